@@ -1,0 +1,31 @@
+// lwsccd — configuration macros shared by every header.
+//
+// Every header of the library compiles both with nvcc and with a plain C++17 host compiler
+// (the cuBQL habit): pure math is marked LWSCCD_HD and runs on the CPU backend and on the GPU.
+#pragma once
+
+#include <cassert>
+
+#if defined(__CUDACC__)
+#define LWSCCD_HD __host__ __device__
+#define LWSCCD_DEVICE __device__
+#define LWSCCD_HAS_CUDA_COMPILER 1
+#else
+#define LWSCCD_HD
+#define LWSCCD_DEVICE
+#define LWSCCD_HAS_CUDA_COMPILER 0
+#endif
+
+#if defined(__CUDA_ARCH__)
+#define LWSCCD_IN_DEVICE_CODE 1
+#else
+#define LWSCCD_IN_DEVICE_CODE 0
+#endif
+
+// Device-side and host-side invariant checks. On the host, invalid *input* is reported by
+// exceptions (see error.hpp); these asserts only guard internal invariants.
+#define LWSCCD_ASSERT(cond) assert(cond)
+
+#define LWSCCD_VERSION_MAJOR 0
+#define LWSCCD_VERSION_MINOR 1
+#define LWSCCD_VERSION_PATCH 0

@@ -1,0 +1,154 @@
+// The geometry core run inside kernels, compared with the same code run on the host.
+#include <catch2/catch.hpp>
+
+#include <random>
+#include <vector>
+
+#include "lwsccd/bv_traits.hpp"
+#include "lwsccd/cuda_check.cuh"
+#include "lwsccd/morton.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+template <class T>
+class DeviceBuffer {  // minimal RAII for the test
+ public:
+  explicit DeviceBuffer(std::size_t n) : n_(n) { LWSCCD_CUDA_CHECK(cudaMalloc(&ptr_, sizeof(T) * (n ? n : 1))); }
+  explicit DeviceBuffer(const std::vector<T>& host) : DeviceBuffer(host.size()) {
+    LWSCCD_CUDA_CHECK(cudaMemcpy(ptr_, host.data(), sizeof(T) * n_, cudaMemcpyHostToDevice));
+  }
+  ~DeviceBuffer() { cudaFree(ptr_); }
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+  T* get() const { return ptr_; }
+  std::vector<T> to_host() const {
+    std::vector<T> out(n_);
+    LWSCCD_CUDA_CHECK(cudaMemcpy(out.data(), ptr_, sizeof(T) * n_, cudaMemcpyDeviceToHost));
+    return out;
+  }
+
+ private:
+  T* ptr_ = nullptr;
+  std::size_t n_;
+};
+
+template <class BV>
+__global__ void fit_swept_kernel(const Vec3d* p0, const Vec3d* p1, int n, BV* out) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n) out[i] = swept_triangle_bv<BV>(p0[3 * i], p0[3 * i + 1], p0[3 * i + 2], p1[3 * i], p1[3 * i + 1], p1[3 * i + 2]);
+}
+
+template <class BV>
+__global__ void overlap_kernel(const BV* bvs, int n, int* out) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i + 1 < n) out[i] = bv_traits<BV>::overlap(bvs[i], bvs[i + 1]) ? 1 : 0;
+}
+
+__global__ void morton_kernel(const Vec3f* pts, int n, Aabbf scene, std::uint32_t* m30, std::uint64_t* m63) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n) {
+    m30[i] = morton30(pts[i], scene);
+    m63[i] = morton63(pts[i], scene);
+  }
+}
+
+struct Triangles {
+  std::vector<Vec3d> p0, p1;
+};
+
+Triangles random_triangles(int n) {
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Triangles t;
+  for (int i = 0; i < n; ++i) {
+    const Vec3d c{u(rng) * 10, u(rng) * 10, u(rng) * 10};
+    for (int k = 0; k < 3; ++k) {
+      const Vec3d p = c + Vec3d{u(rng), u(rng), u(rng)};
+      t.p0.push_back(p);
+      t.p1.push_back(p + Vec3d{u(rng), u(rng), u(rng)} * 0.5);
+    }
+    if (i % 9 == 0) t.p0[3 * i + 2] = t.p0[3 * i + 1];  // degenerate at t0
+  }
+  return t;
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("GPU swept AABBs equal the host's bit for bit, overlaps too", "[gpu][aabb]", float, double) {
+  using BV = Aabb<TestType>;
+  const int n = 4000;
+  const Triangles t = random_triangles(n);
+  DeviceBuffer<Vec3d> d0(t.p0), d1(t.p1);
+  DeviceBuffer<BV> dbv(n);
+  DeviceBuffer<int> dov(n);
+  fit_swept_kernel<BV><<<(n + 127) / 128, 128>>>(d0.get(), d1.get(), n, dbv.get());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  overlap_kernel<BV><<<(n + 127) / 128, 128>>>(dbv.get(), n, dov.get());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  const auto gpu = dbv.to_host();
+  const auto ov = dov.to_host();
+  int overlaps = 0;
+  for (int i = 0; i < n; ++i) {
+    const BV host = swept_triangle_bv<BV>(t.p0[3 * i], t.p0[3 * i + 1], t.p0[3 * i + 2], t.p1[3 * i], t.p1[3 * i + 1],
+                                          t.p1[3 * i + 2]);
+    REQUIRE(gpu[i].lo == host.lo);
+    REQUIRE(gpu[i].hi == host.hi);
+    if (i + 1 < n) {
+      REQUIRE(ov[i] == (bv_traits<BV>::overlap(gpu[i], gpu[i + 1]) ? 1 : 0));
+      overlaps += ov[i];
+    }
+  }
+  CHECK(overlaps > 10);
+}
+
+TEMPLATE_TEST_CASE("GPU swept OBBs contain every endpoint and overlap like the host", "[gpu][obb]", float, double) {
+  using BV = Obb<TestType>;
+  const int n = 4000;
+  const Triangles t = random_triangles(n);
+  DeviceBuffer<Vec3d> d0(t.p0), d1(t.p1);
+  DeviceBuffer<BV> dbv(n);
+  DeviceBuffer<int> dov(n);
+  fit_swept_kernel<BV><<<(n + 127) / 128, 128>>>(d0.get(), d1.get(), n, dbv.get());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  overlap_kernel<BV><<<(n + 127) / 128, 128>>>(dbv.get(), n, dov.get());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  const auto gpu = dbv.to_host();
+  const auto ov = dov.to_host();
+  for (int i = 0; i < n; ++i) {
+    // The device contracts to FMA, so values may differ from the host in the last bits;
+    // what must hold is containment, checked here in long double without slack.
+    for (const Vec3d* p : {&t.p0[3 * i], &t.p0[3 * i + 1], &t.p0[3 * i + 2], &t.p1[3 * i], &t.p1[3 * i + 1], &t.p1[3 * i + 2]}) {
+      for (int a = 0; a < 3; ++a) {
+        long double s = 0;
+        for (int c = 0; c < 3; ++c) s += (long double)gpu[i].axis[a][c] * ((long double)(*p)[c] - (long double)gpu[i].center[c]);
+        REQUIRE(std::fabs(s) <= (long double)gpu[i].half[a]);
+      }
+    }
+    if (i + 1 < n) REQUIRE(ov[i] == (bv_traits<BV>::overlap(gpu[i], gpu[i + 1]) ? 1 : 0));
+  }
+}
+
+TEST_CASE("GPU Morton codes equal the host's", "[gpu][morton]") {
+  std::mt19937_64 rng(2);
+  std::uniform_real_distribution<float> u(-3, 3);
+  const int n = 10000;
+  std::vector<Vec3f> pts(n);
+  for (auto& p : pts) p = {u(rng), u(rng), u(rng)};
+  const Aabbf scene{{-2, -2, -2}, {2, 2.5f, 2}};
+  DeviceBuffer<Vec3f> dp(pts);
+  DeviceBuffer<std::uint32_t> d30(n);
+  DeviceBuffer<std::uint64_t> d63(n);
+  morton_kernel<<<(n + 255) / 256, 256>>>(dp.get(), n, scene, d30.get(), d63.get());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  const auto m30 = d30.to_host();
+  const auto m63 = d63.to_host();
+  for (int i = 0; i < n; ++i) {
+    REQUIRE(m30[i] == morton30(pts[i], scene));
+    REQUIRE(m63[i] == morton63(pts[i], scene));
+  }
+}

@@ -1,0 +1,40 @@
+// Shared helpers for the tests.
+#pragma once
+
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+#include <string>
+
+namespace lwsccd_test {
+
+/// The shared data folder: $LWSCCD_DATA_DIR if set, else the path configured at build time.
+inline std::string data_dir() {
+  if (const char* env = std::getenv("LWSCCD_DATA_DIR")) return env;
+  return LWSCCD_TEST_DATA_DIR;
+}
+
+inline bool have_data() { return std::filesystem::is_directory(data_dir() + "/scenes"); }
+
+/// A fresh empty temporary folder for one test, removed when the object dies.
+class TempDir {
+ public:
+  explicit TempDir(const std::string& tag) {
+    std::random_device rd;
+    path_ = std::filesystem::temp_directory_path() / ("lwsccd-" + tag + "-" + std::to_string(rd()));
+    std::filesystem::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+  std::string path() const { return path_.string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+}  // namespace lwsccd_test
