@@ -11,4 +11,5 @@
 #include "lwsccd/morton.hpp"
 #include "lwsccd/obb.hpp"
 #include "lwsccd/oracle.hpp"
+#include "lwsccd/scenes.hpp"
 #include "lwsccd/vec.hpp"

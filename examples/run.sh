@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Builds and runs the main program, lwsccd-ccd, on a fresh Debian machine: installs what it
+# needs, builds only that program, then runs it with the arguments given (none: the built-in
+# cloth-ball scene, no data needed). It runs on the CPU backend; see README.md.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+packages=(cmake g++ make ccache)
+missing=()
+for p in "${packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if [ ${#missing[@]} -gt 0 ]; then
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}"
+fi
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DLWSCCD_BUILD_TESTS=OFF -DLWSCCD_BUILD_BENCH=OFF >/dev/null
+cmake --build build -j"$(nproc)" --target lwsccd-ccd
+exec ./build/examples/lwsccd-ccd "$@"

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Builds and runs every test of lwsccd on a fresh Debian machine:
+#   1. installs the Debian packages it needs (cmake, g++, catch2, libeigen3-dev, ccache);
+#   2. configures and builds everything (every CUDA translation unit too when nvcc is found;
+#      GPU tests then run, or report "Skipped" where no GPU is present);
+#   3. runs CTest (tests on ../shared/data report "Skipped" where that folder is absent);
+#   4. installs the package and builds examples/minimal as an outside project against it.
+# Environment: LWSCCD_BUILD_DIR (default build-tests), extra CMake arguments in LWSCCD_CMAKE_ARGS.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(cmake g++ make catch2 libeigen3-dev ccache)
+missing=()
+for p in "${packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if [ ${#missing[@]} -gt 0 ]; then
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  echo "== installing ${missing[*]}"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}"
+fi
+
+build="${LWSCCD_BUILD_DIR:-build-tests}"
+jobs="$(nproc)"
+echo "== configure ($build)"
+# shellcheck disable=SC2086
+cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release ${LWSCCD_CMAKE_ARGS:-}
+echo "== build"
+cmake --build "$build" -j"$jobs"
+echo "== test"
+ctest --test-dir "$build" --output-on-failure
+echo "== install and build examples/minimal against the installed package"
+prefix="$PWD/$build/install"
+cmake --install "$build" --prefix "$prefix" >/dev/null
+cmake -S examples/minimal -B "$build/outside-minimal" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$build/outside-minimal" -j"$jobs"
+"$build/outside-minimal/lwsccd_minimal"
+echo "== all tests passed"
