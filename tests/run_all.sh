@@ -29,6 +29,8 @@ echo "== build"
 cmake --build "$build" -j"$jobs"
 echo "== test"
 ctest --test-dir "$build" --output-on-failure
+# CTest hides the output of skipped tests: show why they were skipped.
+grep -h "^SKIPPED:" "$build/Testing/Temporary/LastTest.log" || true
 echo "== install and build examples/minimal against the installed package"
 prefix="$PWD/$build/install"
 cmake --install "$build" --prefix "$prefix" >/dev/null
