@@ -15,59 +15,82 @@ namespace lwsccd {
 
 namespace detail {
 
+// Host-only long double helpers (plain arrays, so that no device code is instantiated for
+// long double under nvcc).
+struct ExactBox {
+  long double lo[3], hi[3];
+  long double volume() const {
+    long double v = 1;
+    for (int i = 0; i < 3; ++i) v *= hi[i] > lo[i] ? hi[i] - lo[i] : 0;
+    return v;
+  }
+};
+
 // An AABB around any BV, for the overlap statistic (exact for AABBs, from corners for OBBs).
 template <class T>
-Aabb<long double> enclosing_aabb(const Aabb<T>& b) {
+ExactBox enclosing_box(const Aabb<T>& b) {
   return {{b.lo.x, b.lo.y, b.lo.z}, {b.hi.x, b.hi.y, b.hi.z}};
 }
 template <class T>
-Aabb<long double> enclosing_aabb(const Obb<T>& b) {
-  Aabb<long double> box = Aabb<long double>::empty();
+void obb_corner(const Obb<T>& b, int k, bool safe, long double out[3]) {
+  for (int a = 0; a < 3; ++a) out[a] = b.center[a];
+  for (int i = 0; i < 3; ++i) {
+    const long double h = safe ? static_cast<long double>(b.safe_half(i)) : static_cast<long double>(b.half[i]);
+    for (int a = 0; a < 3; ++a) out[a] += ((k >> i) & 1 ? 1 : -1) * h * b.axis[i][a];
+  }
+}
+template <class T>
+ExactBox enclosing_box(const Obb<T>& b) {
+  ExactBox box{{HUGE_VALL, HUGE_VALL, HUGE_VALL}, {-HUGE_VALL, -HUGE_VALL, -HUGE_VALL}};
   for (int k = 0; k < 8; ++k) {
-    Vec3<long double> c{b.center.x, b.center.y, b.center.z};
-    for (int i = 0; i < 3; ++i)
-      for (int a = 0; a < 3; ++a) c[a] += ((k >> i) & 1 ? 1 : -1) * static_cast<long double>(b.half[i]) * b.axis[i][a];
-    box.expand(c);
+    long double c[3];
+    obb_corner(b, k, false, c);
+    for (int a = 0; a < 3; ++a) {
+      box.lo[a] = std::min(box.lo[a], c[a]);
+      box.hi[a] = std::max(box.hi[a], c[a]);
+    }
   }
   return box;
 }
 
 // Does `outer` contain point p, evaluated in long double without slack?
-template <class T, class U>
-bool contains_exactly(const Aabb<T>& outer, const Vec3<U>& p) {
+template <class T>
+bool contains_exactly(const Aabb<T>& outer, const long double p[3]) {
   for (int a = 0; a < 3; ++a)
-    if (static_cast<long double>(p[a]) < outer.lo[a] || static_cast<long double>(p[a]) > outer.hi[a]) return false;
+    if (p[a] < outer.lo[a] || p[a] > outer.hi[a]) return false;
   return true;
 }
-template <class T, class U>
-bool contains_exactly(const Obb<T>& outer, const Vec3<U>& p) {
+template <class T>
+bool contains_exactly(const Obb<T>& outer, const long double p[3]) {
   for (int i = 0; i < 3; ++i) {
     long double s = 0;
-    for (int a = 0; a < 3; ++a)
-      s += static_cast<long double>(outer.axis[i][a]) * (static_cast<long double>(p[a]) - outer.center[a]);
+    for (int a = 0; a < 3; ++a) s += static_cast<long double>(outer.axis[i][a]) * (p[a] - outer.center[a]);
     if (std::fabs(s) > static_cast<long double>(outer.half[i])) return false;
   }
   return true;
+}
+template <class BV, class U>
+bool contains_point_exactly(const BV& outer, const Vec3<U>& p) {
+  const long double q[3] = {p.x, p.y, p.z};
+  return contains_exactly(outer, q);
 }
 
 // Does `outer` enclose `inner`? AABBs: exactly; OBBs: the corners of inner's conservative extents.
 template <class T>
 bool encloses(const Aabb<T>& outer, const Aabb<T>& inner) {
-  return contains_exactly(outer, inner.lo) && contains_exactly(outer, inner.hi);
+  return contains_point_exactly(outer, inner.lo) && contains_point_exactly(outer, inner.hi);
 }
 template <class T>
 bool encloses(const Obb<T>& outer, const Obb<T>& inner) {
   for (int k = 0; k < 8; ++k) {
-    Vec3<long double> c{inner.center.x, inner.center.y, inner.center.z};
-    for (int i = 0; i < 3; ++i)
-      for (int a = 0; a < 3; ++a)
-        c[a] += ((k >> i) & 1 ? 1 : -1) * static_cast<long double>(inner.safe_half(i)) * inner.axis[i][a];
+    long double c[3];
+    obb_corner(inner, k, true, c);
     if (!contains_exactly(outer, c)) return false;
   }
   return true;
 }
 
-inline long double intersection_volume(const Aabb<long double>& a, const Aabb<long double>& b) {
+inline long double intersection_volume(const ExactBox& a, const ExactBox& b) {
   long double v = 1;
   for (int i = 0; i < 3; ++i) {
     const long double lo = std::max(a.lo[i], b.lo[i]), hi = std::min(a.hi[i], b.hi[i]);
@@ -100,13 +123,13 @@ BvhQuality measure_quality(const BvhView<BV>& bvh) {
   if (n == 0) return q;
   const double root_area = static_cast<double>(bv_traits<BV>::surface_area(bvh.bvs[0]));
   const double root_volume = static_cast<double>(bv_traits<BV>::volume(bvh.bvs[0]));
-  const auto root_box = detail::enclosing_aabb(bvh.bvs[0]);
+  const auto root_box = detail::enclosing_box(bvh.bvs[0]);
   const long double root_box_volume = root_box.volume();
   for (index_t i = 0; i + 1 < n; ++i) {
     q.sah_cost += root_area > 0 ? static_cast<double>(bv_traits<BV>::surface_area(bvh.bvs[i])) / root_area : 0.0;
     q.volume_sum += root_volume > 0 ? static_cast<double>(bv_traits<BV>::volume(bvh.bvs[i])) / root_volume : 0.0;
     const long double inter =
-        detail::intersection_volume(detail::enclosing_aabb(bvh.bvs[bvh.left[i]]), detail::enclosing_aabb(bvh.bvs[bvh.right[i]]));
+        detail::intersection_volume(detail::enclosing_box(bvh.bvs[bvh.left[i]]), detail::enclosing_box(bvh.bvs[bvh.right[i]]));
     q.sibling_overlap += root_box_volume > 0 ? static_cast<double>(inter / root_box_volume) : 0.0;
   }
   // Depths: parents precede children in no fixed order, so walk from the root.
@@ -168,7 +191,7 @@ std::string check_bvh_invariants(const BvhView<BV>& bvh, const std::vector<Face>
     if (f < 0 || f >= n || seen[f]++) return "leaf_primitive is not a permutation (leaf " + std::to_string(k) + ")";
     const BV& bv = bvh.bvs[bvh.leaf_node(k)];
     for (int c = 0; c < 3; ++c)
-      if (!detail::contains_exactly(bv, x0[faces[f].v[c]]) || !detail::contains_exactly(bv, x1[faces[f].v[c]]))
+      if (!detail::contains_point_exactly(bv, x0[faces[f].v[c]]) || !detail::contains_point_exactly(bv, x1[faces[f].v[c]]))
         return "leaf " + std::to_string(k) + " (triangle " + std::to_string(f) + ") does not enclose its motion";
   }
   return "";

@@ -1,0 +1,91 @@
+// lwsccd — the LBVH on the GPU: build and refit in kernels, no host round trip in refit.
+//
+// Produces the same tree as cpu::Bvh for the same input (see bvh.hpp): identical leaf order,
+// children, parents and leaf ranges; AABB node values bit for bit; OBB values within rounding
+// (the device contracts multiply-adds).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "lwsccd/bvh.hpp"
+#include "lwsccd/device_buffer.cuh"
+
+namespace lwsccd::gpu {
+
+/// A step's topology and positions in device memory (P = float or double).
+template <class P>
+struct DeviceStep {
+  index_t num_vertices = 0;
+  DeviceBuffer<Face> faces;
+  DeviceBuffer<Vec3<P>> x0, x1;
+
+  DeviceStep() = default;
+  /// Uploads (and converts to P) a host step; positions are validated on the host first.
+  DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1,
+             cudaStream_t stream = nullptr);
+  /// Replaces the positions (same topology), e.g. for the next step of a sequence.
+  void set_positions(const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1, cudaStream_t stream = nullptr);
+
+ private:
+  std::vector<Vec3<P>> staging_;
+};
+
+template <class BV>
+class Bvh {
+ public:
+  static_assert(require_bounding_volume<BV>::value, "");
+
+  Bvh() = default;
+  Bvh(const Bvh&) = delete;
+  Bvh& operator=(const Bvh&) = delete;
+  Bvh(Bvh&&) = default;
+  Bvh& operator=(Bvh&&) = default;
+
+  /// Builds over the device step. Synchronizes once at the end to report NaN/inf positions
+  /// (InputError) and launch failures (CudaError).
+  template <class P>
+  void build(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// Refits for the step's current positions: a memset and one kernel, asynchronous. Non-finite
+  /// positions are flagged on the device and reported by the next check_status().
+  template <class P>
+  void refit(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// refit, then rebuild if the policy says the tree decayed (synchronizes to read the cost).
+  template <class P>
+  bool refit_or_rebuild(const DeviceStep<P>& step, const RebuildPolicy& policy = {}, cudaStream_t stream = nullptr);
+
+  /// Sum of internal surface areas over the root's, computed on the device (synchronizes).
+  double sah_cost(cudaStream_t stream = nullptr) const;
+  /// Synchronizes and throws InputError if positions seen since the last check were non-finite.
+  void check_status(cudaStream_t stream = nullptr);
+
+  BvhView<BV> view() const {
+    return {num_leaves_, bvs_.data(), left_.data(), right_.data(), parent_.data(), ranges_.data(), leaf_primitive_.data()};
+  }
+  /// Copies every array to the host (synchronizes).
+  BvhNodes<BV> download(cudaStream_t stream = nullptr) const;
+  index_t num_leaves() const { return num_leaves_; }
+  std::uint64_t generation() const { return generation_; }
+  double cost_at_build() const { return cost_at_build_; }
+  /// Device bytes held by this BVH (nodes, codes, scratch).
+  std::size_t device_bytes() const;
+
+ private:
+  index_t num_leaves_ = 0;
+  std::uint64_t generation_ = 0;
+  double cost_at_build_ = 0;
+  DeviceBuffer<BV> bvs_;
+  DeviceBuffer<index_t> left_, right_, parent_, leaf_primitive_, primitive_scratch_;
+  DeviceBuffer<LeafRange> ranges_;
+  DeviceBuffer<std::uint64_t> codes_, codes_sorted_;
+  DeviceBuffer<int> arrivals_;  ///< per internal node, for the bottom-up pass
+  DeviceBuffer<int> status_;    ///< [0]: non-finite position seen
+  DeviceBuffer<unsigned char> scratch_;  ///< centres | scene box | CUB temporary storage
+  std::size_t temp_offset_ = 0;          ///< where the CUB part of scratch_ starts
+  mutable DeviceBuffer<double> cost_;
+};
+
+}  // namespace lwsccd::gpu
+
+#include "lwsccd/detail/bvh_kernels.cuh"

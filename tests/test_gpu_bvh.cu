@@ -1,0 +1,162 @@
+// GPU LBVH build and refit against the CPU backend, node for node.
+#include <catch2/catch.hpp>
+
+#include <cstring>
+#include <numeric>
+#include <random>
+
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/io.hpp"
+#include "scene_fixtures.hpp"
+#include "test_support.hpp"
+
+using namespace lwsccd;
+using lwsccd_test::MovingMesh;
+
+namespace {
+
+template <class P>
+std::vector<Vec3<P>> as(const std::vector<Vec3d>& x) {
+  std::vector<Vec3<P>> out(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) out[i] = x[i].template cast<P>();
+  return out;
+}
+
+template <class T>
+bool same_value(const Aabb<T>& a, const Aabb<T>& b) {
+  return std::memcmp(&a, &b, sizeof(a)) == 0;
+}
+template <class T>
+bool same_value(const Obb<T>& a, const Obb<T>& b) {
+  // Device FMA contraction moves OBB values by a few ulps; compare relative to the box size.
+  const double scale = 1.0 + std::max({double(a.half.x), double(a.half.y), double(a.half.z), double(norm(a.center))});
+  const double tol = 1e3 * std::numeric_limits<T>::epsilon() * scale;
+  for (int i = 0; i < 3; ++i) {
+    if (std::fabs(double(a.center[i]) - double(b.center[i])) > tol) return false;
+    if (std::fabs(double(a.half[i]) - double(b.half[i])) > tol) return false;
+    // An axis may legitimately flip sign (then the box is the same set).
+    const double d = std::fabs(std::fabs(double(dot(a.axis[i], b.axis[i]))) - 1.0);
+    if (d > 1e-2) return false;
+  }
+  return true;
+}
+
+// Same topology exactly; BVs bit for bit (AABB) or within rounding (OBB); the GPU tree also
+// passes every invariant on its own.
+template <class BV, class P>
+void compare_trees(const BvhNodes<BV>& gpu, const BvhNodes<BV>& cpu_nodes, const std::vector<Face>& faces,
+                   const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
+  REQUIRE(gpu.num_leaves == cpu_nodes.num_leaves);
+  REQUIRE(gpu.leaf_codes == cpu_nodes.leaf_codes);
+  REQUIRE(gpu.leaf_primitive == cpu_nodes.leaf_primitive);
+  REQUIRE(gpu.left == cpu_nodes.left);
+  REQUIRE(gpu.right == cpu_nodes.right);
+  REQUIRE(gpu.parent == cpu_nodes.parent);
+  for (std::size_t i = 0; i < gpu.ranges.size(); ++i) {
+    REQUIRE(gpu.ranges[i].first == cpu_nodes.ranges[i].first);
+    REQUIRE(gpu.ranges[i].last == cpu_nodes.ranges[i].last);
+  }
+  std::size_t differing = 0;
+  for (std::size_t i = 0; i < gpu.bvs.size(); ++i) differing += !same_value(gpu.bvs[i], cpu_nodes.bvs[i]);
+  CHECK(differing == 0);
+  REQUIRE(check_bvh_invariants(gpu.view(), faces, x0, x1) == "");
+}
+
+template <class BV, class P>
+void build_and_refit_match(const TriangleMesh& mesh, const std::vector<Vec3d>& a0, const std::vector<Vec3d>& a1,
+                           const std::vector<Vec3d>& b0, const std::vector<Vec3d>& b1) {
+  gpu::DeviceStep<P> step(mesh, a0, a1);
+  gpu::Bvh<BV> gbvh;
+  gbvh.build(step);
+  cpu::Bvh<BV> cbvh(mesh, as<P>(a0), as<P>(a1));
+  compare_trees(gbvh.download(), cbvh.nodes(), mesh.faces(), as<P>(a0), as<P>(a1));
+  CHECK(gbvh.cost_at_build() == Approx(cbvh.cost_at_build()).epsilon(1e-5));
+  step.set_positions(b0, b1);
+  gbvh.refit(step);
+  gbvh.check_status();
+  cbvh.refit(as<P>(b0), as<P>(b1));
+  compare_trees(gbvh.download(), cbvh.nodes(), mesh.faces(), as<P>(b0), as<P>(b1));
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("GPU LBVH equals the CPU LBVH on procedural meshes", "[gpu][bvh]", Aabbf, Aabbd, Obbf, Obbd) {
+  using BV = TestType;
+  const MovingMesh cloth_a = lwsccd_test::folded_cloth(60, 1), cloth_b = lwsccd_test::folded_cloth(60, 2);
+  build_and_refit_match<BV, double>(cloth_a.mesh, cloth_a.x0, cloth_a.x1, cloth_b.x0, cloth_b.x1);
+  build_and_refit_match<BV, float>(cloth_a.mesh, cloth_a.x0, cloth_a.x1, cloth_b.x0, cloth_b.x1);
+  for (const MovingMesh& m : {lwsccd_test::random_soup(5000, 3), lwsccd_test::coincident_triangles(37),
+                              lwsccd_test::random_soup(1, 4), lwsccd_test::random_soup(2, 5)}) {
+    INFO("faces " << m.mesh.num_faces());
+    build_and_refit_match<BV, double>(m.mesh, m.x0, m.x1, m.x1, m.x0);
+  }
+}
+
+TEMPLATE_TEST_CASE("GPU LBVH equals the CPU LBVH on the real scenes and horse-gallop", "[gpu][bvh][data]", Aabbf, Obbf) {
+  using BV = TestType;
+  if (!lwsccd_test::have_data()) {
+    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
+    return;
+  }
+  for (const char* name : {"cloth-ball", "cloth-funnel", "armadillo-rollers"}) {
+    INFO(name);
+    const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
+    // Refit target: the step reversed (t1 -> t0), a different set of leaf volumes.
+    build_and_refit_match<BV, double>(*scene.step.mesh, scene.step.x0, scene.step.x1, scene.step.x1, scene.step.x0);
+  }
+  const Sequence horse = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
+  gpu::DeviceStep<float> step(*horse.mesh(), horse.frame(0), horse.frame(1));
+  gpu::Bvh<BV> gbvh;
+  gbvh.build(step);
+  cpu::Bvh<BV> cbvh(*horse.mesh(), as<float>(horse.frame(0)), as<float>(horse.frame(1)));
+  for (std::size_t s = 1; s < horse.num_steps(); ++s) {
+    step.set_positions(horse.frame(s), horse.frame(s + 1));
+    gbvh.refit(step);
+    cbvh.refit(as<float>(horse.frame(s)), as<float>(horse.frame(s + 1)));
+    if (s % 5 == 0 || s + 1 == horse.num_steps()) {
+      INFO("horse step " << s);
+      compare_trees(gbvh.download(), cbvh.nodes(), horse.mesh()->faces(), as<float>(horse.frame(s)),
+                    as<float>(horse.frame(s + 1)));
+    }
+  }
+}
+
+TEST_CASE("GPU LBVH: bad input and the rebuild policy", "[gpu][bvh]") {
+  MovingMesh m = lwsccd_test::random_soup(3000, 7, 0.01);
+  gpu::Bvh<Aabbf> bvh;
+  CHECK_THROWS_WITH(bvh.refit(gpu::DeviceStep<float>{}), Catch::Contains("not been built"));
+  CHECK_THROWS_WITH(bvh.build(gpu::DeviceStep<float>{}), Catch::Contains("no faces"));
+  auto bad = m.x1;
+  bad[11].x = std::numeric_limits<double>::quiet_NaN();
+  {
+    gpu::DeviceStep<float> step(m.mesh, m.x0, bad);
+    CHECK_THROWS_WITH(bvh.build(step), Catch::Contains("NaN"));
+  }
+  gpu::DeviceStep<float> step(m.mesh, m.x0, m.x1);
+  bvh.build(step);
+  const auto generation = bvh.generation();
+  step.set_positions(m.x0, bad);
+  bvh.refit(step);  // asynchronous: reported by the next check
+  CHECK_THROWS_WITH(bvh.check_status(), Catch::Contains("NaN"));
+  CHECK_THROWS_AS(step.set_positions(m.x0, std::vector<Vec3d>(5)), InputError);
+  // Scrambled positions: the cost explodes and the policy rebuilds.
+  MovingMesh scrambled = m;
+  std::vector<index_t> perm(m.mesh.num_faces());
+  std::iota(perm.begin(), perm.end(), 0);
+  std::shuffle(perm.begin(), perm.end(), std::mt19937(3));
+  for (index_t f = 0; f < m.mesh.num_faces(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      scrambled.x0[3 * f + k] = m.x0[3 * perm[f] + k];
+      scrambled.x1[3 * f + k] = m.x1[3 * perm[f] + k];
+    }
+  step.set_positions(m.x0, m.x1);
+  CHECK_FALSE(bvh.refit_or_rebuild(step));
+  step.set_positions(scrambled.x0, scrambled.x1);
+  CHECK(bvh.refit_or_rebuild(step));
+  CHECK(bvh.generation() == generation + 1);
+  cpu::Bvh<Aabbf> reference(scrambled.mesh, as<float>(scrambled.x0), as<float>(scrambled.x1));
+  compare_trees(bvh.download(), reference.nodes(), scrambled.mesh.faces(), as<float>(scrambled.x0), as<float>(scrambled.x1));
+  CHECK(bvh.device_bytes() > 3000 * sizeof(Aabbf));
+  CHECK(gpu::memory_stats().peak >= bvh.device_bytes());
+}
