@@ -23,27 +23,13 @@ std::vector<Vec3<P>> as(const std::vector<Vec3d>& x) {
   return out;
 }
 
-template <class T>
-bool same_value(const Aabb<T>& a, const Aabb<T>& b) {
-  return std::memcmp(&a, &b, sizeof(a)) == 0;
-}
-template <class T>
-bool same_value(const Obb<T>& a, const Obb<T>& b) {
-  // Device FMA contraction moves OBB values by a few ulps; compare relative to the box size.
-  const double scale = 1.0 + std::max({double(a.half.x), double(a.half.y), double(a.half.z), double(norm(a.center))});
-  const double tol = 1e3 * std::numeric_limits<T>::epsilon() * scale;
-  for (int i = 0; i < 3; ++i) {
-    if (std::fabs(double(a.center[i]) - double(b.center[i])) > tol) return false;
-    if (std::fabs(double(a.half[i]) - double(b.half[i])) > tol) return false;
-    // An axis may legitimately flip sign (then the box is the same set).
-    const double d = std::fabs(std::fabs(double(dot(a.axis[i], b.axis[i]))) - 1.0);
-    if (d > 1e-2) return false;
-  }
-  return true;
+// Host and device round alike (detail/fp.hpp), so node values must agree bit for bit, OBBs too.
+template <class BV>
+bool same_value(const BV& a, const BV& b) {
+  return std::memcmp(&a, &b, sizeof(BV)) == 0;
 }
 
-// Same topology exactly; BVs bit for bit (AABB) or within rounding (OBB); the GPU tree also
-// passes every invariant on its own.
+// Same topology exactly and BVs bit for bit; the GPU tree also passes every invariant on its own.
 template <class BV, class P>
 void compare_trees(const BvhNodes<BV>& gpu, const BvhNodes<BV>& cpu_nodes, const std::vector<Face>& faces,
                    const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
@@ -71,7 +57,8 @@ void build_and_refit_match(const TriangleMesh& mesh, const std::vector<Vec3d>& a
   gbvh.build(step);
   cpu::Bvh<BV> cbvh(mesh, as<P>(a0), as<P>(a1));
   compare_trees(gbvh.download(), cbvh.nodes(), mesh.faces(), as<P>(a0), as<P>(a1));
-  CHECK(gbvh.cost_at_build() == Approx(cbvh.cost_at_build()).epsilon(1e-5));
+  // The cost is a sum in another order (CUB) of surface areas: equal up to rounding.
+  CHECK(gbvh.cost_at_build() == Approx(cbvh.cost_at_build()).epsilon(1e-6));
   step.set_positions(b0, b1);
   gbvh.refit(step);
   gbvh.check_status();

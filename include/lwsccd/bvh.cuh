@@ -47,7 +47,7 @@ class Bvh {
   /// (InputError) and launch failures (CudaError).
   template <class P>
   void build(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
-  /// Refits for the step's current positions: a memset and one kernel, asynchronous. Non-finite
+  /// Refits for the step's current positions: one kernel, asynchronous. Non-finite
   /// positions are flagged on the device and reported by the next check_status().
   template <class P>
   void refit(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
@@ -79,7 +79,7 @@ class Bvh {
   DeviceBuffer<index_t> left_, right_, parent_, leaf_primitive_, primitive_scratch_;
   DeviceBuffer<LeafRange> ranges_;
   DeviceBuffer<std::uint64_t> codes_, codes_sorted_;
-  DeviceBuffer<int> arrivals_;  ///< per internal node, for the bottom-up pass
+  DeviceBuffer<int> arrivals_;  ///< per internal node, for the bottom-up pass; zero between passes
   DeviceBuffer<int> status_;    ///< [0]: non-finite position seen
   DeviceBuffer<unsigned char> scratch_;  ///< centres | scene box | CUB temporary storage
   std::size_t temp_offset_ = 0;          ///< where the CUB part of scratch_ starts

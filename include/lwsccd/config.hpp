@@ -22,6 +22,14 @@
 #define LWSCCD_IN_DEVICE_CODE 0
 #endif
 
+// Full unrolling of short fixed-count loops, so that small arrays indexed by the loop counter
+// stay in registers on the device (no local-memory stack frame).
+#if defined(__CUDACC__)
+#define LWSCCD_UNROLL _Pragma("unroll")
+#else
+#define LWSCCD_UNROLL
+#endif
+
 // Device-side and host-side invariant checks. On the host, invalid *input* is reported by
 // exceptions (see error.hpp); these asserts only guard internal invariants.
 #define LWSCCD_ASSERT(cond) assert(cond)

@@ -12,6 +12,7 @@
 
 #include "lwsccd/aabb.hpp"
 #include "lwsccd/config.hpp"
+#include "lwsccd/detail/fp.hpp"
 #include "lwsccd/detail/rounding.hpp"
 #include "lwsccd/detail/sym_eigen3.hpp"
 #include "lwsccd/vec.hpp"
@@ -30,7 +31,9 @@ struct Obb {
   static constexpr T kSlack = T(64) * std::numeric_limits<T>::epsilon();
 
   /// Extent along axis i used by merge and overlap (conservative, see the file comment).
-  LWSCCD_HD T safe_half(int i) const { return half[i] + kSlack * (half.x + half.y + half.z); }
+  LWSCCD_HD T safe_half(int i) const {
+    return detail::fadd(half[i], detail::fmul(kSlack, detail::fadd(detail::fadd(half.x, half.y), half.z)));
+  }
 
   LWSCCD_HD T volume() const { return T(8) * half.x * half.y * half.z; }
   LWSCCD_HD T surface_area() const { return T(8) * (half.x * half.y + half.y * half.z + half.z * half.x); }
@@ -43,16 +46,17 @@ struct Obb {
   /// The box grown by `margin` along every axis, rounded outward.
   LWSCCD_HD Obb inflated(T margin) const {
     Obb r = *this;
-    for (int i = 0; i < 3; ++i)
+    LWSCCD_UNROLL for (int i = 0; i < 3; ++i)
       r.half[i] = std::nextafter(half[i] + margin, std::numeric_limits<T>::infinity());
     return r;
   }
 
   /// The eight corners c +- h0 a0 +- h1 a1 +- h2 a2 (rounded; for display and refitting parents).
   LWSCCD_HD void corners(Vec3<T> out[8]) const {
-    for (int k = 0; k < 8; ++k) {
+    LWSCCD_UNROLL for (int k = 0; k < 8; ++k) {
       const T s0 = (k & 1) ? T(1) : T(-1), s1 = (k & 2) ? T(1) : T(-1), s2 = (k & 4) ? T(1) : T(-1);
-      out[k] = center + axis[0] * (s0 * half.x) + axis[1] * (s1 * half.y) + axis[2] * (s2 * half.z);
+      out[k] = detail::vadd_scaled(detail::vadd_scaled(detail::vadd_scaled(center, axis[0], s0 * half.x), axis[1], s1 * half.y),
+                                   axis[2], s2 * half.z);
     }
   }
 
@@ -63,6 +67,7 @@ struct Obb {
   /// from the children's support functions (not from rounded corners).
   LWSCCD_HD static Obb merge(const Obb& a, const Obb& b);
   /// Separating-axis test over the 15 candidate axes. Never reports a false separation.
+  /// fit, merge and overlap round identically on the host and the device (detail/fp.hpp).
   LWSCCD_HD static bool overlap(const Obb& a, const Obb& b);
 };
 

@@ -82,7 +82,10 @@ __global__ void radix_tree_kernel(const std::uint64_t* codes, Index n, Index* le
 }
 
 // One thread per leaf: fits the leaf, then climbs; the second child to arrive at a node fits it.
-// The acq_rel arrival counter orders the first child's BV store before the second's loads.
+// The acq_rel arrival counter orders the first child's BV store before the second's loads. The
+// second arriver also resets the counter, so the counters are all zero again when the kernel
+// ends and a refit needs no memset. It keeps its own child's BV in registers and loads only the
+// sibling's.
 template <class BV, class P>
 __global__ void bottom_up_kernel(const Face* faces, const index_t* leaf_primitive, index_t n, const Vec3<P>* x0,
                                  const Vec3<P>* x1, const index_t* left, const index_t* right, const index_t* parent,
@@ -96,10 +99,14 @@ __global__ void bottom_up_kernel(const Face* faces, const index_t* leaf_primitiv
   if (!is_finite(center)) status[0] = 1;
   index_t node = n - 1 + k;
   bvs[node] = bv;
-  for (index_t p = parent[node]; p != -1; p = parent[p]) {
+  for (index_t p = parent[node]; p != -1; node = p, p = parent[p]) {
     cuda::atomic_ref<int, cuda::thread_scope_device> arrived(arrivals[p]);
     if (arrived.fetch_add(1, cuda::memory_order_acq_rel) == 0) return;
-    bvs[p] = bv_traits<BV>::merge(bvs[left[p]], bvs[right[p]]);
+    arrived.store(0, cuda::memory_order_relaxed);  // both children are done with this node
+    const index_t l = left[p];
+    // Always merge(left, right): the same operation order as the CPU backend.
+    bv = l == node ? bv_traits<BV>::merge(bv, bvs[right[p]]) : bv_traits<BV>::merge(bvs[l], bv);
+    bvs[p] = bv;
   }
 }
 
@@ -195,6 +202,8 @@ void Bvh<BV>::build(const DeviceStep<P>& step, cudaStream_t stream) {
   detail::radix_tree_kernel<<<detail::blocks_for(2 * n - 1), detail::kBvhBlock, 0, stream>>>(
       codes_sorted_.data(), n, left_.data(), right_.data(), parent_.data(), ranges_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
+  // Zero once here; each bottom-up pass leaves the counters at zero again.
+  LWSCCD_CUDA_CHECK(cudaMemsetAsync(arrivals_.data(), 0, sizeof(int) * internal, stream));
   refit(step, stream);
   check_status(stream);
   cost_at_build_ = sah_cost(stream);
@@ -209,7 +218,6 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
     throw InputError("gpu::Bvh::refit", "", "the step has " + std::to_string(step.faces.size()) +
                                                 " faces, the BVH was built over " + std::to_string(num_leaves_));
   const index_t n = num_leaves_;
-  if (n > 1) LWSCCD_CUDA_CHECK(cudaMemsetAsync(arrivals_.data(), 0, sizeof(int) * static_cast<std::size_t>(n - 1), stream));
   detail::bottom_up_kernel<BV, P><<<detail::blocks_for(n), detail::kBvhBlock, 0, stream>>>(
       step.faces.data(), leaf_primitive_.data(), n, step.x0.data(), step.x1.data(), left_.data(), right_.data(),
       parent_.data(), bvs_.data(), arrivals_.data(), status_.data());
@@ -261,9 +269,10 @@ BvhNodes<BV> Bvh<BV>::download(cudaStream_t stream) const {
   BvhNodes<BV> t;
   t.num_leaves = num_leaves_;
   t.bvs = bvs_.download(stream);
-  t.left = left_.download(stream);
-  t.right = right_.download(stream);
-  if (num_leaves_ == 1) t.left.clear(), t.right.clear();
+  if (num_leaves_ > 1) {  // a one-leaf tree has no internal nodes (the arrays hold a placeholder)
+    t.left = left_.download(stream);
+    t.right = right_.download(stream);
+  }
   t.parent = parent_.download(stream);
   t.ranges = ranges_.download(stream);
   t.leaf_primitive = leaf_primitive_.download(stream);

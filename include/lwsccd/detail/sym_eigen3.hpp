@@ -6,8 +6,10 @@
 #pragma once
 
 #include <cmath>
+#include <limits>
 
 #include "lwsccd/config.hpp"
+#include "lwsccd/detail/fp.hpp"
 #include "lwsccd/vec.hpp"
 
 namespace lwsccd::detail {
@@ -38,61 +40,74 @@ LWSCCD_HD SymEigen3<T> symmetric_eigen3(const SymMat3<T>& m, int max_sweeps = 16
   // underflow in the rotation formulas.
   T a[3][3] = {{m.xx, m.xy, m.xz}, {m.xy, m.yy, m.yz}, {m.xz, m.yz, m.zz}};
   T scale = T(0);
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) scale = std::fmax(scale, std::fabs(a[r][c]));
+  LWSCCD_UNROLL for (int r = 0; r < 3; ++r)
+    LWSCCD_UNROLL for (int c = 0; c < 3; ++c) scale = std::fmax(scale, std::fabs(a[r][c]));
   T v[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // columns are eigenvectors
   if (scale > T(0) && std::isfinite(scale)) {
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) a[r][c] /= scale;
+    LWSCCD_UNROLL for (int r = 0; r < 3; ++r)
+      LWSCCD_UNROLL for (int c = 0; c < 3; ++c) a[r][c] /= scale;
     for (int sweep = 0; sweep < max_sweeps; ++sweep) {
       const T off = std::fabs(a[0][1]) + std::fabs(a[0][2]) + std::fabs(a[1][2]);
       if (off == T(0)) break;
-      for (int p = 0; p < 2; ++p) {
-        for (int q = p + 1; q < 3; ++q) {
+      LWSCCD_UNROLL for (int p = 0; p < 2; ++p) {
+        LWSCCD_UNROLL for (int q = p + 1; q < 3; ++q) {
           const T apq = a[p][q];
-          if (apq == T(0)) continue;
+          // Negligible next to the diagonal (or to the unit scale): zero it and skip the rotation,
+          // so that the sweeps end as soon as the matrix is diagonal to working precision.
+          const T eps = std::numeric_limits<T>::epsilon();
+          if (std::fabs(apq) <= fadd(fmul(eps, fadd(std::fabs(a[p][p]), std::fabs(a[q][q]))), fmul(eps, eps))) {
+            a[p][q] = a[q][p] = T(0);
+            continue;
+          }
           // Rotation angle that zeroes a[p][q] (Golub & Van Loan, symmetric Schur decomposition).
-          const T theta = (a[q][q] - a[p][p]) / (T(2) * apq);
-          const T t = (theta >= T(0) ? T(1) : T(-1)) / (std::fabs(theta) + std::sqrt(theta * theta + T(1)));
-          const T c = T(1) / std::sqrt(t * t + T(1));
-          const T s = t * c;
-          for (int k = 0; k < 3; ++k) {  // a = a * J
+          // fmul/fadd/fsub (fp.hpp): the same rounding on host and device.
+          const T theta = fsub(a[q][q], a[p][p]) / fmul(T(2), apq);
+          const T t = (theta >= T(0) ? T(1) : T(-1)) / fadd(std::fabs(theta), std::sqrt(fadd(fmul(theta, theta), T(1))));
+          const T c = T(1) / std::sqrt(fadd(fmul(t, t), T(1)));
+          const T s = fmul(t, c);
+          LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {  // a = a * J
             const T akp = a[k][p], akq = a[k][q];
-            a[k][p] = c * akp - s * akq;
-            a[k][q] = s * akp + c * akq;
+            a[k][p] = fsub(fmul(c, akp), fmul(s, akq));
+            a[k][q] = fadd(fmul(s, akp), fmul(c, akq));
           }
-          for (int k = 0; k < 3; ++k) {  // a = J^T * a
+          LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {  // a = J^T * a
             const T apk = a[p][k], aqk = a[q][k];
-            a[p][k] = c * apk - s * aqk;
-            a[q][k] = s * apk + c * aqk;
+            a[p][k] = fsub(fmul(c, apk), fmul(s, aqk));
+            a[q][k] = fadd(fmul(s, apk), fmul(c, aqk));
           }
-          for (int k = 0; k < 3; ++k) {  // v = v * J
+          LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {  // v = v * J
             const T vkp = v[k][p], vkq = v[k][q];
-            v[k][p] = c * vkp - s * vkq;
-            v[k][q] = s * vkp + c * vkq;
+            v[k][p] = fsub(fmul(c, vkp), fmul(s, vkq));
+            v[k][q] = fadd(fmul(s, vkp), fmul(c, vkq));
           }
+          a[p][q] = a[q][p] = T(0);  // what the rotation makes it, without the rounding residue
         }
       }
     }
   } else {
     scale = T(0);
   }
-  // Sort by eigenvalue, descending.
-  int order[3] = {0, 1, 2};
-  for (int i = 0; i < 2; ++i)
-    for (int j = i + 1; j < 3; ++j)
-      if (a[order[j]][order[j]] > a[order[i]][order[i]]) {
-        const int tmp = order[i];
-        order[i] = order[j];
-        order[j] = tmp;
-      }
+  // Sort by eigenvalue, descending: a three-element network with constant indices (registers).
   SymEigen3<T> out;
-  for (int i = 0; i < 3; ++i) {
-    out.values[i] = a[order[i]][order[i]] * scale;
-    out.vectors[i] = {v[0][order[i]], v[1][order[i]], v[2][order[i]]};
+  LWSCCD_UNROLL for (int i = 0; i < 3; ++i) {
+    out.values[i] = fmul(a[i][i], scale);
+    out.vectors[i] = {v[0][i], v[1][i], v[2][i]};
   }
+  auto order_pair = [&out](int i, int j) {
+    if (out.values[j] > out.values[i]) {
+      const T tv = out.values[i];
+      out.values[i] = out.values[j];
+      out.values[j] = tv;
+      const Vec3<T> tw = out.vectors[i];
+      out.vectors[i] = out.vectors[j];
+      out.vectors[j] = tw;
+    }
+  };
+  order_pair(0, 1);
+  order_pair(1, 2);
+  order_pair(0, 1);
   // Right-handed frame; rotations keep det = +1, the sort may flip it.
-  if (dot(cross(out.vectors[0], out.vectors[1]), out.vectors[2]) < T(0)) out.vectors[2] = -out.vectors[2];
+  if (vdot(vcross(out.vectors[0], out.vectors[1]), out.vectors[2]) < T(0)) out.vectors[2] = -out.vectors[2];
   return out;
 }
 
