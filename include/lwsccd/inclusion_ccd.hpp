@@ -1,0 +1,297 @@
+// lwsccd — a conservative elemental test: inclusion-based root finding on (t, u, v) with a
+// rigorous floating-point error bound (after Wang et al. 2021, "Tight Inclusion").
+//
+// Vertex-face: F(t, u, v) = p(t) - a(t) - u (b(t) - a(t)) - v (c(t) - a(t)), u, v >= 0, u + v <= 1.
+// Edge-edge:   F(t, u, v) = a(t) + u (b(t) - a(t)) - c(t) - v (d(t) - c(t)), u, v in [0, 1].
+// The features come within distance d (the minimum separation, infinity norm) at time t exactly
+// when some (u, v) puts every component of F in [-d, d]. F is linear in each of t, u and v, so its
+// range over a box of (t, u, v) is spanned by the values at the box's eight corners: the
+// inclusion test is exact up to rounding, and the rounding is bounded by eps_k = 128 u m_k per
+// axis k, where m_k is the largest |coordinate| of the query on that axis and u the unit
+// roundoff of T (see docs/NARROW_PHASE.md for the derivation; it also covers a relative
+// perturbation of u on every input, so a query rounded to float from exact data is covered).
+//
+// Boxes are examined in order of their earliest time (a min-heap), split along the dimension
+// that spreads F the most. A box that passes the test is reported as the contact when F over it
+// lies within the tolerance of contact, or when it cannot be split further (the time resolution
+// `tolerance`). Its lower time bound is the reported time of impact: every box with an earlier
+// time was excluded, so no contact happens before it.
+//
+// GUARANTEE. Never answers "no collision" when the features come within `min_separation`
+// (infinity norm) at some time of the step, for the query as given or perturbed relatively by u;
+// the reported toi is a lower bound of the earliest such time. Bounded work: after
+// `max_iterations` boxes, or when its box heap (Policy::kMaxBoxes) is full, it answers "hit" at
+// the earliest time not yet excluded (gave_up = true): a false positive at worst, never a miss.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "lwsccd/ccd_filters.hpp"
+#include "lwsccd/ccd_query.hpp"
+#include "lwsccd/detail/fp.hpp"
+#include "lwsccd/detail/rounding.hpp"
+
+namespace lwsccd {
+
+/// Tuning knobs of InclusionCcd.
+struct InclusionPolicy {
+  static constexpr int kMaxBoxes = 128;  ///< live boxes per query (a per-thread heap on the GPU)
+};
+
+namespace detail {
+
+/// A dyadic box: dimension i spans [idx_i, idx_i + 1] * 2^-level_i.
+struct DyadicBox {
+  std::uint32_t idx[3];
+  std::uint8_t level[3];
+};
+
+// Earliest time of a box as an integer on the finest grid, for ordering.
+LWSCCD_HD inline std::uint64_t box_time_key(const DyadicBox& b) {
+  return static_cast<std::uint64_t>(b.idx[0]) << (40 - b.level[0]);
+}
+// Heap order: earlier first; at equal times the smaller (deeper) box first, so that ties dive.
+LWSCCD_HD inline bool box_before(const DyadicBox& a, const DyadicBox& b) {
+  const std::uint64_t ka = box_time_key(a), kb = box_time_key(b);
+  if (ka != kb) return ka < kb;
+  return a.level[0] + a.level[1] + a.level[2] > b.level[0] + b.level[1] + b.level[2];
+}
+
+template <int kCapacity>
+struct BoxHeap {
+  DyadicBox items[kCapacity];
+  int size = 0;
+  LWSCCD_HD bool push(const DyadicBox& b) {
+    if (size == kCapacity) return false;
+    int i = size++;
+    while (i > 0) {
+      const int parent = (i - 1) / 2;
+      if (!box_before(b, items[parent])) break;
+      items[i] = items[parent];
+      i = parent;
+    }
+    items[i] = b;
+    return true;
+  }
+  LWSCCD_HD DyadicBox pop() {
+    const DyadicBox top = items[0];
+    const DyadicBox last = items[--size];
+    int i = 0;
+    while (true) {
+      int child = 2 * i + 1;
+      if (child >= size) break;
+      if (child + 1 < size && box_before(items[child + 1], items[child])) ++child;
+      if (!box_before(items[child], last)) break;
+      items[i] = items[child];
+      i = child;
+    }
+    if (size > 0) items[i] = last;
+    return top;
+  }
+};
+
+template <class T>
+LWSCCD_HD T dyadic(std::uint32_t idx, int level) {
+  return std::ldexp(static_cast<T>(idx), -level);
+}
+
+// F at the 8 corners of a box: f[it][iu][iv]. Q selects the vertex-face or edge-edge form.
+template <class T>
+LWSCCD_HD void corner_values(const VertexFaceQuery<T>& q, const T t[2], const T u[2], const T v[2], Vec3<T> f[2][2][2]) {
+  for (int it = 0; it < 2; ++it) {
+    const Vec3<T> p = vadd_scaled(q.p0, vsub(q.p1, q.p0), t[it]);
+    const Vec3<T> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t[it]);
+    const Vec3<T> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t[it]), a);
+    const Vec3<T> ac = vsub(vadd_scaled(q.c0, vsub(q.c1, q.c0), t[it]), a);
+    const Vec3<T> ap = vsub(p, a);
+    LWSCCD_UNROLL for (int iu = 0; iu < 2; ++iu)
+      LWSCCD_UNROLL for (int iv = 0; iv < 2; ++iv) f[it][iu][iv] = vsub(vsub(ap, vscale(ab, u[iu])), vscale(ac, v[iv]));
+  }
+}
+template <class T>
+LWSCCD_HD void corner_values(const EdgeEdgeQuery<T>& q, const T t[2], const T u[2], const T v[2], Vec3<T> f[2][2][2]) {
+  for (int it = 0; it < 2; ++it) {
+    const Vec3<T> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t[it]);
+    const Vec3<T> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t[it]), a);
+    const Vec3<T> c = vadd_scaled(q.c0, vsub(q.c1, q.c0), t[it]);
+    const Vec3<T> cd = vsub(vadd_scaled(q.d0, vsub(q.d1, q.d0), t[it]), c);
+    const Vec3<T> ca = vsub(a, c);
+    LWSCCD_UNROLL for (int iu = 0; iu < 2; ++iu)
+      LWSCCD_UNROLL for (int iv = 0; iv < 2; ++iv) f[it][iu][iv] = vsub(vadd(ca, vscale(ab, u[iu])), vscale(cd, v[iv]));
+  }
+}
+
+// Bernstein coefficients of the cubic on [lo, hi] from those on [0, 1]: de Casteljau at hi keeps
+// the left part [0, hi] (the triangle's left edge), then at lo / hi keeps the right part (the
+// right edge). Convex combinations: the coefficients' error grows only by the rounding here.
+template <class T>
+LWSCCD_HD void bernstein_restrict(const T b[4], T lo, T hi, T out[4]) {
+  T y[4] = {b[0], b[1], b[2], b[3]};
+  T left[4];
+  left[0] = y[0];
+  for (int r = 1; r < 4; ++r) {
+    for (int i = 0; i < 4 - r; ++i) y[i] = fadd(y[i], fmul(hi, fsub(y[i + 1], y[i])));
+    left[r] = y[0];
+  }
+  const T s = hi > T(0) ? lo / hi : T(0);
+  out[3] = left[3];
+  for (int r = 1; r < 4; ++r) {
+    for (int i = 0; i < 4 - r; ++i) left[i] = fadd(left[i], fmul(s, fsub(left[i + 1], left[i])));
+    out[3 - r] = left[3 - r];
+  }
+}
+
+template <class T>
+LWSCCD_HD bool is_vertex_face(const VertexFaceQuery<T>*) {
+  return true;
+}
+template <class T>
+LWSCCD_HD bool is_vertex_face(const EdgeEdgeQuery<T>*) {
+  return false;
+}
+
+template <class Policy, class Q, class T>
+LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
+  const T unit = unit_roundoff<T>();
+  const T d = params.min_separation;
+  // Rounding bound per axis, and the length scale for the tolerance test.
+  const Vec3<T>* pts = q.points();
+  Vec3<T> m{0, 0, 0}, lo = pts[0], hi = pts[0];
+  for (int i = 0; i < 8; ++i) {
+    m = max(m, abs(pts[i]));
+    lo = min(lo, pts[i]);
+    hi = max(hi, pts[i]);
+  }
+  const Vec3<T> eps = vadd(vscale(m, T(128) * unit), Vec3<T>{1, 1, 1} * (T(64) * std::numeric_limits<T>::denorm_min()));
+  const T size = max_component(vsub(hi, lo));
+  const T delta = fmul(params.tolerance, size);
+  // Finest level: time resolution `tolerance`, within T's mantissa and the key's 40 bits.
+  int max_level = static_cast<int>(std::ceil(-std::log2(static_cast<double>(params.tolerance))));
+  max_level = max_level < 1 ? 1 : max_level;
+  const int mantissa = std::numeric_limits<T>::digits - 1;
+  max_level = max_level > mantissa ? mantissa : max_level;
+  max_level = max_level > 31 ? 31 : max_level;  // 32-bit box indices
+  const bool vf = is_vertex_face(&q);
+  // Time filter (contact only): the coplanarity cubic must vanish at a contact, so a time range
+  // on which its Bernstein coefficients share a sign is excluded for every (u, v).
+  const bool time_filter = d == T(0);
+  T bern[4] = {0, 0, 0, 0}, bern_bound = T(0), bern_max = T(0);
+  if (time_filter) {
+    bern_bound = coplanarity_bernstein(q, bern);
+    for (int i = 0; i < 4; ++i) bern_max = std::fabs(bern[i]) > bern_max ? std::fabs(bern[i]) : bern_max;
+    if (same_sign_beyond(bern, bern_bound)) return {};
+    // Restricting adds at most 6 rounded convex steps per coefficient, and the interval is
+    // widened by eta so that rounding of its ends cannot uncover a root at a box boundary.
+    bern_bound = fadd(bern_bound, fmul(T(16) * unit, bern_max));
+  }
+  const T eta = T(8) * unit;
+
+  BoxHeap<Policy::kMaxBoxes> heap;
+  heap.push(DyadicBox{{0, 0, 0}, {0, 0, 0}});
+  int examined = 0;
+  while (heap.size > 0) {
+    const DyadicBox box = heap.pop();
+    const T toi = dyadic<T>(box.idx[0], box.level[0]);
+    if (++examined > params.max_iterations) return {true, toi, true};
+    T t[2], u[2], v[2];
+    T* dims[3] = {t, u, v};
+    for (int k = 0; k < 3; ++k) {
+      dims[k][0] = dyadic<T>(box.idx[k], box.level[k]);
+      dims[k][1] = dyadic<T>(box.idx[k] + 1, box.level[k]);
+    }
+    if (time_filter && box.level[0] > 0) {
+      T sub[4];
+      const T t_lo = t[0] > eta ? fsub(t[0], eta) : T(0);
+      const T t_hi = t[1] < fsub(T(1), eta) ? fadd(t[1], eta) : T(1);
+      bernstein_restrict(bern, t_lo, t_hi, sub);
+      if (same_sign_beyond(sub, bern_bound)) continue;
+    }
+    Vec3<T> f[2][2][2];
+    corner_values(q, t, u, v, f);
+    bool excluded = false, within_tolerance = true;
+    for (int k = 0; k < 3 && !excluded; ++k) {
+      T fmin = f[0][0][0][k], fmax = fmin;
+      for (int c = 1; c < 8; ++c) {
+        const T x = f[c >> 2][(c >> 1) & 1][c & 1][k];
+        fmin = x < fmin ? x : fmin;
+        fmax = x > fmax ? x : fmax;
+      }
+      const T low = fsub(fmin, eps[k]), high = fadd(fmax, eps[k]);
+      excluded = low > d || high < -d;
+      within_tolerance = within_tolerance && high <= fadd(d, delta) && low >= -fadd(d, delta);
+    }
+    if (excluded) continue;
+    const bool finest = box.level[0] >= max_level && box.level[1] >= max_level && box.level[2] >= max_level;
+    if (within_tolerance || finest) return {true, toi, false};
+    // Split the dimension along which F varies most (time first on ties).
+    int split = -1;
+    T best = T(-1);
+    for (int k = 0; k < 3; ++k) {
+      if (box.level[k] >= max_level) continue;
+      T spread = T(0);
+      for (int c = 0; c < 8; ++c) {
+        if ((c >> (2 - k)) & 1) continue;  // corners on the low side of dimension k
+        const int c_hi = c | (1 << (2 - k));
+        const Vec3<T> diff = vsub(f[c_hi >> 2][(c_hi >> 1) & 1][c_hi & 1], f[c >> 2][(c >> 1) & 1][c & 1]);
+        const T w = max_component(abs(diff));
+        spread = w > spread ? w : spread;
+      }
+      if (spread > best) {
+        best = spread;
+        split = k;
+      }
+    }
+    for (int half = 0; half < 2; ++half) {
+      DyadicBox child = box;
+      child.idx[split] = box.idx[split] * 2 + static_cast<std::uint32_t>(half);
+      child.level[split] = static_cast<std::uint8_t>(box.level[split] + 1);
+      if (vf) {  // vertex-face: drop boxes entirely beyond u + v = 1 (exact integer test)
+        const std::uint64_t ulo = static_cast<std::uint64_t>(child.idx[1]) << (40 - child.level[1]);
+        const std::uint64_t vlo = static_cast<std::uint64_t>(child.idx[2]) << (40 - child.level[2]);
+        if (ulo + vlo > (std::uint64_t(1) << 40)) continue;
+      }
+      // Out of room: answer conservatively at this box's time, the earliest still possible
+      // (it was the heap's minimum).
+      if (!heap.push(child)) return {true, toi, true};
+    }
+  }
+  return {};
+}
+
+}  // namespace detail
+
+/// The conservative method as a policy (see the file comment for its guarantee).
+template <class Policy = InclusionPolicy>
+struct InclusionCcdT {
+  static constexpr const char* name = "inclusion";
+  static constexpr bool conservative = true;
+  template <class T>
+  LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
+    return detail::inclusion_solve<Policy>(q, params);
+  }
+  template <class T>
+  LWSCCD_HD static CcdResult<T> edge_edge(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
+    return detail::inclusion_solve<Policy>(q, params);
+  }
+};
+using InclusionCcd = InclusionCcdT<>;
+
+/// Any method behind the non-penetration filter: pairs the filter proves separate are answered
+/// "no collision" without running the method.
+template <class Method>
+struct Filtered {
+  static constexpr const char* name = Method::name;
+  static constexpr bool conservative = Method::conservative;
+  template <class T>
+  LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
+    return non_penetration_filter(q, params) ? Method::vertex_face(q, params) : CcdResult<T>{};
+  }
+  template <class T>
+  LWSCCD_HD static CcdResult<T> edge_edge(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
+    return non_penetration_filter(q, params) ? Method::edge_edge(q, params) : CcdResult<T>{};
+  }
+};
+
+}  // namespace lwsccd
