@@ -46,7 +46,7 @@ template <class T>
 struct CcdParams {
   T min_separation = T(0);  ///< report pairs that come closer than this (InclusionCcd; 0 = contact)
   T tolerance = T(1e-6);    ///< time resolution of the reported time of impact
-  int max_iterations = 4096;  ///< InclusionCcd: boxes examined before answering "collision" (bounded time)
+  int max_iterations = 16384;  ///< InclusionCcd: boxes examined before answering "collision" (bounded time)
 };
 
 /// The answer to one query. `toi` is in [0, 1] when `hit`; conservative methods guarantee that

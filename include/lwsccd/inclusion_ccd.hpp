@@ -13,8 +13,8 @@
 //
 // Boxes are examined in order of their earliest time (a min-heap), split along the dimension
 // that spreads F the most. A box that passes the test is reported as the contact when F over it
-// lies within the tolerance of contact, or when it cannot be split further (the time resolution
-// `tolerance`). Its lower time bound is the reported time of impact: every box with an earlier
+// lies within contact up to the distance the features move in `tolerance` of time, or when it
+// cannot be split further (resolution `tolerance` in t, u and v). Its lower time bound is the reported time of impact: every box with an earlier
 // time was excluded, so no contact happens before it.
 //
 // GUARANTEE. Never answers "no collision" when the features come within `min_separation`
@@ -37,7 +37,7 @@ namespace lwsccd {
 
 /// Tuning knobs of InclusionCcd.
 struct InclusionPolicy {
-  static constexpr int kMaxBoxes = 128;  ///< live boxes per query (a per-thread heap on the GPU)
+  static constexpr int kMaxBoxes = 256;  ///< live boxes per query (a per-thread heap: 4 KiB on the GPU)
 };
 
 namespace detail {
@@ -59,6 +59,12 @@ LWSCCD_HD inline bool box_before(const DyadicBox& a, const DyadicBox& b) {
   return a.level[0] + a.level[1] + a.level[2] > b.level[0] + b.level[1] + b.level[2];
 }
 
+// The heap's slots are written before they are read; GCC cannot see it through the indices.
+#if defined(__GNUC__) && !defined(__clang__) && !defined(__CUDACC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#define LWSCCD_HEAP_DIAGNOSTICS_PUSHED
+#endif
 template <int kCapacity>
 struct BoxHeap {
   DyadicBox items[kCapacity];
@@ -82,7 +88,7 @@ struct BoxHeap {
     while (true) {
       int child = 2 * i + 1;
       if (child >= size) break;
-      if (child + 1 < size && box_before(items[child + 1], items[child])) ++child;
+      if (child + 1 < size && child + 1 < kCapacity && box_before(items[child + 1], items[child])) ++child;
       if (!box_before(items[child], last)) break;
       items[i] = items[child];
       i = child;
@@ -91,6 +97,11 @@ struct BoxHeap {
     return top;
   }
 };
+
+#ifdef LWSCCD_HEAP_DIAGNOSTICS_PUSHED
+#pragma GCC diagnostic pop
+#undef LWSCCD_HEAP_DIAGNOSTICS_PUSHED
+#endif
 
 template <class T>
 LWSCCD_HD T dyadic(std::uint32_t idx, int level) {
@@ -158,15 +169,17 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
   const T d = params.min_separation;
   // Rounding bound per axis, and the length scale for the tolerance test.
   const Vec3<T>* pts = q.points();
-  Vec3<T> m{0, 0, 0}, lo = pts[0], hi = pts[0];
-  for (int i = 0; i < 8; ++i) {
-    m = max(m, abs(pts[i]));
-    lo = min(lo, pts[i]);
-    hi = max(hi, pts[i]);
+  Vec3<T> m{0, 0, 0};
+  T motion = T(0);  // the largest displacement of a point over the step
+  for (int i = 0; i < 8; ++i) m = max(m, abs(pts[i]));
+  for (int i = 0; i < 4; ++i) {
+    const T moved = max_component(abs(vsub(pts[i + 4], pts[i])));
+    motion = moved > motion ? moved : motion;
   }
   const Vec3<T> eps = vadd(vscale(m, T(128) * unit), Vec3<T>{1, 1, 1} * (T(64) * std::numeric_limits<T>::denorm_min()));
-  const T size = max_component(vsub(hi, lo));
-  const T delta = fmul(params.tolerance, size);
+  // Distance that counts as contact: how far the features move in `tolerance` of time, so the
+  // reported time stays within the tolerance of the real one (a resting pair must really touch).
+  const T delta = fmul(params.tolerance, motion);
   // Finest level: time resolution `tolerance`, within T's mantissa and the key's 40 bits.
   int max_level = static_cast<int>(std::ceil(-std::log2(static_cast<double>(params.tolerance))));
   max_level = max_level < 1 ? 1 : max_level;
@@ -220,7 +233,9 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
       }
       const T low = fsub(fmin, eps[k]), high = fadd(fmax, eps[k]);
       excluded = low > d || high < -d;
-      within_tolerance = within_tolerance && high <= fadd(d, delta) && low >= -fadd(d, delta);
+      // Contact up to `delta`, and up to the rounding bound, which no subdivision can resolve.
+      const T reach = fadd(fadd(d, delta), fmul(T(2), eps[k]));
+      within_tolerance = within_tolerance && high <= reach && low >= -reach;
     }
     if (excluded) continue;
     const bool finest = box.level[0] >= max_level && box.level[1] >= max_level && box.level[2] >= max_level;

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "lwsccd/ccd_query.hpp"
+#include "lwsccd/detail/fp.hpp"
 #include "lwsccd/mesh.hpp"
 
 namespace lwsccd {
@@ -27,13 +28,25 @@ struct QueryFile {
 /// different truth values).
 QueryFile load_query_csv(const std::string& path);
 
+/// Queries are expressed relative to their first point (translated in the input precision, then
+/// rounded to T): CCD is translation invariant, and small relative coordinates keep far more of
+/// the features' geometry when T is float.
+template <class T, class P>
+LWSCCD_HD Vec3<T> local_point(const Vec3<P>& x, const Vec3<P>& origin) {
+  return detail::vsub(x, origin).template cast<T>();
+}
+
 template <class T>
 VertexFaceQuery<T> vertex_face_query(const std::array<Vec3d, 8>& p) {
-  return VertexFaceQuery<double>{p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]}.template cast<T>();
+  const Vec3d o = p[0];
+  return {local_point<T>(p[0], o), local_point<T>(p[1], o), local_point<T>(p[2], o), local_point<T>(p[3], o),
+          local_point<T>(p[4], o), local_point<T>(p[5], o), local_point<T>(p[6], o), local_point<T>(p[7], o)};
 }
 template <class T>
 EdgeEdgeQuery<T> edge_edge_query(const std::array<Vec3d, 8>& p) {
-  return EdgeEdgeQuery<double>{p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]}.template cast<T>();
+  const Vec3d o = p[0];
+  return {local_point<T>(p[0], o), local_point<T>(p[1], o), local_point<T>(p[2], o), local_point<T>(p[3], o),
+          local_point<T>(p[4], o), local_point<T>(p[5], o), local_point<T>(p[6], o), local_point<T>(p[7], o)};
 }
 
 /// The arrays a kernel needs to turn feature ids into query points.
@@ -49,9 +62,10 @@ template <class T, class P>
 LWSCCD_HD VertexFaceQuery<T> gather_vertex_face(const MeshFeatures& m, const Vec3<P>* x0, const Vec3<P>* x1,
                                                 index_t vertex, index_t face_feature) {
   const Face f = m.faces[face_feature - m.num_vertices - m.num_edges];
-  return VertexFaceQuery<T>{x0[vertex].template cast<T>(),  x0[f.v[0]].template cast<T>(), x0[f.v[1]].template cast<T>(),
-                            x0[f.v[2]].template cast<T>(),  x1[vertex].template cast<T>(), x1[f.v[0]].template cast<T>(),
-                            x1[f.v[1]].template cast<T>(), x1[f.v[2]].template cast<T>()};
+  const Vec3<P> o = x0[vertex];
+  return VertexFaceQuery<T>{local_point<T>(x0[vertex], o),  local_point<T>(x0[f.v[0]], o), local_point<T>(x0[f.v[1]], o),
+                            local_point<T>(x0[f.v[2]], o),  local_point<T>(x1[vertex], o), local_point<T>(x1[f.v[0]], o),
+                            local_point<T>(x1[f.v[1]], o), local_point<T>(x1[f.v[2]], o)};
 }
 
 /// Edge-edge query of two edge feature ids.
@@ -59,9 +73,10 @@ template <class T, class P>
 LWSCCD_HD EdgeEdgeQuery<T> gather_edge_edge(const MeshFeatures& m, const Vec3<P>* x0, const Vec3<P>* x1,
                                             index_t edge_a, index_t edge_b) {
   const Edge a = m.edges[edge_a - m.num_vertices], b = m.edges[edge_b - m.num_vertices];
-  return EdgeEdgeQuery<T>{x0[a.v[0]].template cast<T>(), x0[a.v[1]].template cast<T>(), x0[b.v[0]].template cast<T>(),
-                          x0[b.v[1]].template cast<T>(), x1[a.v[0]].template cast<T>(), x1[a.v[1]].template cast<T>(),
-                          x1[b.v[0]].template cast<T>(), x1[b.v[1]].template cast<T>()};
+  const Vec3<P> o = x0[a.v[0]];
+  return EdgeEdgeQuery<T>{local_point<T>(x0[a.v[0]], o), local_point<T>(x0[a.v[1]], o), local_point<T>(x0[b.v[0]], o),
+                          local_point<T>(x0[b.v[1]], o), local_point<T>(x1[a.v[0]], o), local_point<T>(x1[a.v[1]], o),
+                          local_point<T>(x1[b.v[0]], o), local_point<T>(x1[b.v[1]], o)};
 }
 
 inline MeshFeatures mesh_features(const TriangleMesh& mesh) {

@@ -1,0 +1,84 @@
+// lwsccd — the narrow phase on the GPU: one thread per candidate feature pair, hits compacted
+// with CUB into an output that grows as needed (nothing is dropped), earliest TOI by reduction.
+#pragma once
+
+#include <cub/device/device_reduce.cuh>
+#include <cub/device/device_select.cuh>
+
+#include <algorithm>
+#include <utility>
+
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/device_buffer.cuh"
+#include "lwsccd/narrow_phase.hpp"
+
+namespace lwsccd::gpu {
+
+/// Faces and edges on the device, for turning feature ids into query points.
+struct DeviceMeshFeatures {
+  DeviceBuffer<Face> faces;
+  DeviceBuffer<Edge> edges;
+  index_t num_vertices = 0, num_edges = 0;
+
+  DeviceMeshFeatures() = default;
+  explicit DeviceMeshFeatures(const TriangleMesh& mesh, cudaStream_t stream = nullptr)
+      : num_vertices(mesh.num_vertices()), num_edges(mesh.num_edges()) {
+    faces.upload(mesh.faces(), stream);
+    edges.upload(mesh.edges(), stream);
+  }
+  MeshFeatures view() const { return {faces.data(), edges.data(), num_vertices, num_edges}; }
+};
+
+/// Knobs of the GPU narrow phase.
+struct NarrowPhasePolicy {
+  static constexpr int kBlock = 128;
+};
+
+/// Runs a CCD method over device lists of candidate pairs. Owns its scratch and output buffers
+/// (reused across calls; they only grow).
+template <class Method, class T, class Policy = NarrowPhasePolicy>
+class NarrowPhase {
+ public:
+  static_assert(require_ccd_method<Method>::value, "");
+  using Pair = std::pair<index_t, index_t>;
+
+  /// Pairs are processed in chunks of `chunk_pairs`; the output starts at `initial_capacity`
+  /// hits and doubles whenever a chunk might not fit (tests force tiny values).
+  explicit NarrowPhase(std::size_t chunk_pairs = std::size_t(1) << 22, std::size_t initial_capacity = 1 << 16)
+      : chunk_(std::max<std::size_t>(chunk_pairs, 1)), initial_capacity_(std::max<std::size_t>(initial_capacity, 1)) {}
+
+  /// Tests `num_vf` vertex-face and `num_ee` edge-edge pairs (device arrays of id pairs).
+  /// Synchronizes once per chunk (to size the output); the hits stay on the device until
+  /// download().
+  template <class P>
+  void run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* vf, std::size_t num_vf,
+           const Pair* ee, std::size_t num_ee, const CcdParams<T>& params, cudaStream_t stream = nullptr);
+
+  std::size_t num_vf_hits() const { return vf_count_; }
+  std::size_t num_ee_hits() const { return ee_count_; }
+  T earliest_toi() const { return earliest_; }
+  std::size_t gave_up() const { return gave_up_; }
+  /// Copies the hits to the host, sorted like the CPU backend's.
+  NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
+  std::size_t device_bytes() const {
+    return vf_hits_.capacity_bytes() + ee_hits_.capacity_bytes() + staged_.capacity_bytes() + flags_.capacity_bytes() +
+           scratch_.capacity_bytes() + counters_.capacity_bytes() + toi_.capacity_bytes();
+  }
+
+ private:
+  template <class P, bool kVertexFace>
+  void run_list(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs, std::size_t n,
+                const CcdParams<T>& params, DeviceBuffer<FeatureHit<T>>& out, std::size_t& count, cudaStream_t stream);
+
+  std::size_t chunk_, initial_capacity_;
+  DeviceBuffer<FeatureHit<T>> vf_hits_, ee_hits_, staged_;
+  DeviceBuffer<unsigned char> flags_, scratch_;
+  DeviceBuffer<unsigned long long> counters_;  ///< [0]: selected in the chunk, [1]: gave up
+  DeviceBuffer<T> toi_;
+  std::size_t vf_count_ = 0, ee_count_ = 0, gave_up_ = 0;
+  T earliest_ = T(1);
+};
+
+}  // namespace lwsccd::gpu
+
+#include "lwsccd/detail/narrow_phase_kernels.cuh"

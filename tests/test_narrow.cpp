@@ -1,0 +1,191 @@
+// Elemental CCD tests on constructed queries (no data needed).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "lwsccd/cubic_ccd.hpp"
+#include "lwsccd/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase.hpp"
+#include "scene_fixtures.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+template <class T>
+VertexFaceQuery<T> falling_vertex(T x, T y, T z0, T z1) {
+  const Vec3<T> a{0, 0, 0}, b{1, 0, 0}, c{0, 1, 0};
+  return {{x, y, z0}, a, b, c, {x, y, z1}, a, b, c};
+}
+
+template <class T>
+EdgeEdgeQuery<T> crossing_edges(T z0, T z1, T offset = 0) {
+  // Edge 1 along x at height z(t); edge 2 along y at z = 0, shifted by `offset` along x.
+  return {{-1, 0, z0}, {1, 0, z0}, {offset, -1, 0}, {offset, 1, 0}, {-1, 0, z1}, {1, 0, z1}, {offset, -1, 0}, {offset, 1, 0}};
+}
+
+// f(t) = P . (A x B) sampled finely in long double: does the cubic change sign or vanish?
+template <class Q>
+bool coplanar_somewhere(const Q& q) {
+  const auto c = detail::coplanarity_of(q.template cast<double>());
+  long double prev = 0;
+  for (int i = 0; i <= 2000; ++i) {
+    const long double t = i / 2000.0L;
+    auto lerp3 = [&](const Vec3d& a, const Vec3d& b, int k) { return a[k] + t * (static_cast<long double>(b[k]) - a[k]); };
+    long double p[3], a[3], b[3];
+    for (int k = 0; k < 3; ++k) {
+      p[k] = lerp3(c.p0, c.p1, k);
+      a[k] = lerp3(c.a0, c.a1, k);
+      b[k] = lerp3(c.b0, c.b1, k);
+    }
+    const long double f = p[0] * (a[1] * b[2] - a[2] * b[1]) + p[1] * (a[2] * b[0] - a[0] * b[2]) + p[2] * (a[0] * b[1] - a[1] * b[0]);
+    if (f == 0 || (i > 0 && (f < 0) != (prev < 0))) return true;
+    prev = f;
+  }
+  return false;
+}
+
+struct TinyHeap {
+  static constexpr int kMaxBoxes = 2;
+};
+
+}  // namespace
+
+// How far below the true time the conservative TOI may be: the time tolerance, plus the rounding
+// slack of the inclusion test (128 u per unit of coordinate, over a relative speed of ~2 here).
+template <class T>
+T toi_slack() {
+  return T(2e-6) + T(128) * std::numeric_limits<T>::epsilon();
+}
+
+TEMPLATE_TEST_CASE("a vertex falling through a triangle: both methods, time of impact", "[narrow]", float, double) {
+  using T = TestType;
+  const CcdParams<T> params;
+  const auto q = falling_vertex<T>(T(0.2), T(0.3), T(1), T(-1));  // crosses z = 0 at t = 0.5
+  const auto cubic = CubicCcd::vertex_face(q, params);
+  REQUIRE(cubic.hit);
+  CHECK(double(cubic.toi) == Approx(0.5).margin(1e-5));
+  const auto incl = InclusionCcd::vertex_face(q, params);
+  REQUIRE(incl.hit);
+  CHECK_FALSE(incl.gave_up);
+  CHECK(incl.toi <= T(0.5));             // a lower bound ...
+  CHECK(incl.toi >= T(0.5) - toi_slack<T>());   // ... within the time tolerance and rounding
+  // Outside the triangle: no contact for either.
+  CHECK_FALSE(CubicCcd::vertex_face(falling_vertex<T>(T(0.8), T(0.8), T(1), T(-1)), params).hit);
+  CHECK_FALSE(InclusionCcd::vertex_face(falling_vertex<T>(T(0.8), T(0.8), T(1), T(-1)), params).hit);
+  // Stops short of the plane.
+  CHECK_FALSE(InclusionCcd::vertex_face(falling_vertex<T>(T(0.2), T(0.3), T(1), T(0.01)), params).hit);
+  // Touching exactly at the end of the step.
+  const auto touch = InclusionCcd::vertex_face(falling_vertex<T>(T(0.2), T(0.3), T(1), T(0)), params);
+  CHECK(touch.hit);
+  CHECK(touch.toi >= T(1) - toi_slack<T>());
+}
+
+TEMPLATE_TEST_CASE("crossing edges, edges that miss, and a minimum separation", "[narrow]", float, double) {
+  using T = TestType;
+  CcdParams<T> params;
+  const auto cross = crossing_edges<T>(T(1), T(-3));  // crosses at t = 0.25
+  REQUIRE(CubicCcd::edge_edge(cross, params).hit);
+  CHECK(double(CubicCcd::edge_edge(cross, params).toi) == Approx(0.25).margin(1e-5));
+  const auto r = InclusionCcd::edge_edge(cross, params);
+  REQUIRE(r.hit);
+  CHECK(r.toi <= T(0.25));
+  CHECK(r.toi >= T(0.25) - toi_slack<T>());
+  const auto miss = crossing_edges<T>(T(1), T(-3), T(1.5));  // edge 2 beyond edge 1's end
+  CHECK_FALSE(CubicCcd::edge_edge(miss, params).hit);
+  CHECK_FALSE(InclusionCcd::edge_edge(miss, params).hit);
+  // Passing 0.01 above: no contact; with a separation of 0.02 it is reported, not with 0.005.
+  const auto above = crossing_edges<T>(T(1), T(0.01));
+  CHECK_FALSE(InclusionCcd::edge_edge(above, params).hit);
+  params.min_separation = T(0.02);
+  const auto near = InclusionCcd::edge_edge(above, params);
+  CHECK(near.hit);
+  CHECK(near.toi <= T(0.991));  // reaches 0.02 at t = 0.98/0.99
+  params.min_separation = T(0.005);
+  CHECK_FALSE(InclusionCcd::edge_edge(above, params).hit);
+}
+
+TEMPLATE_TEST_CASE("motion that stays coplanar: the cubic misses, the conservative method does not", "[narrow]", float, double) {
+  using T = TestType;
+  const CcdParams<T> params;
+  // A vertex sliding in the triangle's plane from outside into it: f(t) == 0 throughout.
+  const Vec3<T> a{0, 0, 0}, b{1, 0, 0}, c{0, 1, 0};
+  const VertexFaceQuery<T> slide{{T(-1), T(0.2), 0}, a, b, c, {T(0.5), T(0.2), 0}, a, b, c};
+  const auto incl = InclusionCcd::vertex_face(slide, params);
+  REQUIRE(incl.hit);
+  CHECK(incl.toi <= T(2) / T(3));  // enters the triangle at t = 2/3
+  CHECK(incl.toi >= T(2) / T(3) - toi_slack<T>());
+  // Parallel edges sliding onto each other in one plane.
+  const EdgeEdgeQuery<T> parallel{{-3, 0, 0}, {-2, 0, 0}, {0, 0, 0}, {1, 0, 0}, {-0.5, 0, 0}, {0.5, 0, 0}, {0, 0, 0}, {1, 0, 0}};
+  CHECK(InclusionCcd::edge_edge(parallel, params).hit);
+  // f == 0 throughout: the seed's method sees "roots" only at the ends of the step, so it reports
+  // the contact at t = 1 (too late) or not at all, never at its real time.
+  const auto cubic = CubicCcd::vertex_face(slide, params);
+  CHECK((!cubic.hit || cubic.toi > T(0.9)));
+}
+
+TEMPLATE_TEST_CASE("the non-penetration filter never culls a pair whose features become coplanar", "[narrow][filter]", float, double) {
+  using T = TestType;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const CcdParams<T> params;
+  int culled = 0, kept = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    std::array<Vec3d, 8> pts;
+    for (auto& p : pts) p = {u(rng), u(rng), u(rng)};
+    if (trial % 2) {  // small motions: most stay on one side
+      for (int i = 4; i < 8; ++i) pts[i] = pts[i - 4] + Vec3d{u(rng), u(rng), u(rng)} * 0.05;
+    }
+    const auto vf = vertex_face_query<T>(pts);
+    const auto ee = edge_edge_query<T>(pts);
+    for (bool is_vf : {true, false}) {
+      const bool may = is_vf ? non_penetration_filter(vf, params) : non_penetration_filter(ee, params);
+      const bool coplanar = is_vf ? coplanar_somewhere(vf) : coplanar_somewhere(ee);
+      if (coplanar) REQUIRE(may);
+      (may ? kept : culled)++;
+    }
+  }
+  CHECK(culled > 1000);  // it does cull
+  CHECK(kept > 1000);
+  // With a minimum separation the filter does not apply.
+  CcdParams<T> with_gap;
+  with_gap.min_separation = T(0.1);
+  CHECK(non_penetration_filter(falling_vertex<T>(T(0.2), T(0.2), T(1), T(0.5)), with_gap));
+  CHECK_FALSE(non_penetration_filter(falling_vertex<T>(T(0.2), T(0.2), T(1), T(0.5)), params));
+}
+
+TEMPLATE_TEST_CASE("bounded work: a tiny budget answers hit, never a miss", "[narrow]", float, double) {
+  using T = TestType;
+  CcdParams<T> params;
+  params.max_iterations = 3;
+  const auto r = InclusionCcd::vertex_face(falling_vertex<T>(T(0.2), T(0.3), T(1), T(-1)), params);
+  CHECK(r.hit);
+  CHECK(r.gave_up);
+  CHECK(r.toi <= T(0.5));
+  // A box heap of 2 entries overflows at once: still conservative.
+  const auto tiny = InclusionCcdT<TinyHeap>::edge_edge(crossing_edges<T>(T(1), T(-3)), CcdParams<T>{});
+  CHECK(tiny.hit);
+  CHECK(tiny.toi <= T(0.25));
+}
+
+TEST_CASE("CPU narrow phase over a cloth's feature pairs: filtered equals unfiltered", "[narrow]") {
+  const auto m = lwsccd_test::folded_cloth(16, 3);
+  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
+  const FeaturePairs fp = feature_pairs(m.mesh, pairs);
+  const auto plain = cpu::test_feature_pairs<InclusionCcd, double>(m.mesh, m.x0, m.x1, fp);
+  const auto filtered = cpu::test_feature_pairs<Filtered<InclusionCcd>, double>(m.mesh, m.x0, m.x1, fp);
+  REQUIRE(plain.vf.size() + plain.ee.size() > 0);
+  // The filter removes only pairs that cannot touch, so the hits are the same pairs.
+  REQUIRE(plain.vf.size() == filtered.vf.size());
+  REQUIRE(plain.ee.size() == filtered.ee.size());
+  for (std::size_t i = 0; i < plain.vf.size(); ++i) REQUIRE(plain.vf[i].first == filtered.vf[i].first);
+  CHECK(plain.earliest_toi == filtered.earliest_toi);
+  // Cubic hits are (up to its misses) among the conservative ones.
+  const auto cubic = cpu::test_feature_pairs<CubicCcd, double>(m.mesh, m.x0, m.x1, fp);
+  std::size_t cubic_not_in_inclusion = 0;
+  for (const auto& h : cubic.vf)
+    cubic_not_in_inclusion += !std::binary_search(plain.vf.begin(), plain.vf.end(), h);
+  CHECK(cubic_not_in_inclusion == 0);
+}
