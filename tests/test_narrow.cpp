@@ -8,6 +8,8 @@
 #include "lwsccd/cubic_ccd.hpp"
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase.hpp"
+#include "lwsccd/orphans.hpp"
+#include "lwsccd/scenes.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;
@@ -188,4 +190,32 @@ TEST_CASE("CPU narrow phase over a cloth's feature pairs: filtered equals unfilt
   for (const auto& h : cubic.vf)
     cubic_not_in_inclusion += !std::binary_search(plain.vf.begin(), plain.vf.end(), h);
   CHECK(cubic_not_in_inclusion == 0);
+}
+
+TEST_CASE("culling adjacent triangles with orphan sets loses no contact (open cloth, closed ball)", "[narrow][orphans]") {
+  // Brute-force feature testing (every feature pair of every candidate triangle pair, adjacent
+  // ones included) against the culled stream (non-adjacent pairs + orphans): same contacts.
+  const auto cloth = lwsccd_test::folded_cloth(20, 5);
+  const MultiBodyStep ball_scene = make_cloth_ball_scene(1500);
+  struct Case {
+    const TriangleMesh* mesh;
+    const std::vector<Vec3d>* x0;
+    const std::vector<Vec3d>* x1;
+  };
+  for (const Case& c : {Case{&cloth.mesh, &cloth.x0, &cloth.x1},
+                        Case{ball_scene.step.mesh.get(), &ball_scene.step.x0, &ball_scene.step.x1}}) {
+    const auto pairs = brute_force_pairs(*c.mesh, swept_triangle_bvs<Aabbd>(*c.mesh, *c.x0, *c.x1));
+    const FeaturePairs all = feature_pairs(*c.mesh, pairs);
+    const FeaturePairs culled = culled_feature_pairs(*c.mesh, pairs, find_orphan_sets(*c.mesh));
+    const auto everything = cpu::test_feature_pairs<InclusionCcd, double>(*c.mesh, *c.x0, *c.x1, all);
+    const auto kept = cpu::test_feature_pairs<InclusionCcd, double>(*c.mesh, *c.x0, *c.x1, culled);
+    std::printf("culling: %zu -> %zu feature pairs; contacts %zu + %zu (all) vs %zu + %zu (culled)\n",
+                all.vf.size() + all.ee.size(), culled.vf.size() + culled.ee.size(), everything.vf.size(),
+                everything.ee.size(), kept.vf.size(), kept.ee.size());
+    CHECK(culled.vf.size() + culled.ee.size() < all.vf.size() + all.ee.size());
+    // Every contact found by testing everything is found in the culled stream.
+    for (const auto& h : everything.vf) REQUIRE(std::binary_search(kept.vf.begin(), kept.vf.end(), h));
+    for (const auto& h : everything.ee) REQUIRE(std::binary_search(kept.ee.begin(), kept.ee.end(), h));
+    REQUIRE(everything.vf.size() + everything.ee.size() > 0);
+  }
 }

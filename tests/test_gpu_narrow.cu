@@ -1,0 +1,80 @@
+// The GPU narrow phase against the CPU backend, pair for pair (and TOI bit for bit).
+#include <catch2/catch.hpp>
+
+#include <cstring>
+
+#include "lwsccd/cubic_ccd.hpp"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase.cuh"
+#include "scene_fixtures.hpp"
+#include "test_support.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+template <class T>
+void require_same(const NarrowPhaseResult<T>& gpu, const NarrowPhaseResult<T>& cpu) {
+  REQUIRE(gpu.vf.size() == cpu.vf.size());
+  REQUIRE(gpu.ee.size() == cpu.ee.size());
+  for (std::size_t i = 0; i < gpu.vf.size(); ++i) {
+    REQUIRE(gpu.vf[i].first == cpu.vf[i].first);
+    REQUIRE(gpu.vf[i].second == cpu.vf[i].second);
+    REQUIRE(std::memcmp(&gpu.vf[i].toi, &cpu.vf[i].toi, sizeof(T)) == 0);
+  }
+  for (std::size_t i = 0; i < gpu.ee.size(); ++i) {
+    REQUIRE(gpu.ee[i].first == cpu.ee[i].first);
+    REQUIRE(gpu.ee[i].second == cpu.ee[i].second);
+    REQUIRE(std::memcmp(&gpu.ee[i].toi, &cpu.ee[i].toi, sizeof(T)) == 0);
+  }
+  REQUIRE(gpu.earliest_toi == cpu.earliest_toi);
+  REQUIRE(gpu.gave_up == cpu.gave_up);
+}
+
+template <class Method, class T>
+void compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
+                      const FeaturePairs& pairs, std::size_t chunk, std::size_t capacity) {
+  gpu::DeviceMeshFeatures features(mesh);
+  gpu::DeviceStep<double> step(mesh, x0, x1);
+  gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
+  vf.upload(pairs.vf);
+  ee.upload(pairs.ee);
+  gpu::NarrowPhase<Method, T> narrow(chunk, capacity);
+  const CcdParams<T> params;
+  narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
+  const auto cpu_result = cpu::test_feature_pairs<Method, T>(mesh, x0, x1, pairs, params);
+  require_same(narrow.download(), cpu_result);
+  std::printf("  %s/%s: %zu vf + %zu ee pairs -> %zu + %zu hits, earliest TOI %.9g\n", Method::name,
+              sizeof(T) == 4 ? "float" : "double", pairs.vf.size(), pairs.ee.size(), cpu_result.vf.size(),
+              cpu_result.ee.size(), double(cpu_result.earliest_toi));
+}
+
+}  // namespace
+
+TEST_CASE("GPU narrow phase equals the CPU backend on a folded cloth, with a growing output", "[gpu][narrow]") {
+  const auto m = lwsccd_test::folded_cloth(40, 4);
+  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
+  const FeaturePairs fp = feature_pairs(m.mesh, pairs);
+  // Tiny chunks and a one-hit output force many chunks and repeated growth.
+  compare_backends<Filtered<InclusionCcd>, double>(m.mesh, m.x0, m.x1, fp, 997, 1);
+  compare_backends<Filtered<InclusionCcd>, float>(m.mesh, m.x0, m.x1, fp, 4096, 3);
+  compare_backends<CubicCcd, double>(m.mesh, m.x0, m.x1, fp, 1 << 20, 1 << 16);
+  compare_backends<CubicCcd, float>(m.mesh, m.x0, m.x1, fp, 1 << 20, 1 << 16);
+}
+
+TEST_CASE("GPU narrow phase equals the CPU backend on the real scenes' candidate pairs", "[gpu][narrow][data]") {
+  if (!lwsccd_test::have_data()) {
+    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
+    return;
+  }
+  for (const char* name : {"cloth-funnel", "armadillo-rollers", "cloth-ball"}) {
+    INFO(name);
+    const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
+    const FeaturePairs fp{scene.truth.vf, scene.truth.ee};
+    std::printf("%s\n", name);
+    compare_backends<Filtered<InclusionCcd>, double>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10);
+    compare_backends<Filtered<InclusionCcd>, float>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10);
+    compare_backends<CubicCcd, double>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10);
+  }
+}
