@@ -130,4 +130,26 @@ LWSCCD_HD bool non_penetration_filter(const Q& q, const CcdParams<T>& params) {
   return !detail::same_sign_beyond(b, bound);
 }
 
+/// The name a filtered method reports (methods specialize it, e.g. "filtered-inclusion").
+template <class Method>
+struct filtered_name {
+  static constexpr const char* value = "filtered";
+};
+
+/// Any method behind the non-penetration filter: pairs the filter proves separate are answered
+/// "no collision" without running the method.
+template <class Method>
+struct Filtered {
+  static constexpr const char* name = filtered_name<Method>::value;
+  static constexpr bool conservative = Method::conservative;
+  template <class T>
+  LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
+    return non_penetration_filter(q, params) ? Method::vertex_face(q, params) : CcdResult<T>{};
+  }
+  template <class T>
+  LWSCCD_HD static CcdResult<T> edge_edge(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
+    return non_penetration_filter(q, params) ? Method::edge_edge(q, params) : CcdResult<T>{};
+  }
+};
+
 }  // namespace lwsccd

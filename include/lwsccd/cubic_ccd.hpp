@@ -174,4 +174,9 @@ struct CubicCcd {
   }
 };
 
+template <>
+struct filtered_name<CubicCcd> {
+  static constexpr const char* value = "filtered-cubic";
+};
+
 }  // namespace lwsccd

@@ -293,20 +293,9 @@ struct InclusionCcdT {
 };
 using InclusionCcd = InclusionCcdT<>;
 
-/// Any method behind the non-penetration filter: pairs the filter proves separate are answered
-/// "no collision" without running the method.
-template <class Method>
-struct Filtered {
-  static constexpr const char* name = Method::name;
-  static constexpr bool conservative = Method::conservative;
-  template <class T>
-  LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
-    return non_penetration_filter(q, params) ? Method::vertex_face(q, params) : CcdResult<T>{};
-  }
-  template <class T>
-  LWSCCD_HD static CcdResult<T> edge_edge(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
-    return non_penetration_filter(q, params) ? Method::edge_edge(q, params) : CcdResult<T>{};
-  }
+template <class Policy>
+struct filtered_name<InclusionCcdT<Policy>> {
+  static constexpr const char* value = "filtered-inclusion";
 };
 
 }  // namespace lwsccd
