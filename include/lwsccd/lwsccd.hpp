@@ -13,6 +13,7 @@
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/io.hpp"
 #include "lwsccd/mesh.hpp"
+#include "lwsccd/narrow_phase.hpp"
 #include "lwsccd/morton.hpp"
 #include "lwsccd/obb.hpp"
 #include "lwsccd/oracle.hpp"
