@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bench_common.hpp"
+#include "bench_gpu.cuh"
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/scenes.hpp"
@@ -28,30 +29,10 @@ template <class BV, class P>
 void bench_gpu(const std::string& scene_name, const Step& step, int reps, std::vector<Row>& rows, const char* bv_name) {
   gpu::DeviceStep<P> dstep(*step.mesh, step.x0, step.x1);
   gpu::Bvh<BV> bvh;
-  cudaEvent_t start, stop;
-  LWSCCD_CUDA_CHECK(cudaEventCreate(&start));
-  LWSCCD_CUDA_CHECK(cudaEventCreate(&stop));
   for (int i = 0; i < 3; ++i) bvh.build(dstep);  // warm-up: allocation, module load
-  std::vector<double> build_ms, refit_ms;
-  for (int r = 0; r < reps; ++r) {
-    LWSCCD_CUDA_CHECK(cudaEventRecord(start));
-    bvh.build(dstep);
-    LWSCCD_CUDA_CHECK(cudaEventRecord(stop));
-    LWSCCD_CUDA_CHECK(cudaEventSynchronize(stop));
-    float ms = 0;
-    LWSCCD_CUDA_CHECK(cudaEventElapsedTime(&ms, start, stop));
-    build_ms.push_back(ms);
-  }
+  const std::vector<double> build_ms = lwsccd_bench::time_with_events(reps, [&] { bvh.build(dstep); });
   for (int i = 0; i < 3; ++i) bvh.refit(dstep);
-  for (int r = 0; r < reps; ++r) {
-    LWSCCD_CUDA_CHECK(cudaEventRecord(start));
-    bvh.refit(dstep);
-    LWSCCD_CUDA_CHECK(cudaEventRecord(stop));
-    LWSCCD_CUDA_CHECK(cudaEventSynchronize(stop));
-    float ms = 0;
-    LWSCCD_CUDA_CHECK(cudaEventElapsedTime(&ms, start, stop));
-    refit_ms.push_back(ms);
-  }
+  const std::vector<double> refit_ms = lwsccd_bench::time_with_events(reps, [&] { bvh.refit(dstep); });
   bvh.check_status();
   const std::string bv = std::string(bv_name) + (sizeof(P) == 4 ? " (float pos)" : " (double pos)");
   const index_t faces = step.mesh->num_faces();
@@ -61,8 +42,6 @@ void bench_gpu(const std::string& scene_name, const Step& step, int reps, std::v
   rows.push_back({scene_name, bv, "gpu", "refit", faces, lwsccd_bench::median(refit_ms),
                   lwsccd_bench::percentile(refit_ms, 0.1), lwsccd_bench::percentile(refit_ms, 0.9), reps,
                   bvh.device_bytes()});
-  LWSCCD_CUDA_CHECK(cudaEventDestroy(start));
-  LWSCCD_CUDA_CHECK(cudaEventDestroy(stop));
 }
 
 template <class BV>
@@ -100,30 +79,15 @@ void bench_scene(const std::string& name, const Step& step, int reps, bool cpu_t
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data, json_path;
-  int reps = 50;
-  bool big = true;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--data" && i + 1 < argc) data = argv[++i];
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-    else if (a == "--reps" && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--no-big") big = false;
-    else {
-      std::fprintf(stderr, "usage: lwsccd-bench-bvh [--data DIR] [--reps N] [--json FILE] [--no-big]\n");
-      return a == "-h" || a == "--help" ? 0 : 1;
-    }
-  }
-  int devices = 0;
-  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) {
-    std::fprintf(stderr, "lwsccd-bench-bvh: no CUDA device; nothing to measure\n");
-    return 77;
-  }
+  const lwsccd_bench::BenchArgs args = lwsccd_bench::parse_bench_args(
+      argc, argv, 50, {"--no-big"}, "usage: lwsccd-bench-bvh [--data DIR] [--reps N] [--json FILE] [--no-big]");
+  const int reps = args.reps;
+  const bool big = !args.has("--no-big");
   cudaDeviceProp prop{};
-  LWSCCD_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
+  if (!lwsccd_bench::first_gpu(prop, "lwsccd-bench-bvh")) return 77;
   try {
     std::vector<Row> rows;
-    const std::string dir = lwsccd_bench::data_dir(data, LWSCCD_BENCH_DATA_DIR);
+    const std::string dir = lwsccd_bench::data_dir(args.data, LWSCCD_BENCH_DATA_DIR);
     if (std::filesystem::is_directory(dir + "/scenes/cloth-ball")) {
       const Scene s = load_scene(dir + "/scenes/cloth-ball");
       bench_scene("cloth-ball", s.step, reps, true, rows);
@@ -142,9 +106,9 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-14s %10d %-22s %-15s %-6s %11.4f %10.4f - %9.4f %5d %10.1f\n", r.scene.c_str(), r.faces, r.bv.c_str(),
                   r.backend.c_str(), r.op.c_str(), r.median_ms, r.p10_ms, r.p90_ms, r.reps, r.device_bytes / 1048576.0);
-    if (!json_path.empty()) {
-      std::FILE* f = std::fopen(json_path.c_str(), "w");
-      if (!f) throw Error("cannot write " + json_path);
+    if (!args.json.empty()) {
+      std::FILE* f = std::fopen(args.json.c_str(), "w");
+      if (!f) throw Error("cannot write " + args.json);
       std::fprintf(f, "[\n");
       for (std::size_t i = 0; i < rows.size(); ++i) {
         const Row& r = rows[i];

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -27,6 +28,40 @@ inline std::string data_dir(const std::string& from_args, const char* configured
   if (!from_args.empty()) return from_args;
   if (const char* env = std::getenv("LWSCCD_DATA_DIR")) return env;
   return configured;
+}
+
+/// The options every benchmark takes: --data DIR, --reps N, --json FILE, plus its own flags.
+struct BenchArgs {
+  std::string data, json;
+  int reps = 1;
+  std::vector<std::string> flags;  ///< extra flags that were given (from `known_flags`)
+  bool has(const std::string& flag) const {
+    for (const auto& f : flags)
+      if (f == flag) return true;
+    return false;
+  }
+};
+
+/// Parses the common options; prints `usage` and exits (0 for -h/--help, 1 otherwise) on anything
+/// else.
+inline BenchArgs parse_bench_args(int argc, char** argv, int default_reps, const std::vector<std::string>& known_flags,
+                                  const char* usage) {
+  BenchArgs args;
+  args.reps = default_reps;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    bool known = false;
+    for (const auto& f : known_flags) known = known || a == f;
+    if (a == "--data" && i + 1 < argc) args.data = argv[++i];
+    else if (a == "--json" && i + 1 < argc) args.json = argv[++i];
+    else if (a == "--reps" && i + 1 < argc) args.reps = std::max(1, std::atoi(argv[++i]));
+    else if (known) args.flags.push_back(a);
+    else {
+      std::fprintf(stderr, "%s\n", usage);
+      std::exit(a == "-h" || a == "--help" ? 0 : 1);
+    }
+  }
+  return args;
 }
 
 }  // namespace lwsccd_bench

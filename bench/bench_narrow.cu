@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "bench_common.hpp"
+#include "bench_gpu.cuh"
 #include "lwsccd/cubic_ccd.hpp"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/inclusion_ccd.hpp"
@@ -44,22 +45,9 @@ Row measure(const std::string& scene, const gpu::DeviceMeshFeatures& features, c
             int reps) {
   gpu::NarrowPhase<Method, T> narrow;
   const CcdParams<T> params;
-  narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);  // warm-up
-  cudaEvent_t start, stop;
-  LWSCCD_CUDA_CHECK(cudaEventCreate(&start));
-  LWSCCD_CUDA_CHECK(cudaEventCreate(&stop));
-  std::vector<double> ms;
-  for (int r = 0; r < reps; ++r) {
-    LWSCCD_CUDA_CHECK(cudaEventRecord(start));
-    narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
-    LWSCCD_CUDA_CHECK(cudaEventRecord(stop));
-    LWSCCD_CUDA_CHECK(cudaEventSynchronize(stop));
-    float t = 0;
-    LWSCCD_CUDA_CHECK(cudaEventElapsedTime(&t, start, stop));
-    ms.push_back(t);
-  }
-  LWSCCD_CUDA_CHECK(cudaEventDestroy(start));
-  LWSCCD_CUDA_CHECK(cudaEventDestroy(stop));
+  auto run = [&] { narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params); };
+  run();  // warm-up
+  const std::vector<double> ms = lwsccd_bench::time_with_events(reps, run);
   return {scene, Method::name, sizeof(T) == 4 ? "float" : "double", vf.size() + ee.size(),
           narrow.num_vf_hits() + narrow.num_ee_hits(), narrow.gave_up(), lwsccd_bench::median(ms),
           lwsccd_bench::percentile(ms, 0.1), lwsccd_bench::percentile(ms, 0.9), double(narrow.earliest_toi()), reps};
@@ -68,27 +56,13 @@ Row measure(const std::string& scene, const gpu::DeviceMeshFeatures& features, c
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data, json_path;
-  int reps = 5;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--data" && i + 1 < argc) data = argv[++i];
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-    else if (a == "--reps" && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
-    else {
-      std::fprintf(stderr, "usage: lwsccd-bench-narrow [--data DIR] [--reps N] [--json FILE]\n");
-      return a == "-h" || a == "--help" ? 0 : 1;
-    }
-  }
-  int devices = 0;
-  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) {
-    std::fprintf(stderr, "lwsccd-bench-narrow: no CUDA device; nothing to measure\n");
-    return 77;
-  }
+  const lwsccd_bench::BenchArgs args =
+      lwsccd_bench::parse_bench_args(argc, argv, 5, {}, "usage: lwsccd-bench-narrow [--data DIR] [--reps N] [--json FILE]");
+  const int reps = args.reps;
   cudaDeviceProp prop{};
-  LWSCCD_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
+  if (!lwsccd_bench::first_gpu(prop, "lwsccd-bench-narrow")) return 77;
   try {
-    const std::string dir = lwsccd_bench::data_dir(data, LWSCCD_BENCH_DATA_DIR);
+    const std::string dir = lwsccd_bench::data_dir(args.data, LWSCCD_BENCH_DATA_DIR);
     std::vector<Row> rows;
     for (const char* name : {"cloth-ball", "cloth-funnel", "armadillo-rollers"}) {
       const Scene scene = load_scene(dir + "/scenes/" + name);
@@ -119,9 +93,9 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-18s %-20s %-7s %11zu %10zu %8zu %11.3f %10.3f - %8.3f %16.9g\n", r.scene.c_str(), r.method.c_str(),
                   r.precision.c_str(), r.pairs, r.hits, r.gave_up, r.median_ms, r.p10_ms, r.p90_ms, r.earliest);
-    if (!json_path.empty()) {
-      std::FILE* f = std::fopen(json_path.c_str(), "w");
-      if (!f) throw Error("cannot write " + json_path);
+    if (!args.json.empty()) {
+      std::FILE* f = std::fopen(args.json.c_str(), "w");
+      if (!f) throw Error("cannot write " + args.json);
       std::fprintf(f, "[\n");
       for (std::size_t i = 0; i < rows.size(); ++i) {
         const Row& r = rows[i];

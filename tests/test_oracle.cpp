@@ -5,59 +5,13 @@
 #include <set>
 
 #include "lwsccd/oracle.hpp"
+#include "scene_fixtures.hpp"
 
 using namespace lwsccd;
 
-namespace {
-
-struct Soup {
-  TriangleMesh mesh;
-  std::vector<Vec3d> x0, x1;
-};
-
-// A folded cloth: a grid bent over itself (self contacts) plus some moving noise.
-Soup folded_cloth(int n, std::uint64_t seed) {
-  std::vector<Face> faces;
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i) {
-      const index_t a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
-      faces.push_back({{a, b, d}});
-      faces.push_back({{a, d, c}});
-    }
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1, 1);
-  std::vector<Vec3d> x0, x1;
-  for (int j = 0; j <= n; ++j)
-    for (int i = 0; i <= n; ++i) {
-      const double s = double(i) / n, t = double(j) / n;
-      // Fold along s = 0.5 so the two halves lie close above each other.
-      const double angle = s < 0.5 ? 0.0 : 3.0 * (s - 0.5);
-      const Vec3d p{s < 0.5 ? s : 0.5 - 0.05 * std::sin(angle), t, s < 0.5 ? 0.0 : 0.05 * (1 - std::cos(angle)) + 0.02};
-      x0.push_back(p + Vec3d{u(rng), u(rng), u(rng)} * 0.002);
-      x1.push_back(p + Vec3d{u(rng), u(rng), u(rng) - 1.0} * 0.01);
-    }
-  return {TriangleMesh(static_cast<index_t>(x0.size()), faces), x0, x1};
-}
-
-Soup random_soup(int n, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0, 1), d(-0.05, 0.05);
-  std::vector<Face> faces;
-  std::vector<Vec3d> x0, x1;
-  for (int f = 0; f < n; ++f) {
-    const Vec3d c{u(rng), u(rng), u(rng)};
-    const Vec3d v{d(rng), d(rng), d(rng)};
-    for (int k = 0; k < 3; ++k) {
-      const Vec3d p = c + Vec3d{d(rng), d(rng), d(rng)};
-      x0.push_back(p);
-      x1.push_back(p + v);
-    }
-    faces.push_back({{3 * f, 3 * f + 1, 3 * f + 2}});
-  }
-  return {TriangleMesh(3 * n, faces), x0, x1};
-}
-
-}  // namespace
+using Soup = lwsccd_test::MovingMesh;
+using lwsccd_test::folded_cloth;
+using lwsccd_test::random_soup;
 
 TEST_CASE("sweep and prune gives exactly the brute-force pair set", "[oracle]") {
   for (std::uint64_t seed = 1; seed <= 3; ++seed) {

@@ -1,5 +1,6 @@
-// The smallest lwsccd program: two moving triangles, their swept boxes, the candidate pair and
-// its vertex-face / edge-edge feature pairs. Built against the installed package by CI.
+// The smallest lwsccd program: two moving triangles, their swept boxes, the candidate pair, its
+// vertex-face / edge-edge feature pairs and the contacts among them with their time of impact.
+// Built against the installed package by CI.
 #include <cstdio>
 #include <memory>
 
@@ -17,7 +18,14 @@ int main() {
   const auto boxes = swept_triangle_bvs<Aabbd>(*step.mesh, step.x0, step.x1);
   const auto pairs = brute_force_pairs(*step.mesh, boxes);
   const FeaturePairs features = feature_pairs(*step.mesh, pairs);
-  std::printf("%zu candidate triangle pair(s), %zu vertex-face and %zu edge-edge feature pairs\n", pairs.size(),
-              features.vf.size(), features.ee.size());
-  return pairs.size() == 1 && features.vf.size() == 6 && features.ee.size() == 9 ? 0 : 1;
+  const auto contacts =
+      cpu::test_feature_pairs<Filtered<InclusionCcd>, double>(*step.mesh, step.x0, step.x1, features);
+  std::printf("%zu candidate triangle pair(s), %zu vertex-face and %zu edge-edge feature pairs, "
+              "%zu + %zu in contact, earliest at t = %.6f\n",
+              pairs.size(), features.vf.size(), features.ee.size(), contacts.vf.size(), contacts.ee.size(),
+              contacts.earliest_toi);
+  // The falling triangle's vertices reach z = 0 at t = 0.5, inside the still one.
+  const bool ok = pairs.size() == 1 && features.vf.size() == 6 && features.ee.size() == 9 && contacts.vf.size() >= 3 &&
+                  contacts.earliest_toi <= 0.5 && contacts.earliest_toi > 0.49;
+  return ok ? 0 : 1;
 }

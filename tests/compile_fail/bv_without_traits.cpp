@@ -1,0 +1,7 @@
+// Must NOT compile: a bounding volume with no bv_traits specialization.
+#include "lwsccd/bv_traits.hpp"
+struct Sphere {
+  float r;
+};
+static_assert(lwsccd::require_bounding_volume<Sphere>::value, "");
+int main() {}

@@ -1,0 +1,10 @@
+// Must NOT compile: a traversal task without item_type.
+#include "lwsccd/traversal_task.hpp"
+struct Task {
+  using result_type = int;
+  static constexpr int kMaxChildren = 1;
+  template <class Out>
+  void process(const int&, Out&) const {}
+};
+static_assert(lwsccd::require_traversal_task<Task>::value, "");
+int main() {}

@@ -1,0 +1,10 @@
+// Must NOT compile: a traversal task that does not say how many items one process() pushes.
+#include "lwsccd/traversal_task.hpp"
+struct Task {
+  using item_type = int;
+  using result_type = int;
+  template <class Out>
+  void process(const int&, Out&) const {}
+};
+static_assert(lwsccd::require_traversal_task<Task>::value, "");
+int main() {}

@@ -1,0 +1,9 @@
+// Must NOT compile: a traversal task without process().
+#include "lwsccd/traversal_task.hpp"
+struct Task {
+  using item_type = int;
+  using result_type = int;
+  static constexpr int kMaxChildren = 1;
+};
+static_assert(lwsccd::require_traversal_task<Task>::value, "");
+int main() {}
