@@ -53,6 +53,7 @@ struct SelfCollisionTask {
   BvhView<BV> bvh;
   LeafFilter filter;
 
+  LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void process(const NodePair& p, Out& out) const {
     if (p.a == p.b) {
@@ -85,6 +86,7 @@ struct SelfCollisionTask {
     }
   }
 
+  LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void emit_leaf_pair(index_t f, index_t g, Out& out) const {
     if (!filter.considers(f, g)) return;
@@ -146,6 +148,7 @@ struct InterCollisionTask {
 
   BvhView<BV> a_tree, b_tree;
 
+  LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void process(const NodePair& p, Out& out) const {
     if (!bv_traits<BV>::overlap(a_tree.bvs[p.a], b_tree.bvs[p.b])) {

@@ -30,6 +30,15 @@
 #define LWSCCD_UNROLL
 #endif
 
+// Before a __host__ __device__ template whose instantiations may call host-only code (a task's
+// process() with the CPU backend's emitter): only the instantiations actually used on each side
+// are compiled there, so nvcc's cross-execution-space warning does not apply.
+#if defined(__CUDACC__)
+#define LWSCCD_EXEC_CHECK_DISABLE _Pragma("nv_exec_check_disable")
+#else
+#define LWSCCD_EXEC_CHECK_DISABLE
+#endif
+
 // Device-side and host-side invariant checks. On the host, invalid *input* is reported by
 // exceptions (see error.hpp); these asserts only guard internal invariants.
 #define LWSCCD_ASSERT(cond) assert(cond)

@@ -1,0 +1,417 @@
+// lwsccd — kernels and host loops of traverse.cuh.
+#pragma once
+
+#include <cub/block/block_scan.cuh>
+
+#include <algorithm>
+#include <cassert>
+
+#include "lwsccd/traverse.cuh"
+
+namespace lwsccd::gpu {
+
+namespace detail {
+
+enum Counter : int {
+  kResults = 0,    ///< results appended (may exceed the capacity: then the output grows)
+  kFront = 1,      ///< front items appended (same)
+  kProcessed = 2,  ///< items processed
+  kAppended = 3,   ///< items appended to the next list (expansion) or handed back (resume)
+  kIdle = 4,       ///< blocks that ran out of work (gProximity)
+  kHalted = 5,     ///< blocks that stopped because their global stack was full
+  kCounters = 8
+};
+
+template <class Task>
+struct Outputs {
+  typename Task::result_type* results;
+  std::size_t result_capacity;
+  typename Task::item_type* front;
+  std::size_t front_capacity;
+  unsigned long long* counters;
+  bool record_front;
+};
+
+// Collects one item's children in registers; results and front go straight to global memory.
+template <class Task>
+struct DeviceEmitter {
+  using Item = typename Task::item_type;
+  Item children[Task::kMaxChildren];
+  int count = 0;
+  const Outputs<Task>* out;
+
+  __device__ void push_item(const Item& x) {
+    assert(count < Task::kMaxChildren && "a task pushed more than kMaxChildren items");
+    children[count++] = x;
+  }
+  __device__ void push_result(const typename Task::result_type& r) {
+    const unsigned long long i = atomicAdd(&out->counters[kResults], 1ull);
+    if (i < out->result_capacity) out->results[i] = r;
+  }
+  __device__ void push_front(const Item& x) {
+    if (!out->record_front) return;
+    const unsigned long long i = atomicAdd(&out->counters[kFront], 1ull);
+    if (i < out->front_capacity) out->front[i] = x;
+  }
+};
+
+// One breadth-first level: every item processed once, children appended to `next` (sized
+// n * kMaxChildren by the caller, so it cannot overflow).
+template <class Task>
+__global__ void expand_kernel(Task task, const typename Task::item_type* in, std::size_t n,
+                              typename Task::item_type* next, Outputs<Task> out) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  DeviceEmitter<Task> e;
+  e.out = &out;
+  task.process(in[i], e);
+  if (e.count) {
+    const unsigned long long base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(e.count));
+    for (int c = 0; c < e.count; ++c) next[base + c] = e.children[c];
+  }
+}
+
+// The per-block two-level stack loop shared by the schedulers. `region` is this block's global
+// stack (capacity `global_capacity`), holding `region_size` items on entry. Returns with every
+// remaining item in the region (its new size in `region_size`) unless `hand_back` is set, in which
+// case the items left go to hand_back (when the region would overflow).
+template <class Task, class Policy>
+__device__ void run_block_stack(const Task& task, typename Task::item_type* region, int& region_size, int global_capacity,
+                                const Outputs<Task>& out, const unsigned long long* idle_blocks, unsigned idle_limit,
+                                typename Task::item_type* hand_back) {
+  using Item = typename Task::item_type;
+  constexpr int kThreads = Policy::kBlockThreads;
+  constexpr int kShared = Policy::kSharedStack;
+  constexpr int kK = Task::kMaxChildren;
+  static_assert(kShared >= 2 * kThreads * kK, "lwsccd: kSharedStack must hold at least 2 * kBlockThreads * kMaxChildren items");
+  using Scan = cub::BlockScan<int, kThreads>;
+  __shared__ Item s_items[kShared];
+  __shared__ typename Scan::TempStorage scan_storage;
+  __shared__ int s_size, g_size, take, refill, spill, stop;  // stop: 0 run, 1 done, 2 pause, 3 full
+  const int t = threadIdx.x;
+  if (t == 0) {
+    s_size = 0;
+    g_size = region_size;
+  }
+  __syncthreads();
+  while (true) {
+    if (t == 0) {
+      refill = 0;
+      spill = 0;
+      stop = 0;
+      if (s_size == 0 && g_size == 0) stop = 1;
+      else if (idle_blocks && *reinterpret_cast<const volatile unsigned long long*>(idle_blocks) >= idle_limit) stop = 2;
+      else {
+        if (s_size == 0) refill = ::min(g_size, kShared / 2);
+        const int size = s_size + refill;
+        take = ::min(size, kThreads);
+        const int need = size - take + take * kK;
+        if (need > kShared) {
+          spill = need - kShared;
+          if (g_size - refill + spill > global_capacity) stop = 3;
+        }
+      }
+    }
+    __syncthreads();
+    if (stop) break;
+    if (refill) {  // bring the global stack's top into shared memory
+      for (int i = t; i < refill; i += kThreads) s_items[i] = region[g_size - refill + i];
+      __syncthreads();
+      if (t == 0) {
+        g_size -= refill;
+        s_size = refill;
+      }
+      __syncthreads();
+    }
+    if (spill) {  // oldest shared items to the global stack, the rest shifted down
+      for (int i = t; i < spill; i += kThreads) region[g_size + i] = s_items[i];
+      constexpr int kPerThread = (kShared + kThreads - 1) / kThreads;
+      Item keep[kPerThread];
+      const int remaining = s_size - spill;
+      for (int j = 0; j < kPerThread; ++j) {
+        const int i = t + j * kThreads;
+        if (i < remaining) keep[j] = s_items[i + spill];
+      }
+      __syncthreads();
+      for (int j = 0; j < kPerThread; ++j) {
+        const int i = t + j * kThreads;
+        if (i < remaining) s_items[i] = keep[j];
+      }
+      __syncthreads();
+      if (t == 0) {
+        g_size += spill;
+        s_size = remaining;
+      }
+      __syncthreads();
+    }
+    DeviceEmitter<Task> e;
+    e.out = &out;
+    Item item;
+    const bool active = t < take;
+    if (active) item = s_items[s_size - take + t];
+    __syncthreads();
+    if (t == 0) s_size -= take;
+    if (active) task.process(item, e);
+    int offset = 0, total = 0;
+    Scan(scan_storage).ExclusiveSum(e.count, offset, total);
+    __syncthreads();  // s_size updated, scan storage free
+    for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
+    __syncthreads();
+    if (t == 0) {
+      s_size += total;
+      atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
+    }
+  }
+  // Leave every remaining item in the region, or hand everything back when it would not fit.
+  if (stop == 1) {
+    if (t == 0) region_size = 0;
+    return;
+  }
+  __shared__ unsigned long long base;
+  if (stop == 3 || g_size + s_size > global_capacity) {
+    if (t == 0) {
+      base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(g_size + s_size));
+      atomicAdd(&out.counters[kHalted], 1ull);
+    }
+    __syncthreads();
+    for (int i = t; i < g_size; i += kThreads) hand_back[base + i] = region[i];
+    for (int i = t; i < s_size; i += kThreads) hand_back[base + g_size + i] = s_items[i];
+    if (t == 0) region_size = 0;
+    return;
+  }
+  for (int i = t; i < s_size; i += kThreads) region[g_size + i] = s_items[i];
+  if (t == 0) region_size = g_size + s_size;
+}
+
+// StaticTaskList: block b takes its even share of the cut and runs it to completion.
+template <class Task, class Policy>
+__global__ void __launch_bounds__(Policy::kBlockThreads) static_list_kernel(Task task, const typename Task::item_type* work,
+                                                                            std::size_t n, typename Task::item_type* stacks,
+                                                                            int global_capacity, Outputs<Task> out,
+                                                                            typename Task::item_type* hand_back) {
+  const std::size_t begin = n * blockIdx.x / gridDim.x, end = n * (blockIdx.x + 1) / gridDim.x;
+  typename Task::item_type* region = stacks + static_cast<std::size_t>(blockIdx.x) * global_capacity;
+  __shared__ int region_size;
+  // The share (at most ~kItemsPerBlock items) starts in the block's global stack, reversed so
+  // that the first item is processed first.
+  const int count = static_cast<int>(end - begin);
+  for (int i = threadIdx.x; i < count; i += blockDim.x) region[count - 1 - i] = work[begin + i];
+  if (threadIdx.x == 0) region_size = count;
+  __syncthreads();
+  run_block_stack<Task, Policy>(task, region, region_size, global_capacity, out, nullptr, 0, hand_back);
+}
+
+// gProximity traversal kernel: each block runs its queue until it is empty (then counts itself
+// idle and leaves) or until enough blocks idle; what remains stays in its queue.
+template <class Task, class Policy>
+__global__ void __launch_bounds__(Policy::kBlockThreads) balanced_traverse_kernel(Task task, typename Task::item_type* queues,
+                                                                                  int* sizes, int queue_capacity,
+                                                                                  unsigned idle_limit, Outputs<Task> out,
+                                                                                  typename Task::item_type* hand_back) {
+  typename Task::item_type* region = queues + static_cast<std::size_t>(blockIdx.x) * queue_capacity;
+  __shared__ int region_size;
+  if (threadIdx.x == 0) region_size = sizes[blockIdx.x];
+  __syncthreads();
+  run_block_stack<Task, Policy>(task, region, region_size, queue_capacity, out, &out.counters[kIdle], idle_limit, hand_back);
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    sizes[blockIdx.x] = region_size;
+    if (region_size == 0) atomicAdd(&out.counters[kIdle], 1ull);
+  }
+}
+
+// gProximity balancing kernel (one block): prefix sums of the queue sizes, then every item moves
+// to its even share in the other set of queues; handed-back items are appended after the queues.
+template <class Item>
+__global__ void balance_kernel(const Item* queues, const int* sizes, int blocks, int queue_capacity, const Item* extra,
+                               const unsigned long long* extra_count, Item* new_queues, int* new_sizes,
+                               unsigned long long* total_out) {
+  __shared__ unsigned long long total;
+  extern __shared__ unsigned long long prefix[];  // blocks + 1
+  if (threadIdx.x == 0) {
+    prefix[0] = 0;
+    for (int b = 0; b < blocks; ++b) prefix[b + 1] = prefix[b] + static_cast<unsigned long long>(sizes[b]);
+    total = prefix[blocks] + *extra_count;
+    *total_out = total;
+  }
+  __syncthreads();
+  for (int b = threadIdx.x; b < blocks; b += blockDim.x)
+    new_sizes[b] = static_cast<int>(total * (b + 1) / blocks - total * b / blocks);
+  // Item k of the concatenation goes to block b with k in [total*b/blocks, total*(b+1)/blocks).
+  for (unsigned long long k = threadIdx.x; k < total; k += blockDim.x) {
+    Item x;
+    if (k < prefix[blocks]) {
+      int lo = 0, hi = blocks - 1;  // block holding k
+      while (lo < hi) {
+        const int mid = (lo + hi + 1) / 2;
+        if (prefix[mid] <= k) lo = mid;
+        else hi = mid - 1;
+      }
+      x = queues[static_cast<std::size_t>(lo) * queue_capacity + (k - prefix[lo])];
+    } else {
+      x = extra[k - prefix[blocks]];
+    }
+    int owner = static_cast<int>(k * blocks / total);
+    while (owner > 0 && total * owner / blocks > k) --owner;
+    while (total * (owner + 1) / blocks <= k) ++owner;
+    new_queues[static_cast<std::size_t>(owner) * queue_capacity + (k - total * owner / blocks)] = x;
+  }
+}
+
+template <class T>
+void ensure(DeviceBuffer<T>& b, std::size_t n) {
+  if (b.size() < n) b.resize_discard(n);
+}
+
+inline int resident_blocks(int blocks_per_sm) {
+  int device = 0, sms = 0;
+  LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
+  LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+  return std::max(1, sms * blocks_per_sm);
+}
+
+template <class Task>
+std::vector<unsigned long long> read_counters(const TraversalOutput<Task>& out, cudaStream_t stream) {
+  std::vector<unsigned long long> c(kCounters);
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(c.data(), out.counters_.data(), kCounters * sizeof(unsigned long long),
+                                    cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  return c;
+}
+
+template <class Task>
+Outputs<Task> outputs_of(TraversalOutput<Task>& out, bool record_front) {
+  return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front};
+}
+
+// One complete attempt with the current output capacities.
+template <class Task, class Policy>
+void run_static(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+                bool record_front, cudaStream_t stream) {
+  using Item = typename Task::item_type;
+  const int max_blocks = resident_blocks(Policy::kBlocksPerSm);
+  const std::size_t target = static_cast<std::size_t>(max_blocks) * Policy::kItemsPerBlock;
+  int global_capacity = Policy::kGlobalStack;
+  // Breadth-first expansion into a cut of at least `target` items.
+  ensure(out.work_, std::max<std::size_t>(num_seeds, 1));
+  if (num_seeds)
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.work_.data(), seeds, num_seeds * sizeof(Item), cudaMemcpyDeviceToDevice, stream));
+  std::size_t n = num_seeds;
+  while (n > 0 && n < target / Task::kMaxChildren) {
+    ensure(out.next_, n * Task::kMaxChildren);
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
+    expand_kernel<Task><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, out.work_.data(), n, out.next_.data(),
+                                                                                     outputs_of(out, record_front));
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto c = read_counters(out, stream);
+    out.stats_.items_processed += n;
+    n = static_cast<std::size_t>(c[kAppended]);
+    std::swap(out.work_, out.next_);
+  }
+  // Blocks finish their shares; items handed back (a full global stack) are run again.
+  while (n > 0) {
+    const int blocks = static_cast<int>(std::min<std::size_t>(max_blocks, (n + Policy::kItemsPerBlock - 1) / Policy::kItemsPerBlock));
+    while ((n + blocks - 1) / blocks > static_cast<std::size_t>(global_capacity) / 2) global_capacity *= 2;  // shares fit
+    ensure(out.stacks_, static_cast<std::size_t>(blocks) * global_capacity);
+    ensure(out.next_, static_cast<std::size_t>(blocks) * (global_capacity + Policy::kSharedStack));
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, 4 * sizeof(unsigned long long), stream));
+    static_list_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
+        task, out.work_.data(), n, out.stacks_.data(), global_capacity, outputs_of(out, record_front), out.next_.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto c = read_counters(out, stream);
+    n = static_cast<std::size_t>(c[kAppended]);
+    if (c[kHalted] > 0) {
+      ++out.stats_.relaunches;
+      global_capacity *= 2;  // the next launch has room to make progress
+    }
+    std::swap(out.work_, out.next_);
+  }
+}
+
+template <class Task, class Policy>
+void run_balanced(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+                  bool record_front, cudaStream_t stream) {
+  using Item = typename Task::item_type;
+  const int blocks = resident_blocks(Policy::kBlocksPerSm);
+  int capacity = Policy::kGlobalStack + Policy::kSharedStack;  // a queue always takes a block's leftovers
+  while (static_cast<std::size_t>(capacity) * blocks < num_seeds) capacity *= 2;
+  ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
+  ensure(out.stacks_alt_, static_cast<std::size_t>(blocks) * capacity);
+  ensure(out.sizes_, blocks);
+  ensure(out.sizes_alt_, blocks);
+  ensure(out.next_, std::max<std::size_t>(num_seeds, static_cast<std::size_t>(blocks) * (capacity + Policy::kSharedStack)));
+  // The seeds enter through the balancing kernel as "extra" items.
+  if (num_seeds)
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.next_.data(), seeds, num_seeds * sizeof(Item), cudaMemcpyDeviceToDevice, stream));
+  LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.sizes_.data(), 0, blocks * sizeof(int), stream));
+  unsigned long long extra = num_seeds;
+  const unsigned idle_limit = std::max(1u, static_cast<unsigned>(blocks * Policy::kIdlePercent / 100));
+  while (true) {
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.counters_.data() + kAppended, &extra, sizeof extra, cudaMemcpyHostToDevice, stream));
+    const std::size_t shared_bytes = (blocks + 1) * sizeof(unsigned long long);
+    balance_kernel<Item><<<1, 1024, shared_bytes, stream>>>(out.stacks_.data(), out.sizes_.data(), blocks, capacity,
+                                                            out.next_.data(), out.counters_.data() + kAppended,
+                                                            out.stacks_alt_.data(), out.sizes_alt_.data(),
+                                                            out.counters_.data() + kIdle);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    std::swap(out.stacks_, out.stacks_alt_);
+    std::swap(out.sizes_, out.sizes_alt_);
+    const auto c = read_counters(out, stream);
+    const unsigned long long total = c[kIdle];  // the balancing kernel left the total there
+    if (total == 0) break;
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, 3 * sizeof(unsigned long long), stream));
+    ensure(out.next_, static_cast<std::size_t>(blocks) * (capacity + Policy::kSharedStack));  // hand-backs fit
+    balanced_traverse_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
+        task, out.stacks_.data(), out.sizes_.data(), capacity, idle_limit, outputs_of(out, record_front), out.next_.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto after = read_counters(out, stream);
+    extra = after[kAppended];
+    if (after[kHalted] > 0) {
+      // Queues too small for the work: grow them (contents move through the balancing kernel).
+      ++out.stats_.relaunches;
+      const int grown = capacity * 2;
+      DeviceBuffer<Item> bigger(static_cast<std::size_t>(blocks) * grown);
+      LWSCCD_CUDA_CHECK(cudaMemcpy2DAsync(bigger.data(), grown * sizeof(Item), out.stacks_.data(), capacity * sizeof(Item),
+                                          capacity * sizeof(Item), blocks, cudaMemcpyDeviceToDevice, stream));
+      out.stacks_ = std::move(bigger);
+      out.stacks_alt_ = DeviceBuffer<Item>(static_cast<std::size_t>(blocks) * grown);
+      capacity = grown;
+    }
+  }
+}
+
+}  // namespace detail
+
+template <class Scheduler, class Task>
+void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+              bool record_front, cudaStream_t stream) {
+  static_assert(require_traversal_task<Task>::value, "");
+  detail::ensure(out.counters_, detail::kCounters);
+  if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
+  if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
+  out.stats_ = {};
+  for (int attempt = 0;; ++attempt) {
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
+    out.stats_.items_processed = 0;
+    constexpr bool kStatic = Scheduler::kIsStatic;
+    if constexpr (kStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    const auto c = detail::read_counters(out, stream);
+    out.stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
+    const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
+    const std::size_t front = record_front ? static_cast<std::size_t>(c[detail::kFront]) : 0;
+    if (results <= out.results_.size() && front <= out.front_.size()) {
+      out.num_results_ = results;
+      out.num_front_ = front;
+      out.stats_.results = results;
+      out.stats_.front = front;
+      return;
+    }
+    // An output overflowed: grow it to what was counted and run again from the same seeds.
+    if (results > out.results_.size()) out.results_.resize_discard(results + results / 4);
+    if (front > out.front_.size()) out.front_.resize_discard(front + front / 4);
+    ++out.stats_.relaunches;
+  }
+}
+
+}  // namespace lwsccd::gpu

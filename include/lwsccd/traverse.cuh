@@ -1,0 +1,103 @@
+// lwsccd — the traversal engine on the GPU (card): one kernel composed from a task (BVTT self or
+// inter collision, ray casting, ...) and a scheduler policy:
+//
+//   #include <lwsccd/traverse.cuh>
+//   lwsccd::gpu::TraversalOutput<Task> out;
+//   lwsccd::gpu::traverse<lwsccd::gpu::StaticTaskList<>>(task, seeds, num_seeds, out, record_front, stream);
+//
+// Schedulers (tuning knobs are static constexpr members of their policy structs):
+// - StaticTaskList: the seeds are expanded breadth first into a cut of the BVTT, split evenly
+//   over the blocks before launch; each block finishes its share with its own stack.
+// - GProximityBalancer: per-block queues in global memory; the traversal kernel stops when too
+//   many blocks are idle, a balancing kernel redistributes the queues evenly, looped from the
+//   host (dissertation Algorithms 3.1-3.4).
+//
+// Every block works on a two-level stack: a shared-memory stack holds the hot top, its oldest
+// items spill to the block's region of global memory and come back when the shared part runs
+// dry. Nothing is lost: a block whose global region would overflow stops before it processes
+// more and hands all its items back; the host relaunches with them (TraversalStats::relaunches).
+// Results and front items are appended with atomics to outputs that grow: when a launch
+// produced more than fit, the output grows to the count and the traversal runs again from the
+// same seeds (tasks are deterministic), so the answer is complete.
+#pragma once
+
+#include <cub/block/block_scan.cuh>
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <vector>
+
+#include "lwsccd/device_buffer.cuh"
+#include "lwsccd/traversal_task.hpp"
+
+namespace lwsccd::gpu {
+
+/// Static split of a BVTT cut over the blocks, no balancing.
+template <int BlockThreads = 128, int SharedStack = 1024, int GlobalStack = 16384, int ItemsPerBlock = 256>
+struct StaticTaskList {
+  static constexpr int kBlockThreads = BlockThreads;
+  static constexpr int kSharedStack = SharedStack;  ///< items per block in shared memory
+  static constexpr int kGlobalStack = GlobalStack;  ///< items per block in global memory (spill)
+  static constexpr int kItemsPerBlock = ItemsPerBlock;  ///< size of the initial cut per block
+  static constexpr int kBlocksPerSm = 2;
+  static constexpr bool kIsStatic = true;
+};
+
+/// gProximity-style balancing: traverse until too many blocks idle, then rebalance.
+template <int BlockThreads = 128, int SharedStack = 1024, int GlobalStack = 16384, int IdlePercent = 50>
+struct GProximityBalancer {
+  static constexpr int kBlockThreads = BlockThreads;
+  static constexpr int kSharedStack = SharedStack;
+  static constexpr int kGlobalStack = GlobalStack;
+  static constexpr int kIdlePercent = IdlePercent;  ///< stop the traversal kernel when this share of blocks idles
+  static constexpr int kBlocksPerSm = 2;
+  static constexpr bool kIsStatic = false;
+};
+
+/// Owning device outputs of a traversal (reused across calls; they only grow).
+template <class Task>
+class TraversalOutput {
+ public:
+  using item_type = typename Task::item_type;
+  using result_type = typename Task::result_type;
+
+  std::size_t num_results() const { return num_results_; }
+  std::size_t num_front() const { return num_front_; }
+  const result_type* results() const { return results_.data(); }
+  const item_type* front() const { return front_.data(); }
+  const TraversalStats& stats() const { return stats_; }
+  std::vector<result_type> download_results(cudaStream_t stream = nullptr) const { return prefix(results_, num_results_, stream); }
+  std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(front_, num_front_, stream); }
+  std::size_t device_bytes() const {
+    return results_.capacity_bytes() + front_.capacity_bytes() + work_.capacity_bytes() + next_.capacity_bytes() +
+           stacks_.capacity_bytes() + stacks_alt_.capacity_bytes() + sizes_.capacity_bytes() + counters_.capacity_bytes();
+  }
+
+  // Storage used by the schedulers.
+  DeviceBuffer<result_type> results_;
+  DeviceBuffer<item_type> front_, work_, next_, stacks_, stacks_alt_;
+  DeviceBuffer<int> sizes_, sizes_alt_;
+  DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
+  std::size_t num_results_ = 0, num_front_ = 0;
+  TraversalStats stats_;
+
+ private:
+  template <class T>
+  static std::vector<T> prefix(const DeviceBuffer<T>& b, std::size_t n, cudaStream_t stream) {
+    std::vector<T> out(n);
+    if (n) {
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.data(), b.data(), n * sizeof(T), cudaMemcpyDeviceToHost, stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    }
+    return out;
+  }
+};
+
+/// Runs `task` from the device array of seeds to completion with Scheduler. Synchronizes.
+template <class Scheduler, class Task>
+void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+              bool record_front, cudaStream_t stream = nullptr);
+
+}  // namespace lwsccd::gpu
+
+#include "lwsccd/detail/traverse_kernels.cuh"

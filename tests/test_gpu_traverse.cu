@@ -1,0 +1,152 @@
+// GPU schedulers x BVs x tasks against the CPU traversal engine, pair for pair.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/bvtt.hpp"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/traverse.cuh"
+#include "lwsccd/traverse.hpp"
+#include "scene_fixtures.hpp"
+#include "test_support.hpp"
+
+using namespace lwsccd;
+using lwsccd_test::MovingMesh;
+
+namespace {
+
+// Tiny capacities: spills, hand-backs and relaunches on every run.
+using TinyStatic = gpu::StaticTaskList<32, 192, 64, 8>;
+using TinyBalanced = gpu::GProximityBalancer<32, 192, 64, 30>;
+
+template <class V>
+V sorted(V v) {
+  std::sort(v.begin(), v.end());
+  return v;
+}
+
+template <class Scheduler, class Task>
+std::vector<TrianglePair> gpu_pairs(const Task& task, const std::vector<NodePair>& seeds, gpu::TraversalOutput<Task>& out,
+                                    bool record_front = false) {
+  gpu::DeviceBuffer<NodePair> d_seeds;
+  d_seeds.upload(seeds);
+  gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, record_front);
+  return sorted(out.download_results());
+}
+
+template <class BV, class Scheduler>
+void self_matches_cpu(const MovingMesh& m, bool tiny_outputs) {
+  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+  gpu::Bvh<BV> gbvh;
+  gbvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(m.mesh.faces());
+  SelfCollisionTask<BV> gtask{gbvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  const cpu::Bvh<BV> cbvh(m.mesh, m.x0, m.x1);
+  SelfCollisionTask<BV> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, m.mesh.faces().data(), false}};
+  const auto expected = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
+  gpu::TraversalOutput<SelfCollisionTask<BV>> out;
+  if (tiny_outputs) out.results_.resize_discard(1);  // forces growth and a rerun
+  REQUIRE(gpu_pairs<Scheduler>(gtask, {NodePair{0, 0}}, out) == expected);
+  if (tiny_outputs && !expected.empty()) CHECK(out.stats().relaunches > 0);
+  CHECK(out.stats().items_processed > 0);
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gpu][traverse]", Aabbf, Obbf) {
+  using BV = TestType;
+  for (const MovingMesh& m : {lwsccd_test::folded_cloth(40, 1), lwsccd_test::random_soup(4000, 2),
+                              lwsccd_test::coincident_triangles(50), lwsccd_test::random_soup(1, 3),
+                              lwsccd_test::random_soup(2, 4)}) {
+    INFO("faces " << m.mesh.num_faces());
+    self_matches_cpu<BV, gpu::StaticTaskList<>>(m, false);
+    self_matches_cpu<BV, gpu::GProximityBalancer<>>(m, false);
+    self_matches_cpu<BV, TinyStatic>(m, true);
+    self_matches_cpu<BV, TinyBalanced>(m, true);
+  }
+}
+
+TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu][traverse][front]") {
+  const MovingMesh a = lwsccd_test::random_soup(3000, 21), b = lwsccd_test::random_soup(2000, 22);
+  gpu::DeviceStep<double> sa(a.mesh, a.x0, a.x1), sb(b.mesh, b.x0, b.x1);
+  gpu::Bvh<Aabbf> ta, tb;
+  ta.build(sa);
+  tb.build(sb);
+  const cpu::Bvh<Aabbf> ca(a.mesh, a.x0, a.x1), cb(b.mesh, b.x0, b.x1);
+  const auto expected = sorted(cpu::traverse(InterCollisionTask<Aabbf>{ca.view(), cb.view()}, {NodePair{0, 0}}).results);
+  gpu::TraversalOutput<InterCollisionTask<Aabbf>> out;
+  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
+  REQUIRE(gpu_pairs<TinyBalanced>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
+  REQUIRE(expected.size() > 10);
+
+  // Front: record on the GPU, refit, restart from it; equals a fresh CPU traversal.
+  const MovingMesh m0 = lwsccd_test::folded_cloth(40, 1), m1 = lwsccd_test::folded_cloth(40, 2);
+  gpu::DeviceStep<double> step(m0.mesh, m0.x0, m0.x1);
+  gpu::Bvh<Aabbf> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(m0.mesh.faces());
+  SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  gpu::TraversalOutput<SelfCollisionTask<Aabbf>> self_out;
+  gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, self_out, true);
+  const auto front = self_out.download_front();
+  REQUIRE(front.size() > 0);
+  step.set_positions(m1.x0, m1.x1);
+  bvh.refit(step);
+  cpu::Bvh<Aabbf> cbvh(m0.mesh, m0.x0, m0.x1);
+  cbvh.refit(m1.x0, m1.x1);
+  SelfCollisionTask<Aabbf> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, m0.mesh.faces().data(), false}};
+  const auto fresh = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
+  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, front, self_out, true) == fresh);
+  REQUIRE(gpu_pairs<TinyStatic>(task, front, self_out, true) == fresh);
+}
+
+TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with front tracking", "[gpu][traverse][data]") {
+  if (!lwsccd_test::have_data()) {
+    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
+    return;
+  }
+  for (const char* name : {"cloth-funnel", "armadillo-rollers", "cloth-ball"}) {
+    INFO(name);
+    const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
+    const TriangleMesh& mesh = *scene.step.mesh;
+    const auto oracle = sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, scene.step.x0, scene.step.x1));
+    gpu::DeviceStep<double> step(mesh, scene.step.x0, scene.step.x1);
+    gpu::Bvh<Aabbf> bvh;
+    bvh.build(step);
+    gpu::DeviceBuffer<Face> faces;
+    faces.upload(mesh.faces());
+    SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+    gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
+    REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
+    REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
+    std::printf("%s: %zu pairs, %zu BVTT nodes, %zu relaunches\n", name, oracle.size(), out.stats().items_processed,
+                out.stats().relaunches);
+  }
+  const Sequence horse = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
+  const TriangleMesh& mesh = *horse.mesh();
+  gpu::DeviceStep<float> step(mesh, horse.frame(0), horse.frame(1));
+  gpu::Bvh<Aabbf> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(mesh.faces());
+  SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
+  gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out, true);
+  FrontTracker tracker;
+  tracker.update(out.download_front());
+  for (std::size_t s = 1; s < horse.num_steps(); ++s) {
+    INFO("horse step " << s);
+    step.set_positions(horse.frame(s), horse.frame(s + 1));
+    bvh.refit(step);
+    std::vector<Vec3f> f0(horse.frame(s).size()), f1(f0.size());
+    for (std::size_t v = 0; v < f0.size(); ++v) f0[v] = horse.frame(s)[v].cast<float>(), f1[v] = horse.frame(s + 1)[v].cast<float>();
+    const auto oracle = sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, f0, f1));
+    const auto& seeds = tracker.seeds(bvh.generation());
+    const auto got = s % 2 ? gpu_pairs<gpu::GProximityBalancer<>>(task, seeds, out, true) : gpu_pairs<gpu::StaticTaskList<>>(task, seeds, out, true);
+    REQUIRE(got == oracle);
+    tracker.update(out.download_front());
+  }
+}
