@@ -19,6 +19,7 @@ namespace {
 // Tiny capacities: spills, hand-backs and relaunches on every run.
 using TinyStatic = gpu::StaticTaskList<32, 192, 64, 8>;
 using TinyBalanced = gpu::GProximityBalancer<32, 192, 64, 30>;
+using TinyLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64>;
 
 template <class V>
 V sorted(V v) {
@@ -65,6 +66,8 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
     self_matches_cpu<BV, gpu::GProximityBalancer<>>(m, false);
     self_matches_cpu<BV, TinyStatic>(m, true);
     self_matches_cpu<BV, TinyBalanced>(m, true);
+    self_matches_cpu<BV, gpu::LazyStealScheduler<>>(m, false);
+    self_matches_cpu<BV, TinyLazy>(m, true);
   }
 }
 
@@ -79,6 +82,7 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   gpu::TraversalOutput<InterCollisionTask<Aabbf>> out;
   REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
   REQUIRE(gpu_pairs<TinyBalanced>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
+  REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
   REQUIRE(expected.size() > 10);
 
   // Front: record on the GPU, refit, restart from it; equals a fresh CPU traversal.
@@ -101,6 +105,12 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   const auto fresh = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
   REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, front, self_out, true) == fresh);
   REQUIRE(gpu_pairs<TinyStatic>(task, front, self_out, true) == fresh);
+  REQUIRE(gpu_pairs<TinyLazy>(task, front, self_out, true) == fresh);
+  // Every block of the lazy scheduler reports its busy and idle cycles.
+  const auto cycles = self_out.download_block_cycles();
+  unsigned long long busy = 0;
+  for (std::size_t i = 0; i < cycles.size(); i += 2) busy += cycles[i];
+  CHECK(busy > 0);
 }
 
 TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with front tracking", "[gpu][traverse][data]") {
@@ -122,6 +132,7 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
     REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
     REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
+    REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
     std::printf("%s: %zu pairs, %zu BVTT nodes, %zu relaunches\n", name, oracle.size(), out.stats().items_processed,
                 out.stats().relaunches);
   }
@@ -145,7 +156,9 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     for (std::size_t v = 0; v < f0.size(); ++v) f0[v] = horse.frame(s)[v].cast<float>(), f1[v] = horse.frame(s + 1)[v].cast<float>();
     const auto oracle = sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, f0, f1));
     const auto& seeds = tracker.seeds(bvh.generation());
-    const auto got = s % 2 ? gpu_pairs<gpu::GProximityBalancer<>>(task, seeds, out, true) : gpu_pairs<gpu::StaticTaskList<>>(task, seeds, out, true);
+    const auto got = s % 3 == 0   ? gpu_pairs<gpu::LazyStealScheduler<>>(task, seeds, out, true)
+                     : s % 3 == 1 ? gpu_pairs<gpu::GProximityBalancer<>>(task, seeds, out, true)
+                                  : gpu_pairs<gpu::StaticTaskList<>>(task, seeds, out, true);
     REQUIRE(got == oracle);
     tracker.update(out.download_front());
   }

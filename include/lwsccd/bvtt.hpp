@@ -49,6 +49,7 @@ struct SelfCollisionTask {
   using item_type = NodePair;
   using result_type = TrianglePair;
   static constexpr int kMaxChildren = 3;
+  static constexpr int kMaxResults = 1;
 
   BvhView<BV> bvh;
   LeafFilter filter;
@@ -145,6 +146,7 @@ struct InterCollisionTask {
   using item_type = NodePair;
   using result_type = TrianglePair;
   static constexpr int kMaxChildren = 2;
+  static constexpr int kMaxResults = 1;
 
   BvhView<BV> a_tree, b_tree;
 

@@ -6,12 +6,15 @@
 //     using item_type = ...;    // trivially copyable work item
 //     using result_type = ...;  // trivially copyable result
 //     static constexpr int kMaxChildren = ...;  // most items one process() call pushes
+//     static constexpr int kMaxResults = ...;   // most results one process() call pushes
 //     template <class Out>
 //     LWSCCD_HD void process(const item_type& item, Out& out) const;
 //   };
 //
 // where `out` offers push_item(item_type), push_result(result_type) and push_front(item_type)
-// (an item where the traversal stopped, kept to restart from next time). A scheduler runs any
+// (an item where the traversal stopped, kept to restart from next time; at most once per call).
+// The bounds let the GPU schedulers collect a block's outputs in registers and append them with
+// one atomic per block and round. A scheduler runs any
 // task to completion, on the CPU (traverse.hpp) or the GPU (traverse.cuh).
 #pragma once
 
@@ -47,6 +50,11 @@ template <class T>
 struct has_max_children<T, std::void_t<decltype(T::kMaxChildren)>> : std::true_type {};
 
 template <class T, class = void>
+struct has_max_results : std::false_type {};
+template <class T>
+struct has_max_results<T, std::void_t<decltype(T::kMaxResults)>> : std::true_type {};
+
+template <class T, class = void>
 struct has_process : std::false_type {};
 template <class T>
 struct has_process<T, std::void_t<decltype(std::declval<const T&>().process(
@@ -72,6 +80,8 @@ struct require_traversal_task {
   static_assert(detail::has_result_type<Task>::value, "lwsccd: a traversal task needs a nested type result_type");
   static_assert(detail::has_max_children<Task>::value,
                 "lwsccd: a traversal task needs static constexpr int kMaxChildren (the most items one process() pushes)");
+  static_assert(detail::has_max_results<Task>::value,
+                "lwsccd: a traversal task needs static constexpr int kMaxResults (the most results one process() pushes)");
   static_assert(detail::item_copyable<Task>::value, "lwsccd: a traversal task's item_type must be trivially copyable");
   static_assert(detail::process_ok<Task>::value,
                 "lwsccd: a traversal task needs a const member template process(const item_type&, Out&) "

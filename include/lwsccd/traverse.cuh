@@ -11,6 +11,9 @@
 // - GProximityBalancer: per-block queues in global memory; the traversal kernel stops when too
 //   many blocks are idle, a balancing kernel redistributes the queues evenly, looped from the
 //   host (dissertation Algorithms 3.1-3.4).
+// - LazyStealScheduler: persistent blocks with shared stacks and global deques, lazy stealing
+//   (Algorithms 3.7-3.13); see detail/traverse_kernels.cuh for why it terminates and why ABA
+//   cannot occur.
 //
 // Every block works on a two-level stack: a shared-memory stack holds the hot top, its oldest
 // items spill to the block's region of global memory and come back when the shared part runs
@@ -54,6 +57,23 @@ struct GProximityBalancer {
   static constexpr bool kIsStatic = false;
 };
 
+/// Lazy work stealing (dissertation Algorithms 3.7-3.13): persistent blocks, a shared-memory
+/// stack per block, a deque per block in global memory that the owner fills and drains in
+/// batches, and, when a block runs dry, a lazy steal: it reads every deque's size at once and
+/// takes half of the fullest one's oldest items.
+template <int BlockThreads = 128, int SharedStack = 1024, int DequeCapacity = 8192, int PopSize = 256,
+          int PushThreshold = 512>
+struct LazyStealScheduler {
+  static constexpr int kBlockThreads = BlockThreads;
+  static constexpr int kSharedStack = SharedStack;
+  static constexpr int kDequeCapacity = DequeCapacity;  ///< items per block deque (global memory)
+  static constexpr int kPopSize = PopSize;              ///< items moved from a deque into shared memory at once
+  static constexpr int kPushThreshold = PushThreshold;  ///< shared stack size above which a batch goes to the deque
+  static constexpr int kBlocksPerSm = 2;
+  static constexpr bool kIsStatic = false;
+  static constexpr bool kIsLazySteal = true;
+};
+
 /// Owning device outputs of a traversal (reused across calls; they only grow).
 template <class Task>
 class TraversalOutput {
@@ -66,6 +86,10 @@ class TraversalOutput {
   const result_type* results() const { return results_.data(); }
   const item_type* front() const { return front_.data(); }
   const TraversalStats& stats() const { return stats_; }
+  /// LazyStealScheduler: per block, cycles spent processing and cycles spent looking for work.
+  std::vector<unsigned long long> download_block_cycles(cudaStream_t stream = nullptr) const {
+    return prefix(block_cycles_, block_cycles_.size(), stream);
+  }
   std::vector<result_type> download_results(cudaStream_t stream = nullptr) const { return prefix(results_, num_results_, stream); }
   std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(front_, num_front_, stream); }
   std::size_t device_bytes() const {
@@ -76,7 +100,9 @@ class TraversalOutput {
   // Storage used by the schedulers.
   DeviceBuffer<result_type> results_;
   DeviceBuffer<item_type> front_, work_, next_, stacks_, stacks_alt_;
-  DeviceBuffer<int> sizes_, sizes_alt_;
+  DeviceBuffer<int> sizes_, sizes_alt_, locks_;
+  DeviceBuffer<unsigned long long> deque_ends_;    ///< per block: top, bottom (monotonic)
+  DeviceBuffer<unsigned long long> block_cycles_;  ///< per block: busy, idle (LazyStealScheduler)
   DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
   std::size_t num_results_ = 0, num_front_ = 0;
   TraversalStats stats_;

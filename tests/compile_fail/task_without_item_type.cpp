@@ -3,6 +3,7 @@
 struct Task {
   using result_type = int;
   static constexpr int kMaxChildren = 1;
+  static constexpr int kMaxResults = 1;
   template <class Out>
   void process(const int&, Out&) const {}
 };

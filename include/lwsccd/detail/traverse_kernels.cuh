@@ -2,9 +2,11 @@
 #pragma once
 
 #include <cub/block/block_scan.cuh>
+#include <cuda/atomic>
 
 #include <algorithm>
 #include <cassert>
+#include <type_traits>
 
 #include "lwsccd/traverse.cuh"
 
@@ -32,43 +34,76 @@ struct Outputs {
   bool record_front;
 };
 
-// Collects one item's children in registers; results and front go straight to global memory.
+// Collects one item's children, results and front entry in registers; the block appends them
+// together afterwards (flush_outputs), one atomic per block and round.
 template <class Task>
 struct DeviceEmitter {
   using Item = typename Task::item_type;
+  using Result = typename Task::result_type;
   Item children[Task::kMaxChildren];
-  int count = 0;
-  const Outputs<Task>* out;
+  Result results[Task::kMaxResults];
+  Item front;
+  int count = 0, num_results = 0, num_front = 0;
+  bool record_front = false;
 
   __device__ void push_item(const Item& x) {
     assert(count < Task::kMaxChildren && "a task pushed more than kMaxChildren items");
     children[count++] = x;
   }
-  __device__ void push_result(const typename Task::result_type& r) {
-    const unsigned long long i = atomicAdd(&out->counters[kResults], 1ull);
-    if (i < out->result_capacity) out->results[i] = r;
+  __device__ void push_result(const Result& r) {
+    assert(num_results < Task::kMaxResults && "a task pushed more than kMaxResults results");
+    results[num_results++] = r;
   }
   __device__ void push_front(const Item& x) {
-    if (!out->record_front) return;
-    const unsigned long long i = atomicAdd(&out->counters[kFront], 1ull);
-    if (i < out->front_capacity) out->front[i] = x;
+    assert(num_front == 0 && "a task pushed two front entries in one call");
+    if (!record_front) return;
+    front = x;
+    num_front = 1;
   }
 };
 
+// Appends the block's results and front entries: a block scan, one atomic, coalesced writes.
+// All threads of the block must call it.
+template <class Task, class Scan>
+__device__ void flush_outputs(const DeviceEmitter<Task>& e, const Outputs<Task>& out, typename Scan::TempStorage& storage,
+                              unsigned long long& base) {
+  int offset = 0, total = 0;
+  Scan(storage).ExclusiveSum(e.num_results, offset, total);
+  if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kResults], static_cast<unsigned long long>(total));
+  __syncthreads();
+  for (int r = 0; r < e.num_results; ++r)
+    if (base + offset + r < out.result_capacity) out.results[base + offset + r] = e.results[r];
+  if (!out.record_front) {
+    __syncthreads();
+    return;
+  }
+  __syncthreads();
+  Scan(storage).ExclusiveSum(e.num_front, offset, total);
+  if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kFront], static_cast<unsigned long long>(total));
+  __syncthreads();
+  if (e.num_front && base + offset < out.front_capacity) out.front[base + offset] = e.front;
+  __syncthreads();
+}
+
 // One breadth-first level: every item processed once, children appended to `next` (sized
 // n * kMaxChildren by the caller, so it cannot overflow).
-template <class Task>
-__global__ void expand_kernel(Task task, const typename Task::item_type* in, std::size_t n,
-                              typename Task::item_type* next, Outputs<Task> out) {
+template <class Task, int kThreads>
+__global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typename Task::item_type* in, std::size_t n,
+                                                          typename Task::item_type* next, Outputs<Task> out) {
+  using Scan = cub::BlockScan<int, kThreads>;
+  __shared__ typename Scan::TempStorage storage;
+  __shared__ unsigned long long base;
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
   DeviceEmitter<Task> e;
-  e.out = &out;
-  task.process(in[i], e);
-  if (e.count) {
-    const unsigned long long base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(e.count));
-    for (int c = 0; c < e.count; ++c) next[base + c] = e.children[c];
-  }
+  e.record_front = out.record_front;
+  if (i < n) task.process(in[i], e);
+  int offset = 0, total = 0;
+  Scan(storage).ExclusiveSum(e.count, offset, total);
+  if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(total));
+  __syncthreads();
+  for (int c = 0; c < e.count; ++c) next[base + offset + c] = e.children[c];
+  __syncthreads();
+  flush_outputs<Task, Scan>(e, out, storage, base);
 }
 
 // The per-block two-level stack loop shared by the schedulers. `region` is this block's global
@@ -88,6 +123,7 @@ __device__ void run_block_stack(const Task& task, typename Task::item_type* regi
   __shared__ Item s_items[kShared];
   __shared__ typename Scan::TempStorage scan_storage;
   __shared__ int s_size, g_size, take, refill, spill, stop;  // stop: 0 run, 1 done, 2 pause, 3 full
+  __shared__ unsigned long long out_base;
   const int t = threadIdx.x;
   if (t == 0) {
     s_size = 0;
@@ -145,7 +181,7 @@ __device__ void run_block_stack(const Task& task, typename Task::item_type* regi
       __syncthreads();
     }
     DeviceEmitter<Task> e;
-    e.out = &out;
+    e.record_front = out.record_front;
     Item item;
     const bool active = t < take;
     if (active) item = s_items[s_size - take + t];
@@ -157,6 +193,7 @@ __device__ void run_block_stack(const Task& task, typename Task::item_type* regi
     __syncthreads();  // s_size updated, scan storage free
     for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
     __syncthreads();
+    flush_outputs<Task, Scan>(e, out, scan_storage, out_base);
     if (t == 0) {
       s_size += total;
       atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
@@ -284,6 +321,31 @@ Outputs<Task> outputs_of(TraversalOutput<Task>& out, bool record_front) {
   return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front};
 }
 
+// Breadth-first expansion of the seeds (copied to out.work_) until there are at least `target`
+// items or none; returns their count (in out.work_).
+template <class Task>
+std::size_t expand_breadth_first(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                                 std::size_t target, TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+  using Item = typename Task::item_type;
+  ensure(out.work_, std::max<std::size_t>(num_seeds, 1));
+  if (num_seeds)
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.work_.data(), seeds, num_seeds * sizeof(Item), cudaMemcpyDeviceToDevice, stream));
+  std::size_t n = num_seeds;
+  while (n > 0 && n < target / Task::kMaxChildren) {
+    ensure(out.next_, n * Task::kMaxChildren);
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
+    expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, out.work_.data(), n,
+                                                                                          out.next_.data(),
+                                                                                          outputs_of(out, record_front));
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto c = read_counters(out, stream);
+    out.stats_.items_processed += n;
+    n = static_cast<std::size_t>(c[kAppended]);
+    std::swap(out.work_, out.next_);
+  }
+  return n;
+}
+
 // One complete attempt with the current output capacities.
 template <class Task, class Policy>
 void run_static(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
@@ -292,22 +354,7 @@ void run_static(const Task& task, const typename Task::item_type* seeds, std::si
   const int max_blocks = resident_blocks(Policy::kBlocksPerSm);
   const std::size_t target = static_cast<std::size_t>(max_blocks) * Policy::kItemsPerBlock;
   int global_capacity = Policy::kGlobalStack;
-  // Breadth-first expansion into a cut of at least `target` items.
-  ensure(out.work_, std::max<std::size_t>(num_seeds, 1));
-  if (num_seeds)
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.work_.data(), seeds, num_seeds * sizeof(Item), cudaMemcpyDeviceToDevice, stream));
-  std::size_t n = num_seeds;
-  while (n > 0 && n < target / Task::kMaxChildren) {
-    ensure(out.next_, n * Task::kMaxChildren);
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
-    expand_kernel<Task><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, out.work_.data(), n, out.next_.data(),
-                                                                                     outputs_of(out, record_front));
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    const auto c = read_counters(out, stream);
-    out.stats_.items_processed += n;
-    n = static_cast<std::size_t>(c[kAppended]);
-    std::swap(out.work_, out.next_);
-  }
+  std::size_t n = expand_breadth_first(task, seeds, num_seeds, target, out, record_front, stream);
   // Blocks finish their shares; items handed back (a full global stack) are run again.
   while (n > 0) {
     const int blocks = static_cast<int>(std::min<std::size_t>(max_blocks, (n + Policy::kItemsPerBlock - 1) / Policy::kItemsPerBlock));
@@ -380,6 +427,248 @@ void run_balanced(const Task& task, const typename Task::item_type* seeds, std::
   }
 }
 
+
+// ---------------------------------------------------------------------------------------------
+// LazyStealScheduler.
+//
+// Termination: `pending` counts the items that exist in this launch (in deques, in shared
+// stacks, or being processed). A round adds its children and retires its parents in one atomic
+// update made after the children are in the shared stack, so the count never drops to zero while
+// any item exists or can still be created (only processing an item creates items, and that item
+// is counted until then). Items handed back to the host leave the count when they are handed
+// back. A block exits only after finding its own deque and every other deque empty and reading
+// pending == 0 (acquire), so no block leaves while work is in flight anywhere.
+//
+// ABA: the deques' ends are monotonic 64-bit counters (positions in a ring are taken modulo the
+// capacity), never reused, and every change of a deque's ends happens under that deque's lock,
+// held by one thread of one block; a block holds at most one lock at a time, so there is no
+// deadlock either. The lock is taken with an acquire exchange and released with a release store,
+// which orders the items written or read inside the critical section for the next holder.
+
+__device__ inline void lock_deque(int* lock) {
+  cuda::atomic_ref<int, cuda::thread_scope_device> l(*lock);
+  while (l.exchange(1, cuda::memory_order_acquire) != 0) __nanosleep(64);
+}
+__device__ inline void unlock_deque(int* lock) {
+  cuda::atomic_ref<int, cuda::thread_scope_device>(*lock).store(0, cuda::memory_order_release);
+}
+
+template <class Item>
+__global__ void seed_deques_kernel(const Item* seeds, std::size_t n, Item* deques, unsigned long long* ends,
+                                   int capacity) {
+  const std::size_t begin = n * blockIdx.x / gridDim.x, end = n * (blockIdx.x + 1) / gridDim.x;
+  for (std::size_t i = begin + threadIdx.x; i < end; i += blockDim.x)
+    deques[static_cast<std::size_t>(blockIdx.x) * capacity + (i - begin)] = seeds[i];
+  if (threadIdx.x == 0) {
+    ends[2 * blockIdx.x] = 0;
+    ends[2 * blockIdx.x + 1] = end - begin;
+  }
+}
+
+template <class Task, class Policy>
+__global__ void __launch_bounds__(Policy::kBlockThreads)
+    lazy_steal_kernel(Task task, typename Task::item_type* deques, unsigned long long* ends, int* locks, int capacity,
+                      unsigned long long* pending, Outputs<Task> out, typename Task::item_type* hand_back,
+                      unsigned long long* cycles) {
+  using Item = typename Task::item_type;
+  constexpr int kThreads = Policy::kBlockThreads;
+  constexpr int kShared = Policy::kSharedStack;
+  constexpr int kK = Task::kMaxChildren;
+  constexpr int kPop = Policy::kPopSize;
+  constexpr int kPushAbove = Policy::kPushThreshold;
+  static_assert(kPushAbove + kThreads * kK <= kShared, "lwsccd: kSharedStack must hold kPushThreshold plus one round of children");
+  static_assert(kPop <= kPushAbove, "lwsccd: kPopSize must not exceed kPushThreshold");
+  using Scan = cub::BlockScan<int, kThreads>;
+  __shared__ Item s_items[kShared];
+  __shared__ typename Scan::TempStorage scan_storage;
+  __shared__ int s_size, take, action, count, source, moved;
+  __shared__ unsigned long long from, out_base;
+  const int t = threadIdx.x, me = blockIdx.x;
+  cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(*pending);
+  long long busy = 0, idle = 0;
+  if (t == 0) s_size = 0;
+  __syncthreads();
+  while (true) {
+    if (s_size == 0) {  // find work: own deque first, then a lazy steal
+      const long long start = clock64();
+      if (t == 0) {
+        action = 0;
+        lock_deque(&locks[me]);
+        const unsigned long long top = ends[2 * me], bottom = ends[2 * me + 1];
+        if (bottom > top) {
+          count = static_cast<int>(bottom - top < kPop ? bottom - top : kPop);
+          from = bottom - count;
+          ends[2 * me + 1] = from;  // newest items, from the owner's end
+          source = me;
+          action = 1;
+        } else {
+          unlock_deque(&locks[me]);
+          int best = -1;
+          unsigned long long best_size = 0;
+          for (int v = 0; v < static_cast<int>(gridDim.x); ++v) {  // every deque's size at once
+            if (v == me) continue;
+            const unsigned long long vt = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v]).load(
+                cuda::memory_order_relaxed);
+            const unsigned long long vb = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v + 1]).load(
+                cuda::memory_order_relaxed);
+            if (vb > vt && vb - vt > best_size) best_size = vb - vt, best = v;
+          }
+          if (best >= 0) {
+            lock_deque(&locks[best]);
+            const unsigned long long vt = ends[2 * best], vb = ends[2 * best + 1];
+            if (vb > vt) {  // half of the oldest items (the largest subtrees), at most a pop's worth
+              count = static_cast<int>((vb - vt + 1) / 2 < kPop ? (vb - vt + 1) / 2 : kPop);
+              from = vt;
+              ends[2 * best] = vt + count;
+              source = best;
+              action = 2;
+            } else {
+              unlock_deque(&locks[best]);
+            }
+          }
+          if (action == 0) action = live.load(cuda::memory_order_acquire) == 0 ? 3 : 4;
+        }
+      }
+      __syncthreads();
+      if (action == 3) {
+        idle += clock64() - start;
+        break;
+      }
+      if (action == 4) {
+        if (t == 0) __nanosleep(256);
+        idle += clock64() - start;
+        __syncthreads();
+        continue;
+      }
+      const Item* deque = deques + static_cast<std::size_t>(source) * capacity;
+      for (int i = t; i < count; i += kThreads) s_items[i] = deque[(from + i) % capacity];
+      __syncthreads();
+      if (t == 0) {
+        s_size = count;
+        unlock_deque(&locks[source]);
+      }
+      idle += clock64() - start;
+      __syncthreads();
+    }
+    const long long start = clock64();
+    if (s_size > kPushAbove) {  // the oldest batch goes to this block's deque, for thieves
+      if (t == 0) {
+        moved = s_size - kPushAbove / 2;
+        lock_deque(&locks[me]);
+        const unsigned long long top = ends[2 * me], bottom = ends[2 * me + 1];
+        if (bottom - top + moved > static_cast<unsigned long long>(capacity)) {
+          unlock_deque(&locks[me]);  // full: hand the batch back to the host instead
+          from = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(moved));
+          atomicAdd(&out.counters[kHalted], 1ull);
+          live.fetch_sub(static_cast<unsigned long long>(moved), cuda::memory_order_acq_rel);
+          action = 5;
+        } else {
+          from = bottom;
+          action = 6;
+        }
+      }
+      __syncthreads();
+      if (action == 5) {
+        for (int i = t; i < moved; i += kThreads) hand_back[from + i] = s_items[i];
+      } else {
+        Item* deque = deques + static_cast<std::size_t>(me) * capacity;
+        for (int i = t; i < moved; i += kThreads) deque[(from + i) % capacity] = s_items[i];
+      }
+      __syncthreads();
+      if (t == 0 && action == 6) {
+        ends[2 * me + 1] = from + moved;
+        unlock_deque(&locks[me]);
+      }
+      constexpr int kPerThread = (kShared + kThreads - 1) / kThreads;
+      Item keep[kPerThread];
+      const int remaining = s_size - moved;
+      for (int j = 0; j < kPerThread; ++j) {
+        const int i = t + j * kThreads;
+        if (i < remaining) keep[j] = s_items[i + moved];
+      }
+      __syncthreads();
+      for (int j = 0; j < kPerThread; ++j) {
+        const int i = t + j * kThreads;
+        if (i < remaining) s_items[i] = keep[j];
+      }
+      __syncthreads();
+      if (t == 0) s_size = remaining;
+      __syncthreads();
+    }
+    // One round: up to a block of items from the top of the shared stack.
+    if (t == 0) take = s_size < kThreads ? s_size : kThreads;
+    __syncthreads();
+    DeviceEmitter<Task> e;
+    e.record_front = out.record_front;
+    Item item;
+    const bool active = t < take;
+    if (active) item = s_items[s_size - take + t];
+    __syncthreads();
+    if (t == 0) s_size -= take;
+    if (active) task.process(item, e);
+    int offset = 0, total = 0;
+    Scan(scan_storage).ExclusiveSum(e.count, offset, total);
+    __syncthreads();
+    for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
+    __syncthreads();
+    flush_outputs<Task, Scan>(e, out, scan_storage, out_base);
+    if (t == 0) {
+      s_size += total;
+      // Children counted and parents retired in one update (see the termination note above).
+      live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_acq_rel);
+      atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
+    }
+    busy += clock64() - start;
+    __syncthreads();
+  }
+  if (t == 0) {
+    cycles[2 * me] = static_cast<unsigned long long>(busy);
+    cycles[2 * me + 1] = static_cast<unsigned long long>(idle);
+  }
+}
+
+template <class Task, class Policy>
+void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                    TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+  using Item = typename Task::item_type;
+  const int blocks = resident_blocks(Policy::kBlocksPerSm);
+  int capacity = Policy::kDequeCapacity;
+  ensure(out.locks_, blocks);
+  ensure(out.deque_ends_, 2 * static_cast<std::size_t>(blocks));
+  ensure(out.block_cycles_, 2 * static_cast<std::size_t>(blocks));
+  // A few items for every block to start with (a fresh traversal starts from one root item).
+  std::size_t n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kBlockThreads, out,
+                                       record_front, stream);
+  while (n > 0) {
+    while ((n + blocks - 1) / blocks > static_cast<std::size_t>(capacity) / 2) capacity *= 2;  // seeds fit
+    ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
+    ensure(out.next_, static_cast<std::size_t>(blocks) * Policy::kSharedStack * 4 + n);
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.locks_.data(), 0, blocks * sizeof(int), stream));
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, 4 * sizeof(unsigned long long), stream));
+    const unsigned long long live = n;
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.counters_.data() + kCounters - 1, &live, sizeof live, cudaMemcpyHostToDevice, stream));
+    seed_deques_kernel<Item><<<blocks, 128, 0, stream>>>(out.work_.data(), n, out.stacks_.data(), out.deque_ends_.data(),
+                                                         capacity);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    lazy_steal_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
+        task, out.stacks_.data(), out.deque_ends_.data(), out.locks_.data(), capacity,
+        out.counters_.data() + kCounters - 1, outputs_of(out, record_front), out.next_.data(), out.block_cycles_.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto c = read_counters(out, stream);
+    n = static_cast<std::size_t>(c[kAppended]);
+    if (c[kHalted] > 0) {
+      ++out.stats_.relaunches;
+      capacity *= 2;
+    }
+    std::swap(out.work_, out.next_);
+  }
+}
+
+template <class S, class = void>
+struct is_lazy_steal : std::false_type {};
+template <class S>
+struct is_lazy_steal<S, std::void_t<decltype(S::kIsLazySteal)>> : std::bool_constant<S::kIsLazySteal> {};
+
 }  // namespace detail
 
 template <class Scheduler, class Task>
@@ -393,8 +682,9 @@ void traverse(const Task& task, const typename Task::item_type* seeds, std::size
   for (int attempt = 0;; ++attempt) {
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
     out.stats_.items_processed = 0;
-    constexpr bool kStatic = Scheduler::kIsStatic;
-    if constexpr (kStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    if constexpr (Scheduler::kIsStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    else if constexpr (detail::is_lazy_steal<Scheduler>::value)
+      detail::run_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
     else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
     const auto c = detail::read_counters(out, stream);
     out.stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);

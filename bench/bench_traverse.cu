@@ -1,0 +1,161 @@
+// lwsccd-bench-traverse — BVTT self-collision traversal time per scheduler x BV (CUDA events,
+// medians) on the real scenes (from the root and from the recorded front) and over every step of
+// horse-gallop with front tracking; BVTT nodes, front sizes, candidate pairs, and the lazy
+// scheduler's per-block busy/idle cycles.
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "bench_common.hpp"
+#include "bench_gpu.cuh"
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/bvtt.hpp"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/traverse.cuh"
+
+using namespace lwsccd;
+
+namespace {
+
+struct Row {
+  std::string scene, scheduler, bv, start;
+  double median_ms, p10_ms, p90_ms;
+  std::size_t nodes, pairs, front;
+  double busy_share;  ///< lazy scheduler: busy / (busy + idle) over all blocks, else -1
+};
+
+template <class Task>
+double busy_share(const gpu::TraversalOutput<Task>& out, bool lazy) {
+  if (!lazy) return -1;
+  unsigned long long busy = 0, idle = 0;
+  const auto c = out.download_block_cycles();
+  for (std::size_t i = 0; i + 1 < c.size(); i += 2) busy += c[i], idle += c[i + 1];
+  return busy + idle ? double(busy) / double(busy + idle) : -1;
+}
+
+template <class Scheduler, class BV>
+void scene_rows(const char* scheduler, const char* bv_name, const std::string& name, const Step& step, int reps,
+                std::vector<Row>& rows) {
+  using Task = SelfCollisionTask<BV>;
+  gpu::DeviceStep<float> dstep(*step.mesh, step.x0, step.x1);
+  gpu::Bvh<BV> bvh;
+  bvh.build(dstep);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(step.mesh->faces());
+  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  gpu::TraversalOutput<Task> out;
+  gpu::DeviceBuffer<NodePair> root;
+  root.upload(std::vector<NodePair>{NodePair{0, 0}});
+  auto from_root = [&] { gpu::traverse<Scheduler>(task, root.data(), 1, out, true); };
+  from_root();
+  const auto ms = lwsccd_bench::time_with_events(reps, from_root);
+  const bool lazy = std::string(scheduler) == "lazy-steal";
+  rows.push_back({name, scheduler, bv_name, "root", lwsccd_bench::median(ms), lwsccd_bench::percentile(ms, 0.1),
+                  lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), out.num_front(),
+                  busy_share(out, lazy)});
+  // From the front of the same step (the refit of an unchanged step keeps it valid).
+  gpu::DeviceBuffer<NodePair> front(out.num_front());
+  LWSCCD_CUDA_CHECK(cudaMemcpy(front.data(), out.front(), out.num_front() * sizeof(NodePair), cudaMemcpyDeviceToDevice));
+  const std::size_t front_size = out.num_front();
+  auto from_front = [&] { gpu::traverse<Scheduler>(task, front.data(), front_size, out, true); };
+  from_front();
+  const auto ms_front = lwsccd_bench::time_with_events(reps, from_front);
+  rows.push_back({name, scheduler, bv_name, "front", lwsccd_bench::median(ms_front), lwsccd_bench::percentile(ms_front, 0.1),
+                  lwsccd_bench::percentile(ms_front, 0.9), out.stats().items_processed, out.num_results(), out.num_front(),
+                  busy_share(out, lazy)});
+}
+
+template <class Scheduler, class BV>
+void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& seq, std::vector<Row>& rows) {
+  using Task = SelfCollisionTask<BV>;
+  gpu::DeviceStep<float> dstep(*seq.mesh(), seq.frame(0), seq.frame(1));
+  gpu::Bvh<BV> bvh;
+  bvh.build(dstep);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(seq.mesh()->faces());
+  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  gpu::TraversalOutput<Task> out;
+  FrontTracker tracker;
+  gpu::DeviceBuffer<NodePair> seeds;
+  std::vector<double> ms;
+  std::size_t nodes = 0, pairs = 0, front = 0;
+  for (std::size_t s = 0; s < seq.num_steps(); ++s) {
+    if (s > 0) {
+      dstep.set_positions(seq.frame(s), seq.frame(s + 1));
+      bvh.refit(dstep);
+    }
+    const auto& host_seeds = tracker.seeds(bvh.generation());
+    seeds.upload(host_seeds);
+    const auto t = lwsccd_bench::time_with_events(1, [&] { gpu::traverse<Scheduler>(task, seeds.data(), host_seeds.size(), out, true); });
+    if (s > 0) ms.push_back(t[0]);  // the first step is a cold start from the root
+    nodes += out.stats().items_processed;
+    pairs += out.num_results();
+    front = out.num_front();
+    tracker.update(out.download_front());
+  }
+  double sum = 0;
+  for (double x : ms) sum += x;
+  rows.push_back({"horse-gallop (mean of 46 steps)", scheduler, bv_name, "tracked", sum / ms.size(),
+                  lwsccd_bench::percentile(ms, 0.1), lwsccd_bench::percentile(ms, 0.9), nodes / seq.num_steps(),
+                  pairs / seq.num_steps(), front, -1});
+}
+
+template <class BV>
+void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string, Step>>& scenes, const Sequence& horse,
+                    int reps, std::vector<Row>& rows) {
+  for (const auto& [name, step] : scenes) {
+    scene_rows<gpu::StaticTaskList<>, BV>("static", bv_name, name, step, reps, rows);
+    scene_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, name, step, reps, rows);
+    scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
+  }
+  sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
+  sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
+  sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const lwsccd_bench::BenchArgs args =
+      lwsccd_bench::parse_bench_args(argc, argv, 11, {}, "usage: lwsccd-bench-traverse [--data DIR] [--reps N] [--json FILE]");
+  cudaDeviceProp prop{};
+  if (!lwsccd_bench::first_gpu(prop, "lwsccd-bench-traverse")) return 77;
+  try {
+    const std::string dir = lwsccd_bench::data_dir(args.data, LWSCCD_BENCH_DATA_DIR);
+    std::vector<std::pair<std::string, Step>> scenes;
+    for (const char* name : {"cloth-ball", "cloth-funnel", "armadillo-rollers"})
+      scenes.emplace_back(name, load_scene(dir + "/scenes/" + name).step);
+    const Sequence horse = load_sequence(dir + "/sequences/horse-gallop");
+    std::vector<Row> rows;
+    all_schedulers<Aabbf>("AABB float", scenes, horse, args.reps, rows);
+    all_schedulers<Obbf>("OBB float", scenes, horse, args.reps, rows);
+    std::printf("GPU: %s (sm_%d%d); BVTT self-collision traversal (adjacent pairs skipped), CUDA events, median of %d runs\n",
+                prop.name, prop.major, prop.minor, args.reps);
+    std::printf("%-32s %-11s %-11s %-7s %10s %21s %11s %10s %10s %6s\n", "scene", "scheduler", "bv", "start", "median ms",
+                "p10 - p90 ms", "BVTT nodes", "pairs", "front", "busy");
+    for (const Row& r : rows)
+      std::printf("%-32s %-11s %-11s %-7s %10.3f %10.3f - %8.3f %11zu %10zu %10zu %6.2f\n", r.scene.c_str(),
+                  r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms, r.p90_ms, r.nodes, r.pairs,
+                  r.front, r.busy_share);
+    if (!args.json.empty()) {
+      std::FILE* f = std::fopen(args.json.c_str(), "w");
+      if (!f) throw Error("cannot write " + args.json);
+      std::fprintf(f, "[\n");
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        const Row& r = rows[i];
+        std::fprintf(f,
+                     "  {\"gpu\": \"%s\", \"scene\": \"%s\", \"scheduler\": \"%s\", \"bv\": \"%s\", \"start\": \"%s\", "
+                     "\"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, \"bvtt_nodes\": %zu, \"pairs\": %zu, "
+                     "\"front\": %zu, \"busy_share\": %.4f}%s\n",
+                     prop.name, r.scene.c_str(), r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms,
+                     r.p90_ms, r.nodes, r.pairs, r.front, r.busy_share, i + 1 < rows.size() ? "," : "");
+      }
+      std::fprintf(f, "]\n");
+      std::fclose(f);
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "lwsccd-bench-traverse: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
