@@ -106,6 +106,54 @@ __global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typen
   flush_outputs<Task, Scan>(e, out, storage, base);
 }
 
+// Drops the `count` oldest items of a shared stack (they were copied elsewhere): the rest moves
+// down, staged through registers so that overlapping ranges are safe. All threads call it.
+template <class Item, int kShared, int kThreads>
+__device__ void drop_oldest(Item* s_items, int& s_size, int count) {
+  constexpr int kPerThread = (kShared + kThreads - 1) / kThreads;
+  Item keep[kPerThread];
+  const int remaining = s_size - count;
+  for (int j = 0; j < kPerThread; ++j) {
+    const int i = threadIdx.x + j * kThreads;
+    if (i < remaining) keep[j] = s_items[i + count];
+  }
+  __syncthreads();
+  for (int j = 0; j < kPerThread; ++j) {
+    const int i = threadIdx.x + j * kThreads;
+    if (i < remaining) s_items[i] = keep[j];
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) s_size = remaining;
+  __syncthreads();
+}
+
+// One round: the top `take` items of the shared stack are processed, one per thread; their
+// children go back on the stack (block scan), results and front entries to the outputs. Returns
+// (on thread 0) how many children were pushed. All threads call it.
+template <class Task, class Scan>
+__device__ int process_round(const Task& task, typename Task::item_type* s_items, int& s_size, int take,
+                             typename Scan::TempStorage& storage, unsigned long long& out_base, const Outputs<Task>& out) {
+  DeviceEmitter<Task> e;
+  e.record_front = out.record_front;
+  typename Task::item_type item;
+  const bool active = static_cast<int>(threadIdx.x) < take;
+  if (active) item = s_items[s_size - take + threadIdx.x];
+  __syncthreads();
+  if (threadIdx.x == 0) s_size -= take;
+  if (active) task.process(item, e);
+  int offset = 0, total = 0;
+  Scan(storage).ExclusiveSum(e.count, offset, total);
+  __syncthreads();  // s_size updated, scan storage free
+  for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
+  __syncthreads();
+  flush_outputs<Task, Scan>(e, out, storage, out_base);
+  if (threadIdx.x == 0) {
+    s_size += total;
+    atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
+  }
+  return total;
+}
+
 // The per-block two-level stack loop shared by the schedulers. `region` is this block's global
 // stack (capacity `global_capacity`), holding `region_size` items on entry. Returns with every
 // remaining item in the region (its new size in `region_size`) unless `hand_back` is set, in which
@@ -161,43 +209,11 @@ __device__ void run_block_stack(const Task& task, typename Task::item_type* regi
     }
     if (spill) {  // oldest shared items to the global stack, the rest shifted down
       for (int i = t; i < spill; i += kThreads) region[g_size + i] = s_items[i];
-      constexpr int kPerThread = (kShared + kThreads - 1) / kThreads;
-      Item keep[kPerThread];
-      const int remaining = s_size - spill;
-      for (int j = 0; j < kPerThread; ++j) {
-        const int i = t + j * kThreads;
-        if (i < remaining) keep[j] = s_items[i + spill];
-      }
-      __syncthreads();
-      for (int j = 0; j < kPerThread; ++j) {
-        const int i = t + j * kThreads;
-        if (i < remaining) s_items[i] = keep[j];
-      }
-      __syncthreads();
-      if (t == 0) {
-        g_size += spill;
-        s_size = remaining;
-      }
+      drop_oldest<Item, kShared, kThreads>(s_items, s_size, spill);  // synchronizes: copies done
+      if (t == 0) g_size += spill;
       __syncthreads();
     }
-    DeviceEmitter<Task> e;
-    e.record_front = out.record_front;
-    Item item;
-    const bool active = t < take;
-    if (active) item = s_items[s_size - take + t];
-    __syncthreads();
-    if (t == 0) s_size -= take;
-    if (active) task.process(item, e);
-    int offset = 0, total = 0;
-    Scan(scan_storage).ExclusiveSum(e.count, offset, total);
-    __syncthreads();  // s_size updated, scan storage free
-    for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
-    __syncthreads();
-    flush_outputs<Task, Scan>(e, out, scan_storage, out_base);
-    if (t == 0) {
-      s_size += total;
-      atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
-    }
+    process_round<Task, Scan>(task, s_items, s_size, take, scan_storage, out_base, out);
   }
   // Leave every remaining item in the region, or hand everything back when it would not fit.
   if (stop == 1) {
@@ -579,44 +595,15 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
         ends[2 * me + 1] = from + moved;
         unlock_deque(&locks[me]);
       }
-      constexpr int kPerThread = (kShared + kThreads - 1) / kThreads;
-      Item keep[kPerThread];
-      const int remaining = s_size - moved;
-      for (int j = 0; j < kPerThread; ++j) {
-        const int i = t + j * kThreads;
-        if (i < remaining) keep[j] = s_items[i + moved];
-      }
-      __syncthreads();
-      for (int j = 0; j < kPerThread; ++j) {
-        const int i = t + j * kThreads;
-        if (i < remaining) s_items[i] = keep[j];
-      }
-      __syncthreads();
-      if (t == 0) s_size = remaining;
-      __syncthreads();
+      drop_oldest<Item, kShared, kThreads>(s_items, s_size, moved);
     }
     // One round: up to a block of items from the top of the shared stack.
     if (t == 0) take = s_size < kThreads ? s_size : kThreads;
     __syncthreads();
-    DeviceEmitter<Task> e;
-    e.record_front = out.record_front;
-    Item item;
-    const bool active = t < take;
-    if (active) item = s_items[s_size - take + t];
-    __syncthreads();
-    if (t == 0) s_size -= take;
-    if (active) task.process(item, e);
-    int offset = 0, total = 0;
-    Scan(scan_storage).ExclusiveSum(e.count, offset, total);
-    __syncthreads();
-    for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
-    __syncthreads();
-    flush_outputs<Task, Scan>(e, out, scan_storage, out_base);
+    const int total = process_round<Task, Scan>(task, s_items, s_size, take, scan_storage, out_base, out);
     if (t == 0) {
-      s_size += total;
       // Children counted and parents retired in one update (see the termination note above).
       live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_acq_rel);
-      atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
     }
     busy += clock64() - start;
     __syncthreads();
