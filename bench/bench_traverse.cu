@@ -11,6 +11,7 @@
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/bvtt.hpp"
 #include "lwsccd/dataset.hpp"
+#include "lwsccd/independent_traversal.cuh"
 #include "lwsccd/traverse.cuh"
 
 using namespace lwsccd;
@@ -65,6 +66,24 @@ void scene_rows(const char* scheduler, const char* bv_name, const std::string& n
                   busy_share(out, lazy)});
 }
 
+// Karras's independent traversal: one thread per leaf from the root (it keeps no front).
+template <class BV>
+void independent_rows(const char* bv_name, const std::string& name, const Step& step, int reps, std::vector<Row>& rows) {
+  using Task = SelfCollisionTask<BV>;
+  gpu::DeviceStep<float> dstep(*step.mesh, step.x0, step.x1);
+  gpu::Bvh<BV> bvh;
+  bvh.build(dstep);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(step.mesh->faces());
+  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  gpu::TraversalOutput<Task> out;
+  auto run = [&] { gpu::independent_self_traversal(task, out); };
+  run();
+  const auto ms = lwsccd_bench::time_with_events(reps, run);
+  rows.push_back({name, "karras", bv_name, "root", lwsccd_bench::median(ms), lwsccd_bench::percentile(ms, 0.1),
+                  lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), 0, -1});
+}
+
 template <class Scheduler, class BV>
 void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& seq, std::vector<Row>& rows) {
   using Task = SelfCollisionTask<BV>;
@@ -107,6 +126,7 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
     scene_rows<gpu::StaticTaskList<>, BV>("static", bv_name, name, step, reps, rows);
     scene_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, name, step, reps, rows);
     scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
+    independent_rows<BV>(bv_name, name, step, reps, rows);
   }
   sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
   sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);

@@ -6,6 +6,7 @@
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/bvtt.hpp"
 #include "lwsccd/dataset.hpp"
+#include "lwsccd/independent_traversal.cuh"
 #include "lwsccd/traverse.cuh"
 #include "lwsccd/traverse.hpp"
 #include "scene_fixtures.hpp"
@@ -50,6 +51,11 @@ void self_matches_cpu(const MovingMesh& m, bool tiny_outputs) {
   gpu::TraversalOutput<SelfCollisionTask<BV>> out;
   if (tiny_outputs) out.results_.resize_discard(1);  // forces growth and a rerun
   REQUIRE(gpu_pairs<Scheduler>(gtask, {NodePair{0, 0}}, out) == expected);
+  // Karras's independent traversal (the baseline) finds the same pairs.
+  gpu::TraversalOutput<SelfCollisionTask<BV>> independent;
+  if (tiny_outputs) independent.results_.resize_discard(1);
+  gpu::independent_self_traversal(gtask, independent);
+  REQUIRE(sorted(independent.download_results()) == expected);
   if (tiny_outputs && !expected.empty()) CHECK(out.stats().relaunches > 0);
   CHECK(out.stats().items_processed > 0);
 }
@@ -69,6 +75,29 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
     self_matches_cpu<BV, gpu::LazyStealScheduler<>>(m, false);
     self_matches_cpu<BV, TinyLazy>(m, true);
   }
+}
+
+TEST_CASE("device memory budget: exceeding it is a clear error, not a crash", "[gpu][traverse]") {
+  const MovingMesh m = lwsccd_test::folded_cloth(60, 1);
+  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+  gpu::Bvh<Aabbf> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(m.mesh.faces());
+  SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  const std::size_t previous = gpu::memory_budget();
+  gpu::set_memory_budget(gpu::memory_stats().in_use + 4096);  // almost nothing more
+  gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
+  gpu::DeviceBuffer<NodePair> root;
+  CHECK_THROWS_WITH(root.upload(std::vector<NodePair>(1000, NodePair{0, 0})), Catch::Contains("memory budget exceeded"));
+  gpu::set_memory_budget(gpu::memory_stats().in_use + (1 << 20));  // enough for the seeds only
+  root.upload(std::vector<NodePair>{NodePair{0, 0}});
+  CHECK_THROWS_WITH(gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, out, true),
+                    Catch::Contains("memory budget exceeded"));
+  gpu::set_memory_budget(previous);
+  // With the budget lifted the same objects work.
+  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, out, true);
+  CHECK(out.num_results() > 0);
 }
 
 TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu][traverse][front]") {
@@ -133,6 +162,8 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
     REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
     REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
+    gpu::independent_self_traversal(task, out);
+    REQUIRE(sorted(out.download_results()) == oracle);
     std::printf("%s: %zu pairs, %zu BVTT nodes, %zu relaunches\n", name, oracle.size(), out.stats().items_processed,
                 out.stats().relaunches);
   }

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "lwsccd/error.hpp"
+
 #include "lwsccd/cuda_check.cuh"
 
 namespace lwsccd::gpu {
@@ -27,6 +29,18 @@ inline std::atomic<std::size_t>& bytes_peak() {
   static std::atomic<std::size_t> v{0};
   return v;
 }
+inline std::atomic<std::size_t>& bytes_budget() {
+  static std::atomic<std::size_t> v{~std::size_t(0)};
+  return v;
+}
+// Refuses an allocation that would take the library past the budget (before cudaMalloc).
+inline void check_budget(std::size_t bytes) {
+  const std::size_t in_use = bytes_in_use().load(), budget = bytes_budget().load();
+  if (bytes > budget || in_use > budget - bytes)
+    throw Error("lwsccd: device memory budget exceeded: an allocation of " + std::to_string(bytes) + " bytes with " +
+                std::to_string(in_use) + " in use would pass the budget of " + std::to_string(budget) +
+                " bytes (gpu::set_memory_budget)");
+}
 inline void account_alloc(std::size_t bytes) {
   const std::size_t now = bytes_in_use().fetch_add(bytes) + bytes;
   std::size_t peak = bytes_peak().load();
@@ -37,6 +51,10 @@ inline void account_free(std::size_t bytes) { bytes_in_use().fetch_sub(bytes); }
 }  // namespace detail
 
 inline MemoryStats memory_stats() { return {detail::bytes_in_use().load(), detail::bytes_peak().load()}; }
+/// Caps the device memory all lwsccd objects may hold together; an allocation past it throws
+/// lwsccd::Error (nothing is allocated then). Default: no cap.
+inline void set_memory_budget(std::size_t bytes) { detail::bytes_budget().store(bytes); }
+inline std::size_t memory_budget() { return detail::bytes_budget().load(); }
 /// Restarts the peak at the current use (for measuring one phase).
 inline void reset_peak_memory() { detail::bytes_peak().store(detail::bytes_in_use().load()); }
 
@@ -69,6 +87,7 @@ class DeviceBuffer {
   void resize_discard(std::size_t n) {
     if (n > capacity_) {
       release();
+      detail::check_budget(n * sizeof(T));
       LWSCCD_CUDA_CHECK(cudaMalloc(&ptr_, n * sizeof(T)));
       capacity_ = n;
       detail::account_alloc(capacity_ * sizeof(T));
