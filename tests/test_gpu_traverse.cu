@@ -167,8 +167,59 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     std::printf("%s: %zu pairs, %zu BVTT nodes, %zu relaunches\n", name, oracle.size(), out.stats().items_processed,
                 out.stats().relaunches);
   }
+  {  // OBB on cloth-funnel (the O(n^2) OBB oracle is affordable there), every scheduler
+    const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/cloth-funnel");
+    const TriangleMesh& mesh = *scene.step.mesh;
+    const auto oracle = brute_force_pairs(mesh, swept_triangle_bvs<Obbf>(mesh, scene.step.x0, scene.step.x1));
+    gpu::DeviceStep<double> step(mesh, scene.step.x0, scene.step.x1);
+    gpu::Bvh<Obbf> bvh;
+    bvh.build(step);
+    gpu::DeviceBuffer<Face> faces;
+    faces.upload(mesh.faces());
+    SelfCollisionTask<Obbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+    gpu::TraversalOutput<SelfCollisionTask<Obbf>> out;
+    REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
+    REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
+    REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
+    gpu::independent_self_traversal(task, out);
+    REQUIRE(sorted(out.download_results()) == oracle);
+  }
   const Sequence horse = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
   const TriangleMesh& mesh = *horse.mesh();
+  {  // OBB over every horse step, each scheduler in turn, against the CPU engine (work stealing)
+    gpu::DeviceStep<float> step(mesh, horse.frame(0), horse.frame(1));
+    gpu::Bvh<Obbf> bvh;
+    bvh.build(step);
+    std::vector<Vec3f> f0(mesh.num_vertices()), f1(f0.size());
+    auto to_float = [&](std::size_t s) {
+      for (std::size_t v = 0; v < f0.size(); ++v) f0[v] = horse.frame(s)[v].cast<float>(), f1[v] = horse.frame(s + 1)[v].cast<float>();
+    };
+    to_float(0);
+    cpu::Bvh<Obbf> cbvh(mesh, f0, f1);
+    gpu::DeviceBuffer<Face> faces;
+    faces.upload(mesh.faces());
+    SelfCollisionTask<Obbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+    SelfCollisionTask<Obbf> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, mesh.faces().data(), false}};
+    gpu::TraversalOutput<SelfCollisionTask<Obbf>> out;
+    out.front_.resize_discard(1);  // a one-entry front output: grows and reruns
+    FrontTracker tracker;
+    for (std::size_t s = 0; s < horse.num_steps(); ++s) {
+      INFO("horse OBB step " << s);
+      if (s > 0) {
+        step.set_positions(horse.frame(s), horse.frame(s + 1));
+        bvh.refit(step);
+        to_float(s);
+        cbvh.refit(f0, f1);
+      }
+      const auto expected = sorted(cpu::traverse(ctask, {NodePair{0, 0}}, false, cpu::WorkStealingScheduler{}).results);
+      const auto& seeds = tracker.seeds(bvh.generation());
+      const auto got = s % 3 == 0   ? gpu_pairs<gpu::LazyStealScheduler<>>(task, seeds, out, true)
+                       : s % 3 == 1 ? gpu_pairs<gpu::GProximityBalancer<>>(task, seeds, out, true)
+                                    : gpu_pairs<gpu::StaticTaskList<>>(task, seeds, out, true);
+      REQUIRE(got == expected);
+      tracker.update(out.download_front());
+    }
+  }
   gpu::DeviceStep<float> step(mesh, horse.frame(0), horse.frame(1));
   gpu::Bvh<Aabbf> bvh;
   bvh.build(step);
