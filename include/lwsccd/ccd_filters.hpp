@@ -14,6 +14,8 @@
 
 #include <cmath>
 #include <limits>
+#include <type_traits>
+#include <utility>
 
 #include "lwsccd/ccd_query.hpp"
 #include "lwsccd/detail/fp.hpp"
@@ -138,10 +140,26 @@ struct filtered_name {
 
 /// Any method behind the non-penetration filter: pairs the filter proves separate are answered
 /// "no collision" without running the method.
+namespace detail {
+template <class M, class = void>
+struct has_quick_reject : std::false_type {};
+template <class M>
+struct has_quick_reject<M, std::void_t<decltype(M::quick_reject(std::declval<const VertexFaceQuery<float>&>(),
+                                                                 std::declval<const CcdParams<float>&>()))>>
+    : std::true_type {};
+}  // namespace detail
+
 template <class Method>
 struct Filtered {
   static constexpr const char* name = filtered_name<Method>::value;
   static constexpr bool conservative = Method::conservative;
+  /// The filter, then the method's own first step when it has one (see InclusionCcd).
+  template <class Q, class T>
+  LWSCCD_HD static bool quick_reject(const Q& q, const CcdParams<T>& params) {
+    if (!non_penetration_filter(q, params)) return true;
+    if constexpr (detail::has_quick_reject<Method>::value) return Method::quick_reject(q, params);
+    return false;
+  }
   template <class T>
   LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
     return non_penetration_filter(q, params) ? Method::vertex_face(q, params) : CcdResult<T>{};

@@ -282,6 +282,15 @@ template <class Policy = InclusionPolicy>
 struct InclusionCcdT {
   static constexpr const char* name = "inclusion";
   static constexpr bool conservative = true;
+  /// True when the method's first step (the time filter on [0, 1] and the test of the whole
+  /// (t, u, v) domain) already answers "no collision": exactly the pairs for which
+  /// vertex_face / edge_edge return no hit after one box. Batches use it as a cheap first pass.
+  template <class Q, class T>
+  LWSCCD_HD static bool quick_reject(const Q& q, const CcdParams<T>& params) {
+    CcdParams<T> first = params;
+    first.max_iterations = 1;
+    return !detail::inclusion_solve<Policy>(q, first).hit;
+  }
   template <class T>
   LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
     return detail::inclusion_solve<Policy>(q, params);

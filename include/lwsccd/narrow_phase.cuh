@@ -34,7 +34,9 @@ struct NarrowPhasePolicy {
   static constexpr int kBlock = 128;
 };
 
-/// Runs a CCD method over device lists of candidate pairs. Owns its scratch and output buffers
+/// Runs a CCD method over device lists of candidate pairs. Methods with a quick_reject (the
+/// conservative inclusion method, filtered methods) run in two passes: the cheap first step on
+/// every pair, then the full test on the compacted survivors; the answers are the same. Owns its scratch and output buffers
 /// (reused across calls; they only grow).
 template <class Method, class T, class Policy = NarrowPhasePolicy>
 class NarrowPhase {
@@ -62,7 +64,8 @@ class NarrowPhase {
   NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
   std::size_t device_bytes() const {
     return vf_hits_.capacity_bytes() + ee_hits_.capacity_bytes() + staged_.capacity_bytes() + flags_.capacity_bytes() +
-           scratch_.capacity_bytes() + counters_.capacity_bytes() + toi_.capacity_bytes();
+           scratch_.capacity_bytes() + pair_scratch_.capacity_bytes() + survivors_.capacity_bytes() +
+           counters_.capacity_bytes() + toi_.capacity_bytes();
   }
 
  private:
@@ -72,7 +75,8 @@ class NarrowPhase {
 
   std::size_t chunk_, initial_capacity_;
   DeviceBuffer<FeatureHit<T>> vf_hits_, ee_hits_, staged_;
-  DeviceBuffer<unsigned char> flags_, scratch_;
+  DeviceBuffer<unsigned char> flags_, scratch_, pair_scratch_;
+  DeviceBuffer<unsigned long long> survivors_;  ///< pairs left after Method::quick_reject (two-pass methods)
   DeviceBuffer<unsigned long long> counters_;  ///< [0]: selected in the chunk, [1]: gave up
   DeviceBuffer<T> toi_;
   std::size_t vf_count_ = 0, ee_count_ = 0, gave_up_ = 0;

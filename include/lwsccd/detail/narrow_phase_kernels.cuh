@@ -27,6 +27,23 @@ __global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec
   if (r.gave_up) atomicAdd(gave_up, 1ull);
 }
 
+// First pass: flags the pairs that the method's first step does not already reject.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void quick_reject_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                    const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
+                                    unsigned char* keep) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const std::pair<index_t, index_t> p = pairs[i];
+  bool rejected;
+  if constexpr (kVertexFace) {
+    rejected = Method::quick_reject(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
+  } else {
+    rejected = Method::quick_reject(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
+  }
+  keep[i] = rejected ? 0 : 1;
+}
+
 template <class T>
 struct HitToi {
   LWSCCD_HD T operator()(const FeatureHit<T>& h) const { return h.toi; }
@@ -103,13 +120,40 @@ void NarrowPhase<Method, T, Policy>::run_list(const MeshFeatures& mesh, const Ve
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
       out = std::move(bigger);
     }
-    const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+    const Pair* chunk_pairs = pairs + begin;
+    std::size_t tested = m;
+    if constexpr (lwsccd::detail::has_quick_reject<Method>::value) {
+      // Two passes: the cheap first step for every pair, then the full method on the survivors
+      // only, compacted so that whole warps run the long searches together.
+      survivors_.resize_discard(std::max(survivors_.size(), chunk));
+      const unsigned quick_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+      detail::quick_reject_kernel<Method, kVertexFace, T, P><<<quick_blocks, Policy::kBlock, 0, stream>>>(
+          mesh, x0, x1, chunk_pairs, m, params, flags_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      // Compacted as 64-bit words: std::pair's assignment is host-only (a pair of 32-bit ids is
+      // 8 bytes, and device allocations and chunk offsets are 8-byte aligned).
+      static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
+      const auto* words = reinterpret_cast<const unsigned long long*>(chunk_pairs);
+      std::size_t pair_bytes = 0;
+      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, pair_bytes, words, flags_.data(), survivors_.data(),
+                                                   counters_.data(), static_cast<std::int64_t>(m), stream));
+      pair_scratch_.resize_discard(std::max(pair_bytes, pair_scratch_.size()));
+      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(pair_scratch_.data(), pair_bytes, words, flags_.data(),
+                                                   survivors_.data(), counters_.data(), static_cast<std::int64_t>(m), stream));
+      unsigned long long kept = 0;
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&kept, counters_.data(), sizeof kept, cudaMemcpyDeviceToHost, stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+      chunk_pairs = reinterpret_cast<const Pair*>(survivors_.data());
+      tested = static_cast<std::size_t>(kept);
+    }
+    if (tested == 0) continue;
+    const unsigned blocks = static_cast<unsigned>((tested + Policy::kBlock - 1) / Policy::kBlock);
     detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, stream>>>(
-        mesh, x0, x1, pairs + begin, m, params, staged_.data(), flags_.data(), counters_.data() + 1);
+        mesh, x0, x1, chunk_pairs, tested, params, staged_.data(), flags_.data(), counters_.data() + 1);
     LWSCCD_CUDA_CHECK_LAUNCH();
     std::size_t bytes = scratch_.size();
     LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(scratch_.data(), bytes, staged_.data(), flags_.data(), out.data() + count,
-                                                 counters_.data(), static_cast<std::int64_t>(m), stream));
+                                                 counters_.data(), static_cast<std::int64_t>(tested), stream));
     unsigned long long selected = 0;
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&selected, counters_.data(), sizeof selected, cudaMemcpyDeviceToHost, stream));
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
