@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "lwsccd/bvh.cuh"
+#include "lwsccd/ccd_filters.hpp"
 #include "lwsccd/device_buffer.cuh"
 #include "lwsccd/narrow_phase.hpp"
 

@@ -1,0 +1,226 @@
+// lwsccd — the end-to-end CCD pipeline on the GPU: same API and same answers as
+// cpu::CcdPipeline (pipeline.hpp). Everything between the positions' upload and the hits'
+// download stays on the device: refit (or rebuild), traversal from the front kept on the device,
+// feature pairs generated, sorted and de-duplicated with CUB, the narrow phase.
+#pragma once
+
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_select.cuh>
+
+#include <memory>
+
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/narrow_phase.cuh"
+#include "lwsccd/pipeline.hpp"
+#include "lwsccd/traverse.cuh"
+
+namespace lwsccd::gpu {
+
+namespace detail {
+
+struct FaceEdges {
+  index_t e[3];
+};
+
+// Feature-pair keys (first << 32 | second) of non-adjacent triangle pairs: 6 VF, 9 EE each.
+// (Templates, so that the header defines them in every translation unit.)
+template <class Index>
+__global__ void feature_keys_kernel(const TrianglePair* pairs, std::size_t n, const Face* faces,
+                                    const FaceEdges* face_edges, const Edge* edges, Index num_vertices, Index num_edges,
+                                    unsigned long long* vf_keys, unsigned long long* ee_keys) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const TrianglePair p = pairs[i];
+  const Index tri[2] = {p.a, p.b};
+  auto key = [](Index first, Index second) {
+    return (static_cast<unsigned long long>(first) << 32) | static_cast<unsigned long long>(static_cast<unsigned>(second));
+  };
+  for (int side = 0; side < 2; ++side) {
+    const Face verts = faces[tri[side]];
+    const Index face_feature = num_vertices + num_edges + tri[1 - side];
+    for (int k = 0; k < 3; ++k) vf_keys[6 * i + 3 * side + k] = key(verts.v[k], face_feature);
+  }
+  const FaceEdges ea = face_edges[p.a], eb = face_edges[p.b];
+  for (int x = 0; x < 3; ++x)
+    for (int y = 0; y < 3; ++y) {
+      const Index fa = num_vertices + ea.e[x], fb = num_vertices + eb.e[y];
+      ee_keys[9 * i + 3 * x + y] = fa < fb ? key(fa, fb) : key(fb, fa);
+    }
+}
+
+template <class Index>
+__global__ void keys_to_pairs_kernel(const unsigned long long* keys, std::size_t n, Index* pairs) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  pairs[2 * i] = static_cast<Index>(keys[i] >> 32);
+  pairs[2 * i + 1] = static_cast<Index>(keys[i] & 0xffffffffu);
+}
+
+}  // namespace detail
+
+template <class BV = Aabbf, class Scheduler = LazyStealScheduler<>, class Method = Filtered<InclusionCcd>, class T = double>
+class CcdPipeline {
+ public:
+  using Task = SelfCollisionTask<BV>;
+
+  explicit CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, PipelineParams params = {})
+      : mesh_(std::move(mesh)), params_(params), features_(*mesh_) {
+    const OrphanSets orphans = find_orphan_sets(*mesh_);
+    auto to_keys = [](const std::vector<std::pair<index_t, index_t>>& list) {
+      std::vector<unsigned long long> keys;
+      for (const auto& p : list)
+        keys.push_back((static_cast<unsigned long long>(p.first) << 32) | static_cast<unsigned>(p.second));
+      return keys;
+    };
+    orphan_vf_.upload(to_keys(orphans.vf));
+    orphan_ee_.upload(to_keys(orphans.ee));
+    std::vector<detail::FaceEdges> fe(static_cast<std::size_t>(mesh_->num_faces()));
+    for (index_t f = 0; f < mesh_->num_faces(); ++f) fe[f] = {{mesh_->face_edges(f)[0], mesh_->face_edges(f)[1], mesh_->face_edges(f)[2]}};
+    face_edges_.upload(fe);
+    LWSCCD_CUDA_CHECK(cudaEventCreate(&mark_[0]));
+    LWSCCD_CUDA_CHECK(cudaEventCreate(&mark_[1]));
+  }
+  ~CcdPipeline() {
+    cudaEventDestroy(mark_[0]);
+    cudaEventDestroy(mark_[1]);
+  }
+  CcdPipeline(const CcdPipeline&) = delete;
+  CcdPipeline& operator=(const CcdPipeline&) = delete;
+
+  /// One step from host positions (validated, uploaded).
+  StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
+    StepResult<T> r;
+    reset_peak_memory();
+    const auto start = std::chrono::steady_clock::now();
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1);
+    else step_->set_positions(x0, x1);
+    timed(r.stats.refit_ms, [&] {
+      if (!built_) {
+        bvh_.build(*step_);
+        built_ = r.stats.rebuilt = true;
+      } else {
+        r.stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
+      }
+    });
+    timed(r.stats.traverse_ms, [&] { traverse_step(r.stats); });
+    timed(r.stats.features_ms, [&] { feature_pairs(r.stats); });
+    timed(r.stats.narrow_ms, [&] {
+      CcdParams<T> ccd;
+      ccd.min_separation = static_cast<T>(params_.min_separation);
+      ccd.tolerance = static_cast<T>(params_.tolerance);
+      ccd.max_iterations = params_.max_iterations;
+      narrow_.run(features_, step_->x0.data(), step_->x1.data(), reinterpret_cast<const std::pair<index_t, index_t>*>(vf_pairs_.data()),
+                  r.stats.feature_pairs_vf, reinterpret_cast<const std::pair<index_t, index_t>*>(ee_pairs_.data()),
+                  r.stats.feature_pairs_ee, ccd);
+    });
+    r.contacts = narrow_.download();
+    r.stats.hits_vf = r.contacts.vf.size();
+    r.stats.hits_ee = r.contacts.ee.size();
+    r.stats.gave_up = r.contacts.gave_up;
+    r.stats.peak_device_bytes = memory_stats().peak;
+    r.stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return r;
+  }
+
+ private:
+  template <class F>
+  void timed(double& ms, F&& f) {
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
+    f();
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
+    LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[1]));
+    float t = 0;
+    LWSCCD_CUDA_CHECK(cudaEventElapsedTime(&t, mark_[0], mark_[1]));
+    ms = t;
+  }
+
+  // Traversal from the front kept on the device (FrontTracker's policy, without a host copy).
+  void traverse_step(StepStats& stats) {
+    const Task task{bvh_.view(), LeafFilter{nullptr, nullptr, features_.faces.data(), true}};
+    const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
+    generation_ = bvh_.generation();
+    if (restart) {
+      root_.upload(std::vector<NodePair>{NodePair{0, 0}});
+      traverse<Scheduler>(task, root_.data(), 1, traversal_, params_.front_tracking);
+    } else {
+      traverse<Scheduler>(task, seeds_.data(), front_size_, traversal_, true);
+    }
+    if (params_.front_tracking) {
+      front_size_ = traversal_.num_front();
+      seeds_.resize_discard(std::max<std::size_t>(front_size_, 1));
+      if (front_size_)
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(seeds_.data(), traversal_.front(), front_size_ * sizeof(NodePair),
+                                          cudaMemcpyDeviceToDevice));
+      if (restart) size_at_restart_ = front_size_;
+      reset_next_ = static_cast<double>(front_size_) > params_.front_growth_limit * static_cast<double>(size_at_restart_);
+    }
+    stats.restarted_from_root = restart;
+    stats.bvtt_nodes = traversal_.stats().items_processed;
+    stats.front_size = front_size_;
+    stats.triangle_pairs = traversal_.num_results();
+  }
+
+  // Candidate triangle pairs -> sorted unique VF and EE feature pairs (+ orphans), on the device.
+  void feature_pairs(StepStats& stats) {
+    const std::size_t n = traversal_.num_results();
+    const std::size_t total_vf = 6 * n + orphan_vf_.size(), total_ee = 9 * n + orphan_ee_.size();
+    keys_vf_.resize_discard(std::max<std::size_t>(total_vf, 1));
+    keys_ee_.resize_discard(std::max<std::size_t>(total_ee, 1));
+    keys_sorted_.resize_discard(std::max<std::size_t>(std::max(total_vf, total_ee), 1));
+    counter_.resize_discard(1);
+    if (n) {
+      detail::feature_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256>>>(
+          traversal_.results(), n, features_.faces.data(), face_edges_.data(), features_.edges.data(), mesh_->num_vertices(),
+          mesh_->num_edges(), keys_vf_.data(), keys_ee_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
+    for (int list = 0; list < 2; ++list) {
+      const bool vf = list == 0;
+      DeviceBuffer<unsigned long long>& keys = vf ? keys_vf_ : keys_ee_;
+      const DeviceBuffer<unsigned long long>& orphans = vf ? orphan_vf_ : orphan_ee_;
+      const std::size_t generated = (vf ? 6 : 9) * n, total = generated + orphans.size();
+      if (orphans.size())
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(keys.data() + generated, orphans.data(), orphans.size() * sizeof(unsigned long long),
+                                          cudaMemcpyDeviceToDevice));
+      std::size_t sort_bytes = 0, unique_bytes = 0;
+      LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortKeys(nullptr, sort_bytes, keys.data(), keys_sorted_.data(),
+                                                       static_cast<std::int64_t>(total)));
+      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Unique(nullptr, unique_bytes, keys_sorted_.data(), keys.data(), counter_.data(),
+                                                  static_cast<std::int64_t>(total)));
+      scratch_.resize_discard(std::max({sort_bytes, unique_bytes, scratch_.size(), std::size_t(1)}));
+      LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortKeys(scratch_.data(), sort_bytes, keys.data(), keys_sorted_.data(),
+                                                       static_cast<std::int64_t>(total)));
+      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Unique(scratch_.data(), unique_bytes, keys_sorted_.data(), keys.data(),
+                                                  counter_.data(), static_cast<std::int64_t>(total)));
+      unsigned long long unique = 0;
+      LWSCCD_CUDA_CHECK(cudaMemcpy(&unique, counter_.data(), sizeof unique, cudaMemcpyDeviceToHost));
+      DeviceBuffer<index_t>& out = vf ? vf_pairs_ : ee_pairs_;
+      out.resize_discard(std::max<std::size_t>(2 * unique, 2));
+      if (unique) {
+        detail::keys_to_pairs_kernel<<<static_cast<unsigned>((unique + 255) / 256), 256>>>(keys.data(), unique, out.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      }
+      (vf ? stats.feature_pairs_vf : stats.feature_pairs_ee) = static_cast<std::size_t>(unique);
+    }
+  }
+
+  std::shared_ptr<const TriangleMesh> mesh_;
+  PipelineParams params_;
+  DeviceMeshFeatures features_;
+  DeviceBuffer<detail::FaceEdges> face_edges_;
+  DeviceBuffer<unsigned long long> orphan_vf_, orphan_ee_, keys_vf_, keys_ee_, keys_sorted_, counter_;
+  DeviceBuffer<unsigned char> scratch_;
+  DeviceBuffer<index_t> vf_pairs_, ee_pairs_;  ///< pairs of ids, interleaved
+  std::unique_ptr<DeviceStep<double>> step_;
+  Bvh<BV> bvh_;
+  bool built_ = false;
+  TraversalOutput<Task> traversal_;
+  DeviceBuffer<NodePair> seeds_, root_;
+  std::size_t front_size_ = 0, size_at_restart_ = 0;
+  std::uint64_t generation_ = ~std::uint64_t(0);
+  bool reset_next_ = false;
+  NarrowPhase<Method, T> narrow_;
+  cudaEvent_t mark_[2];
+};
+
+}  // namespace lwsccd::gpu

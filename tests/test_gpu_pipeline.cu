@@ -1,0 +1,87 @@
+// The GPU pipeline against the CPU pipeline: same contacts, same TOIs, step after step.
+#include <catch2/catch.hpp>
+
+#include <cstring>
+
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/pipeline.cuh"
+#include "lwsccd/pipeline.hpp"
+#include "scene_fixtures.hpp"
+#include "test_support.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+template <class T>
+void require_same_contacts(const StepResult<T>& gpu, const StepResult<T>& cpu) {
+  REQUIRE(gpu.stats.triangle_pairs == cpu.stats.triangle_pairs);
+  REQUIRE(gpu.stats.feature_pairs_vf == cpu.stats.feature_pairs_vf);
+  REQUIRE(gpu.stats.feature_pairs_ee == cpu.stats.feature_pairs_ee);
+  REQUIRE(gpu.contacts.vf.size() == cpu.contacts.vf.size());
+  REQUIRE(gpu.contacts.ee.size() == cpu.contacts.ee.size());
+  for (std::size_t i = 0; i < gpu.contacts.vf.size(); ++i) {
+    REQUIRE(gpu.contacts.vf[i].first == cpu.contacts.vf[i].first);
+    REQUIRE(gpu.contacts.vf[i].second == cpu.contacts.vf[i].second);
+    REQUIRE(std::memcmp(&gpu.contacts.vf[i].toi, &cpu.contacts.vf[i].toi, sizeof(T)) == 0);
+  }
+  for (std::size_t i = 0; i < gpu.contacts.ee.size(); ++i) {
+    REQUIRE(gpu.contacts.ee[i].first == cpu.contacts.ee[i].first);
+    REQUIRE(gpu.contacts.ee[i].second == cpu.contacts.ee[i].second);
+    REQUIRE(std::memcmp(&gpu.contacts.ee[i].toi, &cpu.contacts.ee[i].toi, sizeof(T)) == 0);
+  }
+  REQUIRE(gpu.contacts.earliest_toi == cpu.contacts.earliest_toi);
+}
+
+}  // namespace
+
+TEST_CASE("GPU pipeline equals the CPU pipeline over several steps of a folded cloth", "[gpu][pipeline]") {
+  const auto first = lwsccd_test::folded_cloth(50, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  gpu::CcdPipeline<> gpu_pipeline(mesh);
+  cpu::CcdPipeline<> cpu_pipeline(mesh);
+  for (int s = 0; s < 4; ++s) {
+    INFO("step " << s);
+    const auto m = lwsccd_test::folded_cloth(50, 1 + s);
+    const auto g = gpu_pipeline.step(m.x0, m.x1);
+    const auto c = cpu_pipeline.step(m.x0, m.x1);
+    require_same_contacts(g, c);
+    CHECK(g.stats.hits_vf + g.stats.hits_ee > 0);
+    CHECK(g.stats.peak_device_bytes > 0);
+  }
+}
+
+TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth kept", "[gpu][pipeline][data]") {
+  if (!lwsccd_test::have_data()) {
+    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
+    return;
+  }
+  for (const char* name : {"cloth-funnel", "armadillo-rollers", "cloth-ball"}) {
+    INFO(name);
+    const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
+    gpu::CcdPipeline<> gpu_pipeline(scene.step.mesh);
+    cpu::CcdPipeline<> cpu_pipeline(scene.step.mesh);
+    const auto g = gpu_pipeline.step(scene.step.x0, scene.step.x1);
+    const auto c = cpu_pipeline.step(scene.step.x0, scene.step.x1);
+    require_same_contacts(g, c);
+    // No ground-truth contact is missed by the whole pipeline.
+    std::size_t missed = 0;
+    for (std::size_t i = 0; i < scene.truth.vf.size(); ++i)
+      if (scene.truth.vf_collides[i])
+        missed += !std::binary_search(g.contacts.vf.begin(), g.contacts.vf.end(),
+                                      FeatureHit<double>{scene.truth.vf[i].first, scene.truth.vf[i].second, 0});
+    for (std::size_t i = 0; i < scene.truth.ee.size(); ++i)
+      if (scene.truth.ee_collides[i])
+        missed += !std::binary_search(g.contacts.ee.begin(), g.contacts.ee.end(),
+                                      FeatureHit<double>{scene.truth.ee[i].first, scene.truth.ee[i].second, 0});
+    std::printf("%s: GPU pipeline %.2f ms (refit %.3f, traverse %.3f, features %.3f, narrow %.3f), %zu + %zu contacts, "
+                "earliest TOI %.9g, %zu ground-truth contacts missed\n",
+                name, g.stats.total_ms, g.stats.refit_ms, g.stats.traverse_ms, g.stats.features_ms, g.stats.narrow_ms,
+                g.stats.hits_vf, g.stats.hits_ee, g.contacts.earliest_toi, missed);
+    CHECK(missed == 0);
+    // A second, identical step restarts from the front and gives the same answer.
+    const auto g2 = gpu_pipeline.step(scene.step.x0, scene.step.x1);
+    CHECK_FALSE(g2.stats.restarted_from_root);
+    require_same_contacts(g2, c);
+  }
+}
