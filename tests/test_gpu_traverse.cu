@@ -60,6 +60,25 @@ void self_matches_cpu(const MovingMesh& m, bool tiny_outputs) {
   CHECK(out.stats().items_processed > 0);
 }
 
+// Every GPU scheduler and Karras's traversal, from the root, against an oracle pair list.
+template <class BV>
+void every_scheduler_matches(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
+                             const std::vector<TrianglePair>& oracle, const char* name) {
+  gpu::DeviceStep<double> step(mesh, x0, x1);
+  gpu::Bvh<BV> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(mesh.faces());
+  SelfCollisionTask<BV> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  gpu::TraversalOutput<SelfCollisionTask<BV>> out;
+  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
+  REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
+  REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
+  gpu::independent_self_traversal(task, out);
+  REQUIRE(sorted(out.download_results()) == oracle);
+  std::printf("%s: %zu pairs, %zu BVTT nodes (Karras)\n", name, oracle.size(), out.stats().items_processed);
+}
+
 }  // namespace
 
 TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gpu][traverse]", Aabbf, Obbf) {
@@ -151,38 +170,16 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     INFO(name);
     const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
     const TriangleMesh& mesh = *scene.step.mesh;
-    const auto oracle = sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, scene.step.x0, scene.step.x1));
-    gpu::DeviceStep<double> step(mesh, scene.step.x0, scene.step.x1);
-    gpu::Bvh<Aabbf> bvh;
-    bvh.build(step);
-    gpu::DeviceBuffer<Face> faces;
-    faces.upload(mesh.faces());
-    SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
-    gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
-    REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
-    REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
-    REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
-    gpu::independent_self_traversal(task, out);
-    REQUIRE(sorted(out.download_results()) == oracle);
-    std::printf("%s: %zu pairs, %zu BVTT nodes, %zu relaunches\n", name, oracle.size(), out.stats().items_processed,
-                out.stats().relaunches);
+    every_scheduler_matches<Aabbf>(mesh, scene.step.x0, scene.step.x1,
+                                   sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, scene.step.x0, scene.step.x1)),
+                                   name);
   }
-  {  // OBB on cloth-funnel (the O(n^2) OBB oracle is affordable there), every scheduler
+  {  // OBB on cloth-funnel (the O(n^2) OBB oracle is affordable there)
     const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/cloth-funnel");
     const TriangleMesh& mesh = *scene.step.mesh;
-    const auto oracle = brute_force_pairs(mesh, swept_triangle_bvs<Obbf>(mesh, scene.step.x0, scene.step.x1));
-    gpu::DeviceStep<double> step(mesh, scene.step.x0, scene.step.x1);
-    gpu::Bvh<Obbf> bvh;
-    bvh.build(step);
-    gpu::DeviceBuffer<Face> faces;
-    faces.upload(mesh.faces());
-    SelfCollisionTask<Obbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
-    gpu::TraversalOutput<SelfCollisionTask<Obbf>> out;
-    REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
-    REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
-    REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
-    gpu::independent_self_traversal(task, out);
-    REQUIRE(sorted(out.download_results()) == oracle);
+    every_scheduler_matches<Obbf>(mesh, scene.step.x0, scene.step.x1,
+                                  brute_force_pairs(mesh, swept_triangle_bvs<Obbf>(mesh, scene.step.x0, scene.step.x1)),
+                                  "cloth-funnel (OBB)");
   }
   const Sequence horse = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
   const TriangleMesh& mesh = *horse.mesh();
