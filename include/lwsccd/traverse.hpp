@@ -23,19 +23,6 @@ struct TraversalResult {
   TraversalStats stats;
 };
 
-namespace cpu {
-
-/// One thread, one explicit stack (depth first).
-struct SerialScheduler {};
-
-/// All cores: a deque per thread; a thread pops its newest item and, when out of work, steals
-/// the oldest half of another thread's deque (the largest subtrees). Termination: a shared count
-/// of items pushed but not yet processed reaches zero only when no thread holds or can create
-/// work, because an item's children are counted before the item itself is retired.
-struct WorkStealingScheduler {
-  unsigned threads = 0;  ///< 0: std::thread::hardware_concurrency()
-};
-
 namespace detail {
 
 template <class Task>
@@ -51,6 +38,19 @@ struct VectorEmitter {
 };
 
 }  // namespace detail
+
+namespace cpu {
+
+/// One thread, one explicit stack (depth first).
+struct SerialScheduler {};
+
+/// All cores: a deque per thread; a thread pops its newest item and, when out of work, steals
+/// the oldest half of another thread's deque (the largest subtrees). Termination: a shared count
+/// of items pushed but not yet processed reaches zero only when no thread holds or can create
+/// work, because an item's children are counted before the item itself is retired.
+struct WorkStealingScheduler {
+  unsigned threads = 0;  ///< 0: std::thread::hardware_concurrency()
+};
 
 template <class Task>
 TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task::item_type>& seeds,

@@ -1,0 +1,141 @@
+// lwsccd — casting rays against a triangle BVH as a traversal task: the lazy-stealing scheduler
+// (and every other) reused for ray tracing, written only against the public task interface.
+//
+// Items are (ray, BVH node) pairs. Closest hit: each ray keeps its best hit in a 64-bit word
+// (t's float bits, which order like t for t >= 0, above the triangle id) lowered with an atomic
+// minimum, and nodes the ray enters only beyond its best hit are pruned. Any hit (shadow rays):
+// the first hit sets the ray's word and the others stop. Both give the same answer in every
+// scheduler (the minimum does not depend on the order).
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#include "lwsccd/bvh.hpp"
+#include "lwsccd/detail/fp.hpp"
+#include "lwsccd/traversal_task.hpp"
+
+namespace lwsccd {
+
+struct Ray {
+  Vec3f origin, direction;
+  float t_max;
+};
+
+struct RayNode {
+  index_t ray, node;
+};
+
+/// No hit: the largest key.
+constexpr std::uint64_t kNoHit = ~std::uint64_t(0);
+
+LWSCCD_HD inline std::uint64_t hit_key(float t, index_t triangle) {
+  std::uint32_t bits;
+  memcpy(&bits, &t, sizeof bits);
+  return (static_cast<std::uint64_t>(bits) << 32) | static_cast<std::uint32_t>(triangle);
+}
+LWSCCD_HD inline float hit_t(std::uint64_t key) {
+  const std::uint32_t bits = static_cast<std::uint32_t>(key >> 32);
+  float t;
+  memcpy(&t, &bits, sizeof t);
+  return t;
+}
+LWSCCD_HD inline index_t hit_triangle(std::uint64_t key) { return static_cast<index_t>(key & 0xffffffffu); }
+
+namespace detail {
+
+LWSCCD_HD inline std::uint64_t atomic_load_u64(const std::uint64_t* p) {
+#if LWSCCD_IN_DEVICE_CODE
+  return *reinterpret_cast<const volatile unsigned long long*>(p);
+#else
+  return __atomic_load_n(p, __ATOMIC_RELAXED);
+#endif
+}
+
+LWSCCD_HD inline void atomic_min_u64(std::uint64_t* p, std::uint64_t value) {
+#if LWSCCD_IN_DEVICE_CODE
+  atomicMin(reinterpret_cast<unsigned long long*>(p), static_cast<unsigned long long>(value));
+#else
+  std::uint64_t current = __atomic_load_n(p, __ATOMIC_RELAXED);
+  while (value < current && !__atomic_compare_exchange_n(p, &current, value, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
+  }
+#endif
+}
+
+/// Entry distance of the ray into the box, or +inf when it misses it within [0, t_max]. The slab
+/// distances are widened by a few ulps (Ize 2013) so that rounding never culls a box the ray
+/// touches: the traversal then finds exactly the hits a test of every triangle finds.
+LWSCCD_HD inline float ray_box_entry(const Ray& r, const Vec3f& inv, const Aabbf& b, float t_max) {
+  float t0 = 0.0f, t1 = t_max;
+  for (int a = 0; a < 3; ++a) {
+    float near_t = fmul(fsub(b.lo[a], r.origin[a]), inv[a]), far_t = fmul(fsub(b.hi[a], r.origin[a]), inv[a]);
+    if (near_t > far_t) {
+      const float tmp = near_t;
+      near_t = far_t;
+      far_t = tmp;
+    }
+    // NaN from 0 * inf (ray in the slab's plane) keeps the bounds unchanged.
+    t0 = near_t > t0 ? near_t : t0;
+    t1 = far_t < t1 ? far_t : t1;
+  }
+  constexpr float kWiden = 8.0f * std::numeric_limits<float>::epsilon();
+  return t0 * (1.0f - kWiden) <= t1 * (1.0f + kWiden) ? t0 * (1.0f - kWiden) : std::numeric_limits<float>::infinity();
+}
+
+/// Moller-Trumbore: distance along the ray to triangle (a, b, c), or +inf. Rounded the same way
+/// on host and device (detail/fp.hpp), so every scheduler reports the same bits.
+LWSCCD_HD inline float ray_triangle(const Ray& r, const Vec3f& a, const Vec3f& b, const Vec3f& c) {
+  const Vec3f e1 = vsub(b, a), e2 = vsub(c, a);
+  const Vec3f p = vcross(r.direction, e2);
+  const float det = vdot(e1, p);
+  if (det == 0.0f) return std::numeric_limits<float>::infinity();
+  const float inv_det = 1.0f / det;
+  const Vec3f s = vsub(r.origin, a);
+  const float u = fmul(vdot(s, p), inv_det);
+  if (u < 0.0f || u > 1.0f) return std::numeric_limits<float>::infinity();
+  const Vec3f q = vcross(s, e1);
+  const float v = fmul(vdot(r.direction, q), inv_det);
+  if (v < 0.0f || fadd(u, v) > 1.0f) return std::numeric_limits<float>::infinity();
+  const float t = fmul(vdot(e2, q), inv_det);
+  return t > 0.0f && t <= r.t_max ? t : std::numeric_limits<float>::infinity();
+}
+
+}  // namespace detail
+
+/// Rays against a BVH of AABBs over the triangles at t0 (x0). Seeds: {ray, root} per ray.
+struct RayCastTask {
+  using item_type = RayNode;
+  using result_type = RayNode;  ///< unused: hits go to `best`
+  static constexpr int kMaxChildren = 2;
+  static constexpr int kMaxResults = 1;
+
+  BvhView<Aabbf> bvh;
+  const Face* faces;
+  const Vec3f* positions;
+  const Ray* rays;
+  std::uint64_t* best;  ///< per ray, kNoHit before the traversal
+  bool any_hit = false;
+
+  LWSCCD_EXEC_CHECK_DISABLE
+  template <class Out>
+  LWSCCD_HD void process(const RayNode& item, Out& out) const {
+    const Ray r = rays[item.ray];
+    const std::uint64_t current = detail::atomic_load_u64(&best[item.ray]);
+    if (any_hit && current != kNoHit) return;
+    const float limit = current == kNoHit ? r.t_max : hit_t(current);
+    const Vec3f inv{1.0f / r.direction.x, 1.0f / r.direction.y, 1.0f / r.direction.z};
+    if (!(detail::ray_box_entry(r, inv, bvh.bvs[item.node], limit) <= limit)) return;
+    if (bvh.is_leaf(item.node)) {
+      const index_t tri = bvh.primitive(item.node);
+      const Face f = faces[tri];
+      const float t = detail::ray_triangle(r, positions[f.v[0]], positions[f.v[1]], positions[f.v[2]]);
+      if (t <= limit) detail::atomic_min_u64(&best[item.ray], hit_key(t, tri));
+      return;
+    }
+    out.push_item(RayNode{item.ray, bvh.left[item.node]});
+    out.push_item(RayNode{item.ray, bvh.right[item.node]});
+  }
+};
+
+}  // namespace lwsccd

@@ -1,0 +1,66 @@
+// Ray casting with every GPU scheduler (no change to any of them): the same closest hits as
+// testing every triangle, hit for hit.
+#include <catch2/catch.hpp>
+
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/traverse.cuh"
+#include "ray_fixtures.hpp"
+#include "scene_fixtures.hpp"
+#include "test_support.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+template <class Scheduler>
+std::vector<std::uint64_t> traced(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceBuffer<Face>& faces,
+                                  const gpu::DeviceBuffer<Vec3f>& x, const std::vector<Ray>& rays, bool any_hit) {
+  gpu::DeviceBuffer<Ray> d_rays;
+  d_rays.upload(rays);
+  gpu::DeviceBuffer<std::uint64_t> best;
+  best.upload(std::vector<std::uint64_t>(rays.size(), kNoHit));
+  std::vector<RayNode> seeds;
+  for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
+  gpu::DeviceBuffer<RayNode> d_seeds;
+  d_seeds.upload(seeds);
+  RayCastTask task{bvh.view(), faces.data(), x.data(), d_rays.data(), best.data(), any_hit};
+  gpu::TraversalOutput<RayCastTask> out;
+  gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
+  return best.download();
+}
+
+void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, int grid, int random_rays) {
+  std::vector<Vec3f> x(x0.size());
+  for (std::size_t v = 0; v < x.size(); ++v) x[v] = x0[v].cast<float>();
+  gpu::DeviceStep<float> step(mesh, x0, x0);
+  gpu::Bvh<Aabbf> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(mesh.faces());
+  gpu::DeviceBuffer<Vec3f> dx;
+  dx.upload(x);
+  const auto rays = lwsccd_test::test_rays(x, grid, random_rays);
+  const auto reference = lwsccd_test::brute_force_hits(rays, mesh.faces(), x);
+  REQUIRE(traced<gpu::StaticTaskList<>>(bvh, faces, dx, rays, false) == reference);
+  REQUIRE(traced<gpu::GProximityBalancer<>>(bvh, faces, dx, rays, false) == reference);
+  REQUIRE(traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, false) == reference);
+  const auto any = traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, true);
+  for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any[r] == kNoHit) == (reference[r] == kNoHit));
+}
+
+}  // namespace
+
+TEST_CASE("GPU ray casting with every scheduler equals testing every triangle", "[gpu][ray]") {
+  const auto m = lwsccd_test::folded_cloth(40, 2);
+  check_mesh(m.mesh, m.x0, 32, 500);
+  if (!lwsccd_test::have_data()) {
+    WARN("SKIPPED (real scenes): shared data not found at " << lwsccd_test::data_dir());
+    return;
+  }
+  for (const char* name : {"cloth-funnel", "cloth-ball"}) {
+    INFO(name);
+    const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
+    check_mesh(*scene.step.mesh, scene.step.x0, 16, 150);
+  }
+}
