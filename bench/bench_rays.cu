@@ -1,0 +1,189 @@
+// lwsccd-bench-rays — rays per second of RayCastTask with each scheduler against the standard
+// approach (one thread per ray with its own stack), for coherent primary rays and incoherent
+// random rays, closest hit, on cloth-ball (or the built-in scene). CUDA events, medians; every
+// variant's hits are checked equal to the one-thread-per-ray kernel's.
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "bench_common.hpp"
+#include "bench_gpu.cuh"
+#include "lwsccd/bvh.cuh"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/ray_task.hpp"
+#include "lwsccd/scenes.hpp"
+#include "lwsccd/traverse.cuh"
+
+using namespace lwsccd;
+
+namespace {
+
+// The standard approach: one thread per ray, a per-thread stack, near child first.
+__global__ void ray_per_thread_kernel(BvhView<Aabbf> bvh, const Face* faces, const Vec3f* x, const Ray* rays, int n,
+                                      std::uint64_t* best) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const Ray r = rays[i];
+  const Vec3f inv{1.0f / r.direction.x, 1.0f / r.direction.y, 1.0f / r.direction.z};
+  std::uint64_t hit = kNoHit;
+  index_t stack[128];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const index_t node = stack[--top];
+    const float limit = hit == kNoHit ? r.t_max : hit_t(hit);
+    if (!(detail::ray_box_entry(r, inv, bvh.bvs[node], limit) <= limit)) continue;
+    if (bvh.is_leaf(node)) {
+      const index_t tri = bvh.primitive(node);
+      const Face f = faces[tri];
+      const float t = detail::ray_triangle(r, x[f.v[0]], x[f.v[1]], x[f.v[2]]);
+      if (t <= limit) {
+        const std::uint64_t key = hit_key(t, tri);
+        hit = key < hit ? key : hit;
+      }
+      continue;
+    }
+    const index_t l = bvh.left[node], rr = bvh.right[node];
+    const float tl = detail::ray_box_entry(r, inv, bvh.bvs[l], limit), tr = detail::ray_box_entry(r, inv, bvh.bvs[rr], limit);
+    if (tl <= tr) {  // push the far child first
+      stack[top++] = rr;
+      stack[top++] = l;
+    } else {
+      stack[top++] = l;
+      stack[top++] = rr;
+    }
+  }
+  best[i] = hit;
+}
+
+std::vector<Ray> camera_rays(const std::vector<Vec3f>& x, int w, int h) {
+  Aabbf box = Aabbf::empty();
+  for (const auto& p : x) box.expand(p);
+  const Vec3f c = box.center();
+  const float r = 0.5f * norm(box.extent());
+  const Vec3f eye = c + Vec3f{0.9f * r, -1.6f * r, 1.1f * r};
+  Vec3f fwd = c - eye;
+  fwd *= 1.0f / norm(fwd);
+  Vec3f right = cross(fwd, Vec3f{0, 0, 1});
+  right *= 1.0f / norm(right);
+  const Vec3f up = cross(right, fwd);
+  std::vector<Ray> rays;
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i) {
+      Vec3f d = fwd + right * ((2.0f * (i + 0.5f) / w - 1.0f) * 0.6f * w / h) + up * ((1.0f - 2.0f * (j + 0.5f) / h) * 0.6f);
+      d *= 1.0f / norm(d);
+      rays.push_back({eye, d, 1e30f});
+    }
+  return rays;
+}
+
+std::vector<Ray> random_rays(const std::vector<Vec3f>& x, std::size_t n) {
+  Aabbf box = Aabbf::empty();
+  for (const auto& p : x) box.expand(p);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(0, 1), d(-1, 1);
+  std::vector<Ray> rays;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3f o{box.lo.x + u(rng) * (box.hi.x - box.lo.x), box.lo.y + u(rng) * (box.hi.y - box.lo.y),
+                  box.lo.z + u(rng) * (box.hi.z - box.lo.z)};
+    Vec3f dir{d(rng), d(rng), d(rng)};
+    dir *= 1.0f / norm(dir);
+    rays.push_back({o, dir, 1e30f});
+  }
+  return rays;
+}
+
+struct Row {
+  std::string rays, method;
+  std::size_t count;
+  double median_ms;
+  bool same;
+};
+
+template <class Scheduler>
+Row scheduler_row(const char* name, const std::string& kind, const RayCastTask& task_template, const gpu::DeviceBuffer<Ray>& rays,
+                  gpu::DeviceBuffer<std::uint64_t>& best, const gpu::DeviceBuffer<RayNode>& seeds,
+                  const std::vector<std::uint64_t>& reference, int reps) {
+  RayCastTask task = task_template;
+  task.rays = rays.data();
+  task.best = best.data();
+  gpu::TraversalOutput<RayCastTask> out;
+  auto run = [&] {
+    LWSCCD_CUDA_CHECK(cudaMemset(best.data(), 0xff, rays.size() * sizeof(std::uint64_t)));
+    gpu::traverse<Scheduler>(task, seeds.data(), seeds.size(), out, false);
+  };
+  run();
+  const auto ms = lwsccd_bench::time_with_events(reps, run);
+  return {kind, name, rays.size(), lwsccd_bench::median(ms), best.download() == reference};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const lwsccd_bench::BenchArgs args =
+      lwsccd_bench::parse_bench_args(argc, argv, 5, {}, "usage: lwsccd-bench-rays [--data DIR] [--reps N] [--json FILE]");
+  cudaDeviceProp prop{};
+  if (!lwsccd_bench::first_gpu(prop, "lwsccd-bench-rays")) return 77;
+  try {
+    const std::string dir = lwsccd_bench::data_dir(args.data, LWSCCD_BENCH_DATA_DIR);
+    const Scene scene = load_scene(dir + "/scenes/cloth-ball");
+    const TriangleMesh& mesh = *scene.step.mesh;
+    std::vector<Vec3f> x(scene.step.x0.size());
+    for (std::size_t v = 0; v < x.size(); ++v) x[v] = scene.step.x0[v].cast<float>();
+    gpu::DeviceStep<float> step(mesh, scene.step.x0, scene.step.x0);
+    gpu::Bvh<Aabbf> bvh;
+    bvh.build(step);
+    gpu::DeviceBuffer<Face> faces;
+    faces.upload(mesh.faces());
+    gpu::DeviceBuffer<Vec3f> dx;
+    dx.upload(x);
+    std::vector<Row> rows;
+    for (const std::string kind : {"primary 1920x1080 (coherent)", "random (incoherent)"}) {
+      const std::vector<Ray> host_rays = kind[0] == 'p' ? camera_rays(x, 1920, 1080) : random_rays(x, 1920 * 1080);
+      gpu::DeviceBuffer<Ray> rays;
+      rays.upload(host_rays);
+      gpu::DeviceBuffer<std::uint64_t> best(host_rays.size());
+      const int n = static_cast<int>(host_rays.size());
+      auto baseline = [&] {
+        ray_per_thread_kernel<<<(n + 127) / 128, 128>>>(bvh.view(), faces.data(), dx.data(), rays.data(), n, best.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      };
+      baseline();
+      const auto ms = lwsccd_bench::time_with_events(args.reps, baseline);
+      const std::vector<std::uint64_t> reference = best.download();
+      rows.push_back({kind, "one thread per ray", host_rays.size(), lwsccd_bench::median(ms), true});
+      std::vector<RayNode> host_seeds;
+      for (index_t r = 0; r < n; ++r) host_seeds.push_back({r, 0});
+      gpu::DeviceBuffer<RayNode> seeds;
+      seeds.upload(host_seeds);
+      const RayCastTask task{bvh.view(), faces.data(), dx.data(), nullptr, nullptr, false};
+      rows.push_back(scheduler_row<gpu::StaticTaskList<>>("static task list", kind, task, rays, best, seeds, reference, args.reps));
+      rows.push_back(scheduler_row<gpu::GProximityBalancer<>>("gProximity", kind, task, rays, best, seeds, reference, args.reps));
+      rows.push_back(scheduler_row<gpu::LazyStealScheduler<>>("lazy stealing", kind, task, rays, best, seeds, reference, args.reps));
+    }
+    std::printf("GPU: %s; cloth-ball (92,230 triangles), closest hit, CUDA events, median of %d runs\n", prop.name, args.reps);
+    std::printf("%-30s %-20s %10s %10s %14s %s\n", "rays", "method", "count", "ms", "Mrays/s", "hits = per-thread");
+    for (const Row& r : rows)
+      std::printf("%-30s %-20s %10zu %10.3f %14.1f %s\n", r.rays.c_str(), r.method.c_str(), r.count, r.median_ms,
+                  r.count / r.median_ms / 1e3, r.same ? "yes" : "NO");
+    if (!args.json.empty()) {
+      std::FILE* f = std::fopen(args.json.c_str(), "w");
+      if (!f) throw Error("cannot write " + args.json);
+      std::fprintf(f, "[\n");
+      for (std::size_t i = 0; i < rows.size(); ++i)
+        std::fprintf(f, "  {\"gpu\": \"%s\", \"rays\": \"%s\", \"method\": \"%s\", \"count\": %zu, \"median_ms\": %.6f, "
+                        "\"mrays_per_s\": %.3f, \"same_hits\": %s}%s\n",
+                     prop.name, rows[i].rays.c_str(), rows[i].method.c_str(), rows[i].count, rows[i].median_ms,
+                     rows[i].count / rows[i].median_ms / 1e3, rows[i].same ? "true" : "false", i + 1 < rows.size() ? "," : "");
+      std::fprintf(f, "]\n");
+      std::fclose(f);
+    }
+    for (const Row& r : rows)
+      if (!r.same) return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "lwsccd-bench-rays: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
