@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -62,6 +63,22 @@ inline BenchArgs parse_bench_args(int argc, char** argv, int default_reps, const
     }
   }
   return args;
+}
+
+/// Writes a JSON array to `path` (nothing when it is empty): print_row(file, i) prints object i.
+template <class PrintRow>
+void write_json_rows(const std::string& path, std::size_t n, PrintRow&& print_row) {
+  if (path.empty()) return;
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) throw std::runtime_error("cannot write " + path);
+  std::fprintf(f, "[\n");
+  for (std::size_t i = 0; i < n; ++i) {
+    std::fprintf(f, "  ");
+    print_row(f, i);
+    std::fprintf(f, "%s\n", i + 1 < n ? "," : "");
+  }
+  std::fprintf(f, "]\n");
+  std::fclose(f);
 }
 
 }  // namespace lwsccd_bench

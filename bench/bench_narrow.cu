@@ -93,22 +93,15 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-18s %-20s %-7s %11zu %10zu %8zu %11.3f %10.3f - %8.3f %16.9g\n", r.scene.c_str(), r.method.c_str(),
                   r.precision.c_str(), r.pairs, r.hits, r.gave_up, r.median_ms, r.p10_ms, r.p90_ms, r.earliest);
-    if (!args.json.empty()) {
-      std::FILE* f = std::fopen(args.json.c_str(), "w");
-      if (!f) throw Error("cannot write " + args.json);
-      std::fprintf(f, "[\n");
-      for (std::size_t i = 0; i < rows.size(); ++i) {
-        const Row& r = rows[i];
-        std::fprintf(f,
-                     "  {\"gpu\": \"%s\", \"scene\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"pairs\": %zu, "
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+      const Row& r = rows[i];
+      std::fprintf(f,
+                     "{\"gpu\": \"%s\", \"scene\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"pairs\": %zu, "
                      "\"hits\": %zu, \"gave_up\": %zu, \"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, "
-                     "\"earliest_toi\": %.17g, \"reps\": %d}%s\n",
+                     "\"earliest_toi\": %.17g, \"reps\": %d}",
                      prop.name, r.scene.c_str(), r.method.c_str(), r.precision.c_str(), r.pairs, r.hits, r.gave_up,
-                     r.median_ms, r.p10_ms, r.p90_ms, r.earliest, r.reps, i + 1 < rows.size() ? "," : "");
-      }
-      std::fprintf(f, "]\n");
-      std::fclose(f);
-    }
+                     r.median_ms, r.p10_ms, r.p90_ms, r.earliest, r.reps);
+    });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-narrow: error: %s\n", e.what());
     return 1;

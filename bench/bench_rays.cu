@@ -167,18 +167,12 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-30s %-20s %10zu %10.3f %14.1f %s\n", r.rays.c_str(), r.method.c_str(), r.count, r.median_ms,
                   r.count / r.median_ms / 1e3, r.same ? "yes" : "NO");
-    if (!args.json.empty()) {
-      std::FILE* f = std::fopen(args.json.c_str(), "w");
-      if (!f) throw Error("cannot write " + args.json);
-      std::fprintf(f, "[\n");
-      for (std::size_t i = 0; i < rows.size(); ++i)
-        std::fprintf(f, "  {\"gpu\": \"%s\", \"rays\": \"%s\", \"method\": \"%s\", \"count\": %zu, \"median_ms\": %.6f, "
-                        "\"mrays_per_s\": %.3f, \"same_hits\": %s}%s\n",
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+      std::fprintf(f, "{\"gpu\": \"%s\", \"rays\": \"%s\", \"method\": \"%s\", \"count\": %zu, \"median_ms\": %.6f, "
+                        "\"mrays_per_s\": %.3f, \"same_hits\": %s}",
                      prop.name, rows[i].rays.c_str(), rows[i].method.c_str(), rows[i].count, rows[i].median_ms,
-                     rows[i].count / rows[i].median_ms / 1e3, rows[i].same ? "true" : "false", i + 1 < rows.size() ? "," : "");
-      std::fprintf(f, "]\n");
-      std::fclose(f);
-    }
+                     rows[i].count / rows[i].median_ms / 1e3, rows[i].same ? "true" : "false");
+    });
     for (const Row& r : rows)
       if (!r.same) return 2;
   } catch (const std::exception& e) {

@@ -157,22 +157,15 @@ int main(int argc, char** argv) {
       std::printf("%-32s %-11s %-11s %-7s %10.3f %10.3f - %8.3f %11zu %10zu %10zu %6.2f\n", r.scene.c_str(),
                   r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms, r.p90_ms, r.nodes, r.pairs,
                   r.front, r.busy_share);
-    if (!args.json.empty()) {
-      std::FILE* f = std::fopen(args.json.c_str(), "w");
-      if (!f) throw Error("cannot write " + args.json);
-      std::fprintf(f, "[\n");
-      for (std::size_t i = 0; i < rows.size(); ++i) {
-        const Row& r = rows[i];
-        std::fprintf(f,
-                     "  {\"gpu\": \"%s\", \"scene\": \"%s\", \"scheduler\": \"%s\", \"bv\": \"%s\", \"start\": \"%s\", "
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+      const Row& r = rows[i];
+      std::fprintf(f,
+                     "{\"gpu\": \"%s\", \"scene\": \"%s\", \"scheduler\": \"%s\", \"bv\": \"%s\", \"start\": \"%s\", "
                      "\"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, \"bvtt_nodes\": %zu, \"pairs\": %zu, "
-                     "\"front\": %zu, \"busy_share\": %.4f}%s\n",
+                     "\"front\": %zu, \"busy_share\": %.4f}",
                      prop.name, r.scene.c_str(), r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms,
-                     r.p90_ms, r.nodes, r.pairs, r.front, r.busy_share, i + 1 < rows.size() ? "," : "");
-      }
-      std::fprintf(f, "]\n");
-      std::fclose(f);
-    }
+                     r.p90_ms, r.nodes, r.pairs, r.front, r.busy_share);
+    });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-traverse: error: %s\n", e.what());
     return 1;

@@ -7,30 +7,13 @@
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase.cuh"
+#include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"
 
 using namespace lwsccd;
 
 namespace {
-
-template <class T>
-void require_same(const NarrowPhaseResult<T>& gpu, const NarrowPhaseResult<T>& cpu) {
-  REQUIRE(gpu.vf.size() == cpu.vf.size());
-  REQUIRE(gpu.ee.size() == cpu.ee.size());
-  for (std::size_t i = 0; i < gpu.vf.size(); ++i) {
-    REQUIRE(gpu.vf[i].first == cpu.vf[i].first);
-    REQUIRE(gpu.vf[i].second == cpu.vf[i].second);
-    REQUIRE(std::memcmp(&gpu.vf[i].toi, &cpu.vf[i].toi, sizeof(T)) == 0);
-  }
-  for (std::size_t i = 0; i < gpu.ee.size(); ++i) {
-    REQUIRE(gpu.ee[i].first == cpu.ee[i].first);
-    REQUIRE(gpu.ee[i].second == cpu.ee[i].second);
-    REQUIRE(std::memcmp(&gpu.ee[i].toi, &cpu.ee[i].toi, sizeof(T)) == 0);
-  }
-  REQUIRE(gpu.earliest_toi == cpu.earliest_toi);
-  REQUIRE(gpu.gave_up == cpu.gave_up);
-}
 
 template <class Method, class T>
 void compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
@@ -44,7 +27,7 @@ void compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, co
   const CcdParams<T> params;
   narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
   const auto cpu_result = cpu::test_feature_pairs<Method, T>(mesh, x0, x1, pairs, params);
-  require_same(narrow.download(), cpu_result);
+  lwsccd_test::require_same_contacts(narrow.download(), cpu_result);
   std::printf("  %s/%s: %zu vf + %zu ee pairs -> %zu + %zu hits, earliest TOI %.9g\n", Method::name,
               sizeof(T) == 4 ? "float" : "double", pairs.vf.size(), pairs.ee.size(), cpu_result.vf.size(),
               cpu_result.ee.size(), double(cpu_result.earliest_toi));

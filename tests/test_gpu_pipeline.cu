@@ -6,6 +6,7 @@
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/pipeline.cuh"
 #include "lwsccd/pipeline.hpp"
+#include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"
 
@@ -18,19 +19,7 @@ void require_same_contacts(const StepResult<T>& gpu, const StepResult<T>& cpu) {
   REQUIRE(gpu.stats.triangle_pairs == cpu.stats.triangle_pairs);
   REQUIRE(gpu.stats.feature_pairs_vf == cpu.stats.feature_pairs_vf);
   REQUIRE(gpu.stats.feature_pairs_ee == cpu.stats.feature_pairs_ee);
-  REQUIRE(gpu.contacts.vf.size() == cpu.contacts.vf.size());
-  REQUIRE(gpu.contacts.ee.size() == cpu.contacts.ee.size());
-  for (std::size_t i = 0; i < gpu.contacts.vf.size(); ++i) {
-    REQUIRE(gpu.contacts.vf[i].first == cpu.contacts.vf[i].first);
-    REQUIRE(gpu.contacts.vf[i].second == cpu.contacts.vf[i].second);
-    REQUIRE(std::memcmp(&gpu.contacts.vf[i].toi, &cpu.contacts.vf[i].toi, sizeof(T)) == 0);
-  }
-  for (std::size_t i = 0; i < gpu.contacts.ee.size(); ++i) {
-    REQUIRE(gpu.contacts.ee[i].first == cpu.contacts.ee[i].first);
-    REQUIRE(gpu.contacts.ee[i].second == cpu.contacts.ee[i].second);
-    REQUIRE(std::memcmp(&gpu.contacts.ee[i].toi, &cpu.contacts.ee[i].toi, sizeof(T)) == 0);
-  }
-  REQUIRE(gpu.contacts.earliest_toi == cpu.contacts.earliest_toi);
+  lwsccd_test::require_same_contacts(gpu.contacts, cpu.contacts);
 }
 
 }  // namespace

@@ -19,6 +19,27 @@ struct NodePair {
   index_t a, b;
 };
 
+namespace detail {
+
+/// The BVTT descent rule shared by the tasks: split the larger volume (by surface area) of a
+/// pair that overlaps and is not two leaves; a leaf cannot be split.
+LWSCCD_EXEC_CHECK_DISABLE
+template <class BV, class Out>
+LWSCCD_HD void descend_larger(const BvhView<BV>& ta, const BvhView<BV>& tb, const NodePair& p, Out& out) {
+  const bool leaf_a = ta.is_leaf(p.a), leaf_b = tb.is_leaf(p.b);
+  const bool split_b =
+      leaf_a || (!leaf_b && bv_traits<BV>::surface_area(tb.bvs[p.b]) > bv_traits<BV>::surface_area(ta.bvs[p.a]));
+  if (split_b) {
+    out.push_item(NodePair{p.a, tb.left[p.b]});
+    out.push_item(NodePair{p.a, tb.right[p.b]});
+  } else {
+    out.push_item(NodePair{ta.left[p.a], p.b});
+    out.push_item(NodePair{ta.right[p.a], p.b});
+  }
+}
+
+}  // namespace detail
+
 /// Which leaf pairs are reported: faces' bodies and which bodies self-collide (device-friendly
 /// raw arrays; null = one self-colliding body). Mirrors BodyLayout.
 struct LeafFilter {
@@ -69,22 +90,12 @@ struct SelfCollisionTask {
       out.push_front(p);
       return;
     }
-    const bool leaf_a = bvh.is_leaf(p.a), leaf_b = bvh.is_leaf(p.b);
-    if (leaf_a && leaf_b) {
+    if (bvh.is_leaf(p.a) && bvh.is_leaf(p.b)) {
       out.push_front(p);
       emit_leaf_pair(bvh.primitive(p.a), bvh.primitive(p.b), out);
       return;
     }
-    // Descend the larger volume (by surface area); leaves cannot be descended.
-    const bool split_b =
-        leaf_a || (!leaf_b && bv_traits<BV>::surface_area(bvh.bvs[p.b]) > bv_traits<BV>::surface_area(bvh.bvs[p.a]));
-    if (split_b) {
-      out.push_item(NodePair{p.a, bvh.left[p.b]});
-      out.push_item(NodePair{p.a, bvh.right[p.b]});
-    } else {
-      out.push_item(NodePair{bvh.left[p.a], p.b});
-      out.push_item(NodePair{bvh.right[p.a], p.b});
-    }
+    detail::descend_larger(bvh, bvh, p, out);
   }
 
   LWSCCD_EXEC_CHECK_DISABLE
@@ -157,21 +168,12 @@ struct InterCollisionTask {
       out.push_front(p);
       return;
     }
-    const bool leaf_a = a_tree.is_leaf(p.a), leaf_b = b_tree.is_leaf(p.b);
-    if (leaf_a && leaf_b) {
+    if (a_tree.is_leaf(p.a) && b_tree.is_leaf(p.b)) {
       out.push_front(p);
       out.push_result(TrianglePair{a_tree.primitive(p.a), b_tree.primitive(p.b), false});
       return;
     }
-    const bool split_b = leaf_a || (!leaf_b && bv_traits<BV>::surface_area(b_tree.bvs[p.b]) >
-                                                   bv_traits<BV>::surface_area(a_tree.bvs[p.a]));
-    if (split_b) {
-      out.push_item(NodePair{p.a, b_tree.left[p.b]});
-      out.push_item(NodePair{p.a, b_tree.right[p.b]});
-    } else {
-      out.push_item(NodePair{a_tree.left[p.a], p.b});
-      out.push_item(NodePair{a_tree.right[p.a], p.b});
-    }
+    detail::descend_larger(a_tree, b_tree, p, out);
   }
 };
 

@@ -1,0 +1,30 @@
+// Comparing two sets of contacts pair for pair and TOI bit for bit (GPU against CPU).
+#pragma once
+
+#include <catch2/catch.hpp>
+
+#include <cstring>
+
+#include "lwsccd/narrow_phase.hpp"
+
+namespace lwsccd_test {
+
+template <class T>
+void require_same_hits(const std::vector<lwsccd::FeatureHit<T>>& gpu, const std::vector<lwsccd::FeatureHit<T>>& cpu) {
+  REQUIRE(gpu.size() == cpu.size());
+  for (std::size_t i = 0; i < gpu.size(); ++i) {
+    REQUIRE(gpu[i].first == cpu[i].first);
+    REQUIRE(gpu[i].second == cpu[i].second);
+    REQUIRE(std::memcmp(&gpu[i].toi, &cpu[i].toi, sizeof(T)) == 0);
+  }
+}
+
+template <class T>
+void require_same_contacts(const lwsccd::NarrowPhaseResult<T>& gpu, const lwsccd::NarrowPhaseResult<T>& cpu) {
+  require_same_hits(gpu.vf, cpu.vf);
+  require_same_hits(gpu.ee, cpu.ee);
+  REQUIRE(gpu.earliest_toi == cpu.earliest_toi);
+  REQUIRE(gpu.gave_up == cpu.gave_up);
+}
+
+}  // namespace lwsccd_test
