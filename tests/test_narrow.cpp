@@ -52,6 +52,9 @@ bool coplanar_somewhere(const Q& q) {
 struct TinyHeap {
   static constexpr int kMaxBoxes = 2;
 };
+struct SmallHeap {
+  static constexpr int kMaxBoxes = 16;
+};
 
 }  // namespace
 
@@ -166,10 +169,52 @@ TEMPLATE_TEST_CASE("bounded work: a tiny budget answers hit, never a miss", "[na
   CHECK(r.hit);
   CHECK(r.gave_up);
   CHECK(r.toi <= T(0.5));
-  // A box heap of 2 entries overflows at once: still conservative.
-  const auto tiny = InclusionCcdT<TinyHeap>::edge_edge(crossing_edges<T>(T(1), T(-3)), CcdParams<T>{});
+  // A heap of 2 boxes cannot make progress: the answer is "hit" at the time reached, never a miss.
+  params.max_iterations = 1 << 20;
+  const auto tiny = InclusionCcdT<TinyHeap>::edge_edge(crossing_edges<T>(T(1), T(-3)), params);
   CHECK(tiny.hit);
   CHECK(tiny.toi <= T(0.25));
+}
+
+TEMPLATE_TEST_CASE("a full box heap costs time, not a wrong answer", "[narrow]", float, double) {
+  using T = TestType;
+  CcdParams<T> params;
+  params.max_iterations = 1 << 20;
+  // A heap of 16 boxes overflows soon; the search drops the latest boxes and searches again
+  // from where the excluded part reaches: the same answers as with room to spare.
+  const auto edges = InclusionCcdT<SmallHeap>::edge_edge(crossing_edges<T>(T(1), T(-3)), params);  // touch at t = 0.25
+  REQUIRE(edges.hit);
+  CHECK_FALSE(edges.gave_up);
+  CHECK(edges.toi <= T(0.25));
+  CHECK(edges.toi >= T(0.25) - toi_slack<T>());
+  const auto vertex = InclusionCcdT<SmallHeap>::vertex_face(falling_vertex<T>(T(0.2), T(0.3), T(1), T(-1)), params);
+  REQUIRE(vertex.hit);
+  CHECK_FALSE(vertex.gave_up);
+  CHECK(vertex.toi <= T(0.5));
+  CHECK(vertex.toi >= T(0.5) - toi_slack<T>());
+  CHECK_FALSE(InclusionCcdT<SmallHeap>::vertex_face(falling_vertex<T>(T(0.8), T(0.8), T(1), T(-1)), params).hit);
+  CHECK_FALSE(InclusionCcdT<SmallHeap>::edge_edge(crossing_edges<T>(T(1), T(-3), T(1.5)), params).hit);
+}
+
+TEST_CASE("a vertex near a sliver triangle that moves away: no contact (it overflowed the heap)", "[narrow]") {
+  // cloth-ball 92->93, vertex 11423 and face 246191, in the query's local frame: the vertex is
+  // 0.0029 from a nearly collinear triangle at t = 0 and 0.019 at t = 1. The search needs ~2,000
+  // boxes and more than 256 live at once; answering "hit" when the heap filled made this the
+  // scene's earliest contact, at t = 0.
+  const VertexFaceQuery<double> q{{0, 0, 0},
+                                  {0.056929945945739746, 0.13329124450683594, 0.062498092651367188},
+                                  {-0.063248038291931152, -0.14238786697387695, -0.076035022735595703},
+                                  {-0.0097349882125854492, -0.016850948333740234, -0.010957241058349609},
+                                  {0.38241994380950928, 0.050976276397705078, -0.055601119995117188},
+                                  {0.44626402854919434, 0.17645025253295898, 0.024160861968994141},
+                                  {0.32294201850891113, -0.10964393615722656, -0.11288833618164062},
+                                  {0.40604197978973389, 0.0056691169738769531, -0.055171966552734375}};
+  const CcdParams<double> params;
+  const auto r = InclusionCcd::vertex_face(q, params);
+  CHECK_FALSE(r.hit);
+  CHECK_FALSE(r.gave_up);
+  CHECK_FALSE(Filtered<InclusionCcd>::vertex_face(q, params).hit);
+  CHECK_FALSE(InclusionCcd::vertex_face(q.cast<float>(), CcdParams<float>{}).hit);
 }
 
 TEST_CASE("CPU narrow phase over a cloth's feature pairs: filtered equals unfiltered", "[narrow]") {

@@ -20,8 +20,10 @@
 // GUARANTEE. Never answers "no collision" when the features come within `min_separation`
 // (infinity norm) at some time of the step, for the query as given or perturbed relatively by u;
 // the reported toi is a lower bound of the earliest such time. Bounded work: after
-// `max_iterations` boxes, or when its box heap (Policy::kMaxBoxes) is full, it answers "hit" at
-// the earliest time not yet excluded (gave_up = true): a false positive at worst, never a miss.
+// `max_iterations` boxes it answers "hit" at the earliest time not yet excluded (gave_up =
+// true): a false positive at worst, never a miss. Bounded memory: when its box heap
+// (Policy::kMaxBoxes) is full it drops the latest box and later searches again from the time
+// the excluded part reaches, so a full heap costs time, not a wrong answer.
 #pragma once
 
 #include <cmath>
@@ -95,6 +97,24 @@ struct BoxHeap {
     }
     if (size > 0) items[i] = last;
     return top;
+  }
+  /// Makes room for b when full: the latest box (b itself if none is later) leaves the heap
+  /// and is returned; the rest of the heap and b stay.
+  LWSCCD_HD DyadicBox push_evicting_latest(const DyadicBox& b) {
+    int latest = size / 2;  // the latest box is a leaf
+    for (int i = latest + 1; i < size && i < kCapacity; ++i)
+      if (box_before(items[latest], items[i])) latest = i;
+    if (!box_before(b, items[latest])) return b;
+    const DyadicBox evicted = items[latest];
+    int i = latest;
+    while (i > 0) {
+      const int parent = (i - 1) / 2;
+      if (!box_before(b, items[parent])) break;
+      items[i] = items[parent];
+      i = parent;
+    }
+    items[i] = b;
+    return evicted;
   }
 };
 
@@ -201,12 +221,32 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
   }
   const T eta = T(8) * unit;
 
+  // When the heap is full, the latest box is dropped and the earliest dropped time remembered.
+  // Once every box before that time is excluded, the search restarts from the whole domain with
+  // the times before it cut off (they are excluded already): bounded memory without the false
+  // "hit at the current time" that giving up at a full heap would answer (seen on a sliver
+  // triangle in cloth-ball, where that hit was at t = 0).
+  constexpr std::uint64_t kNone = ~std::uint64_t(0);
+  const DyadicBox whole{{0, 0, 0}, {0, 0, 0}};
+  std::uint64_t floor_key = 0, evicted_key = kNone;
+  T t_floor = T(0);
   BoxHeap<Policy::kMaxBoxes> heap;
-  heap.push(DyadicBox{{0, 0, 0}, {0, 0, 0}});
+  heap.push(whole);
   int examined = 0;
-  while (heap.size > 0) {
+  while (true) {
+    if (heap.size == 0 || (evicted_key != kNone && box_time_key(heap.items[0]) >= evicted_key)) {
+      if (evicted_key == kNone) return {};  // everything excluded
+      // No time excluded since the last restart: the heap is too small for this query.
+      if (evicted_key == floor_key) return {true, t_floor, true};
+      floor_key = evicted_key;
+      t_floor = std::ldexp(static_cast<T>(floor_key), -40);  // a box's time: exact in T
+      evicted_key = kNone;
+      heap.size = 0;
+      heap.push(whole);
+    }
     const DyadicBox box = heap.pop();
-    const T toi = dyadic<T>(box.idx[0], box.level[0]);
+    if ((static_cast<std::uint64_t>(box.idx[0]) + 1) << (40 - box.level[0]) <= floor_key) continue;  // before the cut
+    const T toi = box_time_key(box) < floor_key ? t_floor : dyadic<T>(box.idx[0], box.level[0]);
     if (++examined > params.max_iterations) return {true, toi, true};
     T t[2], u[2], v[2];
     T* dims[3] = {t, u, v};
@@ -214,7 +254,8 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
       dims[k][0] = dyadic<T>(box.idx[k], box.level[k]);
       dims[k][1] = dyadic<T>(box.idx[k] + 1, box.level[k]);
     }
-    if (time_filter && box.level[0] > 0) {
+    t[0] = toi;
+    if (time_filter && (box.level[0] > 0 || floor_key > 0)) {
       T sub[4];
       const T t_lo = t[0] > eta ? fsub(t[0], eta) : T(0);
       const T t_hi = t[1] < fsub(T(1), eta) ? fadd(t[1], eta) : T(1);
@@ -267,12 +308,14 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
         const std::uint64_t vlo = static_cast<std::uint64_t>(child.idx[2]) << (40 - child.level[2]);
         if (ulo + vlo > (std::uint64_t(1) << 40)) continue;
       }
-      // Out of room: answer conservatively at this box's time, the earliest still possible
-      // (it was the heap's minimum).
-      if (!heap.push(child)) return {true, toi, true};
+      if (heap.size < Policy::kMaxBoxes) {
+        heap.push(child);
+      } else {
+        const std::uint64_t dropped = box_time_key(heap.push_evicting_latest(child));
+        evicted_key = dropped < evicted_key ? dropped : evicted_key;
+      }
     }
   }
-  return {};
 }
 
 }  // namespace detail
