@@ -6,6 +6,7 @@
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/pipeline.cuh"
 #include "lwsccd/pipeline.hpp"
+#include "lwsccd/scenes.hpp"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"
@@ -73,4 +74,25 @@ TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth
     CHECK_FALSE(g2.stats.restarted_from_root);
     require_same_contacts(g2, c);
   }
+}
+
+TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from device memory equal host ones",
+          "[gpu][pipeline][bodies]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(20000);
+  gpu::CcdPipeline<> gpu_pipeline(scene.step.mesh, scene.layout);
+  cpu::CcdPipeline<> cpu_pipeline(scene.step.mesh, scene.layout);
+  const auto g = gpu_pipeline.step(scene.step.x0, scene.step.x1);
+  const auto c = cpu_pipeline.step(scene.step.x0, scene.step.x1);
+  require_same_contacts(g, c);
+  CHECK(g.stats.hits_vf + g.stats.hits_ee > 0);
+  CHECK(g.stats.bvtt_nodes == c.stats.bvtt_nodes);  // the same pruning on both sides
+  // The same step from device-resident positions, in a fresh pipeline and in this one.
+  DeviceBuffer<Vec3d> x0, x1;
+  x0.upload(scene.step.x0);
+  x1.upload(scene.step.x1);
+  gpu::CcdPipeline<> fresh(scene.step.mesh, scene.layout);
+  require_same_contacts(fresh.step_from_device(x0.data(), x1.data()), c);
+  require_same_contacts(gpu_pipeline.step_from_device(x0.data(), x1.data()), c);
+  CHECK_THROWS_AS(fresh.step_from_device(scene.step.x0.data(), x1.data()), InputError);
+  CHECK_THROWS_AS(fresh.step_from_device(x0.data(), nullptr), InputError);
 }

@@ -1,7 +1,11 @@
 // The CPU pipeline against its stages composed by hand from the oracles.
 #include <catch2/catch.hpp>
 
+#include <cstdio>
+#include <string>
+
 #include "lwsccd/pipeline.hpp"
+#include "lwsccd/scenes.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;
@@ -30,4 +34,126 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
     CHECK(r.stats.hits_vf + r.stats.hits_ee > 0);
     CHECK(r.stats.restarted_from_root == (s == 0));
   }
+}
+
+namespace {
+
+// The oracle for a scene with bodies: brute-force candidates under the layout, adjacent pairs
+// left to the orphans (restricted to the layout), the narrow phase.
+NarrowPhaseResult<double> oracle_contacts(const MultiBodyStep& scene) {
+  const TriangleMesh& mesh = *scene.step.mesh;
+  std::vector<TrianglePair> non_adjacent;
+  for (const auto& p : brute_force_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, scene.step.x0, scene.step.x1), scene.layout))
+    if (!p.adjacent) non_adjacent.push_back(p);
+  const OrphanSets orphans = orphans_for_layout(mesh, find_orphan_sets(mesh), scene.layout);
+  const FeaturePairs features = culled_feature_pairs(mesh, non_adjacent, orphans);
+  return cpu::test_feature_pairs<Filtered<InclusionCcd>, double>(mesh, scene.step.x0, scene.step.x1, features);
+}
+
+}  // namespace
+
+TEST_CASE("CPU pipeline with bodies: a rigid ball costs no self traversal and no contacts are lost", "[pipeline][bodies]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(3000);
+  REQUIRE(scene.layout.body_self_collides == std::vector<bool>{true, false});
+  cpu::CcdPipeline<Aabbf> with_bodies(scene.step.mesh, scene.layout);
+  cpu::CcdPipeline<Aabbf> one_body(scene.step.mesh);
+  const auto r = with_bodies.step(scene.step.x0, scene.step.x1);
+  const auto all = one_body.step(scene.step.x0, scene.step.x1);
+  const auto expected = oracle_contacts(scene);
+  REQUIRE(r.contacts.vf.size() == expected.vf.size());
+  REQUIRE(r.contacts.ee.size() == expected.ee.size());
+  for (std::size_t i = 0; i < expected.vf.size(); ++i) {
+    REQUIRE(r.contacts.vf[i].first == expected.vf[i].first);
+    REQUIRE(r.contacts.vf[i].second == expected.vf[i].second);
+    REQUIRE(r.contacts.vf[i].toi == expected.vf[i].toi);
+  }
+  for (std::size_t i = 0; i < expected.ee.size(); ++i) {
+    REQUIRE(r.contacts.ee[i].first == expected.ee[i].first);
+    REQUIRE(r.contacts.ee[i].toi == expected.ee[i].toi);
+  }
+  // Cloth-cloth and cloth-ball contacts exist; the ball's subtrees are pruned whole.
+  CHECK(r.stats.hits_vf + r.stats.hits_ee > 0);
+  CHECK(r.stats.bvtt_nodes < all.stats.bvtt_nodes);
+  CHECK(r.stats.triangle_pairs < all.stats.triangle_pairs);
+  // Every contact of the layout's pipeline is also one of the single-body pipeline's.
+  for (const auto& h : r.contacts.vf) CHECK(std::binary_search(all.contacts.vf.begin(), all.contacts.vf.end(), h));
+  std::printf("built-in cloth-ball, %d faces: BVTT nodes %zu with bodies vs %zu as one body; triangle pairs %zu vs %zu\n",
+              scene.step.mesh->num_faces(), r.stats.bvtt_nodes, all.stats.bvtt_nodes, r.stats.triangle_pairs,
+              all.stats.triangle_pairs);
+  // A second step from the front (same positions): same answer.
+  const auto again = with_bodies.step(scene.step.x0, scene.step.x1);
+  CHECK_FALSE(again.stats.restarted_from_root);
+  CHECK(again.contacts.vf.size() == r.contacts.vf.size());
+  CHECK(again.contacts.ee.size() == r.contacts.ee.size());
+}
+
+TEST_CASE("node_bodies: one body per subtree, mixed where bodies meet", "[pipeline][bodies]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(800);
+  cpu::Bvh<Aabbf> bvh;
+  bvh.build(*scene.step.mesh, scene.step.x0, scene.step.x1);
+  const auto view = bvh.view();
+  const std::vector<index_t> bodies = node_bodies(view, scene.layout.face_body);
+  std::size_t uniform = 0;
+  for (index_t node = 0; node < view.num_nodes(); ++node) {
+    // The brute-force answer from the node's leaves.
+    index_t expected = scene.layout.face_body[view.leaf_primitive[view.ranges[node].first]];
+    for (index_t k = view.ranges[node].first; k <= view.ranges[node].last; ++k)
+      if (scene.layout.face_body[view.leaf_primitive[k]] != expected) expected = kMixedBodies;
+    REQUIRE(bodies[node] == expected);
+    uniform += expected != kMixedBodies;
+  }
+  CHECK(bodies[0] == kMixedBodies);
+  CHECK(uniform > static_cast<std::size_t>(view.num_leaves));  // leaves and some internal nodes
+}
+
+TEST_CASE("orphans_for_layout drops only pairs inside a body that does not self-collide", "[pipeline][bodies]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(1500);
+  const TriangleMesh& mesh = *scene.step.mesh;
+  const OrphanSets all = find_orphan_sets(mesh);
+  const OrphanSets kept = orphans_for_layout(mesh, all, scene.layout);
+  // The cloth self-collides: its orphans (all there are: the closed ball has none) stay.
+  REQUIRE(all.vf.size() + all.ee.size() > 0);
+  CHECK(kept.vf.size() == all.vf.size());
+  CHECK(kept.ee.size() == all.ee.size());
+  // A rigid cloth over a self-colliding ball: the cloth's orphans go.
+  BodyLayout swapped = scene.layout;
+  swapped.body_self_collides = {false, true};
+  CHECK(orphans_for_layout(mesh, all, swapped).vf.size() + orphans_for_layout(mesh, all, swapped).ee.size() == 0);
+  const std::vector<index_t> ball_faces_only(mesh.num_faces(), 1);  // all faces in the rigid ball's body
+  BodyLayout all_rigid{ball_faces_only, {true, false}};
+  CHECK(orphans_for_layout(mesh, all, all_rigid).vf.empty());
+  CHECK(orphans_for_layout(mesh, all, all_rigid).ee.empty());
+  BodyLayout everyone = scene.layout;
+  everyone.body_self_collides = {true, true};
+  CHECK(orphans_for_layout(mesh, all, everyone).vf.size() == all.vf.size());
+  CHECK(orphans_for_layout(mesh, all, everyone).ee.size() == all.ee.size());
+  BodyLayout wrong = scene.layout;
+  wrong.face_body.pop_back();
+  CHECK_THROWS_AS(orphans_for_layout(mesh, all, wrong), InputError);
+}
+
+TEST_CASE("CPU pipeline rejects bad parameters, layouts and positions with a clear error", "[pipeline]") {
+  const auto m = lwsccd_test::folded_cloth(8, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  auto with = [](auto change) {
+    PipelineParams p;
+    change(p);
+    return p;
+  };
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.tolerance = 0; })), InputError);
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.min_separation = -1; })), InputError);
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.max_iterations = 0; })), InputError);
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.rebuild_factor = 0.5; })), InputError);
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(nullptr), InputError);
+  BodyLayout short_layout;
+  short_layout.face_body = {0};
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, short_layout), InputError);
+  try {
+    cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.tolerance = 2; }));
+  } catch (const InputError& e) {
+    CHECK(std::string(e.what()).find("tolerance") != std::string::npos);
+  }
+  cpu::CcdPipeline<> pipeline(mesh);
+  std::vector<Vec3d> too_few(m.x0.begin(), m.x0.end() - 1);
+  CHECK_THROWS_AS(pipeline.step(too_few, m.x1), InputError);
 }

@@ -25,8 +25,14 @@ struct DeviceStep {
   /// Uploads (and converts to P) a host step; positions are validated on the host first.
   DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1,
              cudaStream_t stream = nullptr);
+  /// Topology only; positions follow through set_positions or set_positions_from_device.
+  explicit DeviceStep(const TriangleMesh& mesh, cudaStream_t stream = nullptr);
   /// Replaces the positions (same topology), e.g. for the next step of a sequence.
   void set_positions(const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1, cudaStream_t stream = nullptr);
+  /// Replaces the positions from device memory (num_vertices points each; copied, so the
+  /// caller's arrays may change afterwards). Throws InputError unless both point to device
+  /// (or managed) memory. Non-finite values are reported by the next BVH build or refit.
+  void set_positions_from_device(const Vec3<P>* d0, const Vec3<P>* d1, cudaStream_t stream = nullptr);
 
  private:
   std::vector<Vec3<P>> staging_;

@@ -40,6 +40,9 @@ LWSCCD_HD void descend_larger(const BvhView<BV>& ta, const BvhView<BV>& tb, cons
 
 }  // namespace detail
 
+/// node_body value of a BVH node whose faces belong to more than one body.
+constexpr index_t kMixedBodies = -1;
+
 /// Which leaf pairs are reported: faces' bodies and which bodies self-collide (device-friendly
 /// raw arrays; null = one self-colliding body). Mirrors BodyLayout.
 struct LeafFilter {
@@ -47,6 +50,16 @@ struct LeafFilter {
   const unsigned char* body_self_collides = nullptr;
   const Face* faces = nullptr;  ///< for the adjacency flag
   bool skip_adjacent = false;   ///< leave triangles sharing a vertex to the orphan sets
+  /// Per BVH node: the one body of all its faces, or kMixedBodies (node_bodies()). With it, a
+  /// node pair inside one body that does not self-collide is dropped whole, not descended to
+  /// its leaves: a rigid ball costs the traversal nothing. Null: leaves are filtered one by one.
+  const index_t* node_body = nullptr;
+
+  LWSCCD_HD bool prunes(index_t node_a, index_t node_b) const {
+    if (!node_body || !body_self_collides) return false;
+    const index_t body = node_body[node_a];
+    return body != kMixedBodies && body == node_body[node_b] && !body_self_collides[body];
+  }
 
   LWSCCD_HD bool considers(index_t f, index_t g) const {
     if (!face_body) return true;
@@ -78,6 +91,8 @@ struct SelfCollisionTask {
   LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void process(const NodePair& p, Out& out) const {
+    // Never reports anything, now or after a refit (bodies are fixed): off the front for good.
+    if (filter.prunes(p.a, p.b)) return;
     if (p.a == p.b) {
       if (bvh.is_leaf(p.a)) return;
       const index_t l = bvh.left[p.a], r = bvh.right[p.a];
@@ -107,6 +122,28 @@ struct SelfCollisionTask {
     out.push_result(f < g ? TrianglePair{f, g, adjacent} : TrianglePair{g, f, adjacent});
   }
 };
+
+namespace detail {
+/// A node's body from its leaf range: `changes[k]` counts the body changes between consecutive
+/// sorted leaves up to leaf k, so the range holds one body exactly when the count does not move.
+LWSCCD_HD inline index_t node_body_of(const LeafRange& range, const index_t* changes, const index_t* leaf_primitive,
+                                      const index_t* face_body) {
+  return changes[range.last] == changes[range.first] ? face_body[leaf_primitive[range.first]] : kMixedBodies;
+}
+}  // namespace detail
+
+/// LeafFilter::node_body for a BVH (host side; the GPU pipeline computes it on the device).
+/// Depends on the tree's topology only: recompute after a build, not after a refit.
+template <class BV>
+std::vector<index_t> node_bodies(const BvhView<BV>& bvh, const std::vector<index_t>& face_body) {
+  const index_t n = bvh.num_leaves;
+  std::vector<index_t> changes(static_cast<std::size_t>(n), 0), out(static_cast<std::size_t>(bvh.num_nodes()));
+  for (index_t k = 1; k < n; ++k)
+    changes[k] = changes[k - 1] + (face_body[bvh.leaf_primitive[k]] != face_body[bvh.leaf_primitive[k - 1]]);
+  for (index_t node = 0; node < bvh.num_nodes(); ++node)
+    out[node] = detail::node_body_of(bvh.ranges[node], changes.data(), bvh.leaf_primitive, face_body.data());
+  return out;
+}
 
 /// When to restart from the root instead of the recorded front (Tang et al. 2010, 2.3.3): the
 /// front only deepens as pairs separate, so once it has grown past `growth_limit` times its size

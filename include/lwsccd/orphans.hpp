@@ -33,9 +33,15 @@ OrphanSets find_orphan_sets(const TriangleMesh& mesh);
 /// non-adjacent pairs only, plus every orphan pair; sorted and unique. For candidates from a
 /// conservative broad phase over the whole mesh, this contains every feature pair of `pairs`
 /// whose features' own bounding volumes overlap, so no contact is lost. (Orphans of bodies that
-/// a BodyLayout excludes from self collision are included too: conservative.)
+/// a BodyLayout excludes from self collision are included too, unless the sets were passed
+/// through orphans_for_layout first.)
 FeaturePairs culled_feature_pairs(const TriangleMesh& mesh, const std::vector<TrianglePair>& pairs,
                                   const OrphanSets& orphans);
+
+/// The orphan pairs a scene with bodies needs: those whose two features lie in one body that
+/// does not self-collide are dropped (a vertex or edge shared by several bodies counts as in
+/// all of them, so its pairs stay). Validates the layout.
+OrphanSets orphans_for_layout(const TriangleMesh& mesh, const OrphanSets& orphans, const BodyLayout& layout);
 
 }  // namespace lwsccd
 

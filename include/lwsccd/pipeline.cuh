@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
 
 #include <memory>
@@ -56,6 +57,21 @@ __global__ void keys_to_pairs_kernel(const unsigned long long* keys, std::size_t
   pairs[2 * i + 1] = static_cast<Index>(keys[i] & 0xffffffffu);
 }
 
+// Body changes between consecutive sorted leaves (the node_bodies prefix, before the scan).
+template <class Index>
+__global__ void body_change_kernel(const Index* leaf_primitive, Index n, const Index* face_body, Index* changes) {
+  const Index k = static_cast<Index>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (k >= n) return;
+  changes[k] = k > 0 && face_body[leaf_primitive[k]] != face_body[leaf_primitive[k - 1]];
+}
+
+template <class BV>
+__global__ void node_body_kernel(BvhView<BV> bvh, const index_t* changes, const index_t* face_body, index_t* node_body) {
+  const index_t node = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (node >= bvh.num_nodes()) return;
+  node_body[node] = node_body_of(bvh.ranges[node], changes, bvh.leaf_primitive, face_body);
+}
+
 }  // namespace detail
 
 template <class BV = Aabbf, class Scheduler = LazyStealScheduler<>, class Method = Filtered<InclusionCcd>, class T = double>
@@ -63,9 +79,20 @@ class CcdPipeline {
  public:
   using Task = SelfCollisionTask<BV>;
 
+  /// One self-colliding body.
   explicit CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, PipelineParams params = {})
-      : mesh_(std::move(mesh)), params_(params), features_(*mesh_) {
-    const OrphanSets orphans = find_orphan_sets(*mesh_);
+      : CcdPipeline(std::move(mesh), BodyLayout{}, params) {}
+  /// Several bodies (as cpu::CcdPipeline: a body that does not self-collide costs no traversal).
+  CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
+      : mesh_(lwsccd::detail::checked_mesh(std::move(mesh), "gpu::CcdPipeline")), layout_(std::move(layout)),
+        params_(lwsccd::detail::validated(params)), features_(*mesh_) {
+    if (params_.device_memory_budget) set_memory_budget(params_.device_memory_budget);
+    const OrphanSets orphans = orphans_for_layout(*mesh_, find_orphan_sets(*mesh_), layout_);
+    const std::vector<unsigned char> self_collides = lwsccd::detail::self_collision_flags(layout_);
+    if (!self_collides.empty()) {
+      face_body_.upload(layout_.face_body);
+      self_collides_.upload(self_collides);
+    }
     auto to_keys = [](const std::vector<std::pair<index_t, index_t>>& list) {
       std::vector<unsigned long long> keys;
       for (const auto& p : list)
@@ -89,11 +116,30 @@ class CcdPipeline {
 
   /// One step from host positions (validated, uploaded).
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
-    StepResult<T> r;
     reset_peak_memory();
     const auto start = std::chrono::steady_clock::now();
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1);
     else step_->set_positions(x0, x1);
+    return run_step(start);
+  }
+
+  /// One step from positions already in device memory (mesh().num_vertices() points each, e.g.
+  /// a simulation's own arrays): no host round trip. Throws InputError for host pointers.
+  StepResult<T> step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) {
+    reset_peak_memory();
+    const auto start = std::chrono::steady_clock::now();
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
+    step_->set_positions_from_device(device_x0, device_x1);
+    return run_step(start);
+  }
+
+  const TriangleMesh& mesh() const { return *mesh_; }
+  const BodyLayout& layout() const { return layout_; }
+  const PipelineParams& params() const { return params_; }
+
+ private:
+  StepResult<T> run_step(std::chrono::steady_clock::time_point start) {
+    StepResult<T> r;
     timed(r.stats.refit_ms, [&] {
       if (!built_) {
         bvh_.build(*step_);
@@ -101,6 +147,7 @@ class CcdPipeline {
       } else {
         r.stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
       }
+      if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
     });
     timed(r.stats.traverse_ms, [&] { traverse_step(r.stats); });
     timed(r.stats.features_ms, [&] { feature_pairs(r.stats); });
@@ -122,7 +169,25 @@ class CcdPipeline {
     return r;
   }
 
- private:
+  // LeafFilter::node_body for the current tree (after a build: topology only).
+  void update_node_bodies() {
+    const BvhView<BV> view = bvh_.view();
+    const index_t n = view.num_leaves;
+    body_changes_.resize_discard(static_cast<std::size_t>(n));
+    node_body_.resize_discard(static_cast<std::size_t>(view.num_nodes()));
+    detail::body_change_kernel<<<static_cast<unsigned>((n + 255) / 256), 256>>>(view.leaf_primitive, n, face_body_.data(),
+                                                                                 body_changes_.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    std::size_t bytes = 0;
+    LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, body_changes_.data(), body_changes_.data(), n));
+    scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
+    LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, body_changes_.data(), body_changes_.data(), n));
+    detail::node_body_kernel<<<static_cast<unsigned>((view.num_nodes() + 255) / 256), 256>>>(
+        view, body_changes_.data(), face_body_.data(), node_body_.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    node_body_generation_ = bvh_.generation();
+  }
+
   template <class F>
   void timed(double& ms, F&& f) {
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
@@ -136,7 +201,9 @@ class CcdPipeline {
 
   // Traversal from the front kept on the device (FrontTracker's policy, without a host copy).
   void traverse_step(StepStats& stats) {
-    const Task task{bvh_.view(), LeafFilter{nullptr, nullptr, features_.faces.data(), true}};
+    const bool bodies = face_body_.size() > 0;
+    const Task task{bvh_.view(), LeafFilter{bodies ? face_body_.data() : nullptr, bodies ? self_collides_.data() : nullptr,
+                                            features_.faces.data(), true, bodies ? node_body_.data() : nullptr}};
     const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
     generation_ = bvh_.generation();
     if (restart) {
@@ -205,8 +272,12 @@ class CcdPipeline {
   }
 
   std::shared_ptr<const TriangleMesh> mesh_;
+  BodyLayout layout_;
   PipelineParams params_;
   DeviceMeshFeatures features_;
+  DeviceBuffer<index_t> face_body_, node_body_, body_changes_;  ///< empty: no body pruning
+  DeviceBuffer<unsigned char> self_collides_;
+  std::uint64_t node_body_generation_ = ~std::uint64_t(0);
   DeviceBuffer<detail::FaceEdges> face_edges_;
   DeviceBuffer<unsigned long long> orphan_vf_, orphan_ee_, keys_vf_, keys_ee_, keys_sorted_, counter_;
   DeviceBuffer<unsigned char> scratch_;

@@ -8,7 +8,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "lwsccd/bvh.hpp"
@@ -27,8 +30,42 @@ struct PipelineParams {
   int max_iterations = 16384;    ///< narrow-phase work bound per pair (InclusionCcd)
   bool front_tracking = true;    ///< restart each traversal from the last front
   double rebuild_factor = 1.5;   ///< rebuild the BVH when its cost exceeds this times the cost at build
-  double front_growth_limit = 1.5;
+  double front_growth_limit = 1.5;  ///< restart from the root once the front grew this much
+  std::size_t device_memory_budget = 0;  ///< GPU backend: device bytes the library may hold (0: no limit)
+
+  /// Throws InputError naming the first parameter out of range.
+  void validate() const;
 };
+
+inline void PipelineParams::validate() const {
+  auto require = [](bool ok, const char* name, const std::string& what) {
+    if (!ok) throw InputError("PipelineParams", name, what);
+  };
+  require(min_separation >= 0 && std::isfinite(min_separation), "min_separation", "must be finite and >= 0");
+  require(tolerance > 0 && tolerance < 1, "tolerance", "must be in (0, 1)");
+  require(max_iterations >= 1, "max_iterations", "must be at least 1");
+  require(rebuild_factor >= 1, "rebuild_factor", "must be >= 1 (1: rebuild every step)");
+  require(front_growth_limit >= 1, "front_growth_limit", "must be >= 1");
+}
+
+namespace detail {
+inline PipelineParams validated(PipelineParams params) {
+  params.validate();
+  return params;
+}
+inline std::shared_ptr<const TriangleMesh> checked_mesh(std::shared_ptr<const TriangleMesh> mesh, const char* who) {
+  if (!mesh) throw InputError(who, "mesh", "is null");
+  return mesh;
+}
+// BodyLayout::body_self_collides as bytes (device-friendly), empty when every body self-collides
+// (then nothing is pruned by body).
+inline std::vector<unsigned char> self_collision_flags(const BodyLayout& layout) {
+  std::vector<unsigned char> flags(layout.body_self_collides.begin(), layout.body_self_collides.end());
+  if (layout.face_body.empty() || std::all_of(flags.begin(), flags.end(), [](unsigned char f) { return f != 0; }))
+    flags.clear();
+  return flags;
+}
+}  // namespace detail
 
 /// What one step measured.
 struct StepStats {
@@ -51,8 +88,14 @@ namespace cpu {
 template <class BV = Aabbf, class Method = Filtered<InclusionCcd>, class T = double>
 class CcdPipeline {
  public:
+  /// One self-colliding body.
   explicit CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, PipelineParams params = {})
-      : mesh_(std::move(mesh)), params_(params), orphans_(find_orphan_sets(*mesh_)),
+      : CcdPipeline(std::move(mesh), BodyLayout{}, params) {}
+  /// Several bodies: pairs inside a body that does not self-collide are never looked at (its
+  /// subtrees are pruned whole in the traversal, its orphan pairs dropped).
+  CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
+      : mesh_(detail::checked_mesh(std::move(mesh), "cpu::CcdPipeline")), layout_(std::move(layout)), self_collides_(detail::self_collision_flags(layout_)),
+        params_(detail::validated(params)), orphans_(orphans_for_layout(*mesh_, find_orphan_sets(*mesh_), layout_)),
         tracker_(FrontPolicy{params.front_growth_limit}) {}
 
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
@@ -67,9 +110,16 @@ class CcdPipeline {
     } else {
       r.stats.rebuilt = bvh_.refit_or_rebuild(x0, x1, RebuildPolicy{params_.rebuild_factor});
     }
+    if (!self_collides_.empty() && bvh_.generation() != node_body_generation_) {
+      node_body_ = node_bodies(bvh_.view(), layout_.face_body);  // topology changed
+      node_body_generation_ = bvh_.generation();
+    }
     r.stats.refit_ms = ms(t);
     t = clock::now();
-    SelfCollisionTask<BV> task{bvh_.view(), LeafFilter{nullptr, nullptr, mesh_->faces().data(), true}};
+    const bool bodies = !self_collides_.empty();
+    SelfCollisionTask<BV> task{bvh_.view(),
+                               LeafFilter{bodies ? layout_.face_body.data() : nullptr, bodies ? self_collides_.data() : nullptr,
+                                          mesh_->faces().data(), true, bodies ? node_body_.data() : nullptr}};
     const std::vector<NodePair> root{NodePair{0, 0}};
     const auto& seeds = params_.front_tracking ? tracker_.seeds(bvh_.generation()) : root;
     r.stats.restarted_from_root = !params_.front_tracking || tracker_.last_was_restart();
@@ -99,8 +149,17 @@ class CcdPipeline {
     return r;
   }
 
+  const TriangleMesh& mesh() const { return *mesh_; }
+  const BodyLayout& layout() const { return layout_; }
+  const PipelineParams& params() const { return params_; }
+
  private:
+
   std::shared_ptr<const TriangleMesh> mesh_;
+  BodyLayout layout_;
+  std::vector<unsigned char> self_collides_;  ///< empty: no body pruning
+  std::vector<index_t> node_body_;
+  std::uint64_t node_body_generation_ = ~std::uint64_t(0);
   PipelineParams params_;
   OrphanSets orphans_;
   Bvh<BV> bvh_;

@@ -127,6 +127,29 @@ DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3d>& h0
 }
 
 template <class P>
+DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, cudaStream_t stream) : num_vertices(mesh.num_vertices()) {
+  faces.upload(mesh.faces(), stream);
+  x0.resize_discard(static_cast<std::size_t>(num_vertices));
+  x1.resize_discard(static_cast<std::size_t>(num_vertices));
+}
+
+template <class P>
+void DeviceStep<P>::set_positions_from_device(const Vec3<P>* d0, const Vec3<P>* d1, cudaStream_t stream) {
+  for (const Vec3<P>* d : {d0, d1}) {
+    const char* name = d == d0 ? "x0" : "x1";
+    cudaPointerAttributes attributes{};
+    LWSCCD_CUDA_CHECK(cudaPointerGetAttributes(&attributes, d));
+    if (d == nullptr || (attributes.type != cudaMemoryTypeDevice && attributes.type != cudaMemoryTypeManaged))
+      throw InputError("gpu::DeviceStep::set_positions_from_device", name, "is not a pointer to device memory");
+  }
+  const std::size_t bytes = static_cast<std::size_t>(num_vertices) * sizeof(Vec3<P>);
+  x0.resize_discard(static_cast<std::size_t>(num_vertices));
+  x1.resize_discard(static_cast<std::size_t>(num_vertices));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x0.data(), d0, bytes, cudaMemcpyDeviceToDevice, stream));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x1.data(), d1, bytes, cudaMemcpyDeviceToDevice, stream));
+}
+
+template <class P>
 void DeviceStep<P>::set_positions(const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1, cudaStream_t stream) {
   for (const auto* h : {&h0, &h1}) {
     const char* name = h == &h0 ? "x0" : "x1";

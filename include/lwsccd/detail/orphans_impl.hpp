@@ -110,4 +110,33 @@ inline FeaturePairs culled_feature_pairs(const TriangleMesh& mesh, const std::ve
   return out;
 }
 
+inline OrphanSets orphans_for_layout(const TriangleMesh& mesh, const OrphanSets& orphans, const BodyLayout& layout) {
+  layout.validate(mesh);
+  if (layout.face_body.empty()) return orphans;
+  // Body of each vertex and edge feature: the one body of its faces, or kMixed when shared.
+  constexpr index_t kUnset = -2, kMixed = -1;
+  const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
+  std::vector<index_t> body(features, kUnset);
+  auto assign = [&](index_t feature, index_t b) {
+    index_t& slot = body[static_cast<std::size_t>(feature)];
+    slot = slot == kUnset || slot == b ? b : kMixed;
+  };
+  for (index_t f = 0; f < mesh.num_faces(); ++f) {
+    const index_t b = layout.face_body[f];
+    assign(mesh.face_feature_id(f), b);
+    for (int k = 0; k < 3; ++k) {
+      assign(mesh.vertex_feature_id(mesh.face(f).v[k]), b);
+      assign(mesh.edge_feature_id(mesh.face_edges(f)[k]), b);
+    }
+  }
+  auto keep = [&](const std::pair<index_t, index_t>& p) {
+    const index_t a = body[static_cast<std::size_t>(p.first)], b = body[static_cast<std::size_t>(p.second)];
+    return a < 0 || a != b || layout.body_self_collides.empty() || layout.body_self_collides[a];
+  };
+  OrphanSets out;
+  std::copy_if(orphans.vf.begin(), orphans.vf.end(), std::back_inserter(out.vf), keep);
+  std::copy_if(orphans.ee.begin(), orphans.ee.end(), std::back_inserter(out.ee), keep);
+  return out;
+}
+
 }  // namespace lwsccd
