@@ -1,29 +1,34 @@
-// lwsccd-ccd — the main program: loads a scene (or builds one) and runs the CCD pipeline on it.
+// lwsccd-ccd — the main program: continuous collision detection on a scene, step after step,
+// through the library's pipeline (GPU when one is present, else the CPU backend).
 //
-// At this stage of the library it runs the CPU backend: swept bounding volumes, candidate
-// triangle pairs (sort-and-sweep or brute force), feature pairs with adjacent triangles culled
-// through orphan sets, then the narrow phase (by default the conservative inclusion method behind
-// the non-penetration filter). With a scene folder that has ground truth, it reports false
-// negatives and false positives against it.
+// Inputs: the built-in cloth-on-a-ball simulation (default, no data needed), two frames, a folder
+// of frames (a sequence), or a scene folder with ground truth, against which it then reports false
+// negatives and false positives. Prints a per-stage table, or JSON with --json.
+#include <unistd.h>
+
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
-#include "lwsccd/lwsccd.hpp"
+#include "ccd_app.hpp"
+#include "lwsccd/simulation.hpp"
 
 namespace {
 
 struct Options {
   std::vector<std::string> inputs;
-  std::size_t builtin_triangles = 20000;
-  std::string bv = "aabb";
-  std::string precision = "double";
-  std::string method = "filtered-inclusion";
-  double min_separation = 0;
-  bool brute = false;
+  std::size_t triangles = 20000;
+  std::size_t first_frame = 30;
+  std::size_t steps = 0;  // 0: 3 for the built-in scene, all for a sequence
+  std::string device = "auto";
+  ccd_app::PolicyChoice policies;
+  lwsccd::PipelineParams params;
+  bool check = false;
   bool json = false;
 };
 
@@ -31,64 +36,104 @@ void print_usage(std::FILE* out) {
   std::fprintf(out,
                "usage: lwsccd-ccd [options] [INPUT...]\n"
                "\n"
-               "INPUT (none: the built-in cloth-ball scene)\n"
-               "  SCENE_DIR        a folder laid out like shared/data/scenes/<scene>/ (frames/, and\n"
-               "                   boxes/ + mma_bool/ ground truth, which is then checked)\n"
-               "  T0.ply T1.ply    a two-frame step (PLY or OBJ)\n"
-               "  FRAMES_DIR       a folder of OBJ/PLY frames: every consecutive pair is a step\n"
+               "Continuous collision detection with lwsccd: every vertex-face and edge-edge pair that comes\n"
+               "into contact during each step, with its time of impact.\n"
                "\n"
-               "options\n"
-               "  --triangles N    size of the built-in scene (default 20000)\n"
-               "  --bv aabb|obb    bounding volume of the swept triangles (default aabb)\n"
-               "  --precision float|double  precision of the bounding volumes and the narrow phase\n"
-               "                   (default double)\n"
-               "  --method M       narrow phase: filtered-inclusion (default, conservative), inclusion,\n"
-               "                   cubic (the seed's method, not conservative), none\n"
-               "  --separation D   minimum separation reported as contact (default 0)\n"
-               "  --brute          test all triangle pairs (O(n^2)) instead of sort-and-sweep\n"
-               "                   (always for --bv obb)\n"
-               "  --json           machine-readable output\n"
-               "  -h, --help       this text\n");
+               "INPUT (none: the built-in scene, a cloth dropped folded onto a ball)\n"
+               "  SCENE_DIR        a folder laid out like shared/data/scenes/<scene>/ (frames/ with two\n"
+               "                   frames; boxes/ + mma_bool/ ground truth, when present, is checked)\n"
+               "  T0 T1            a two-frame step (PLY or OBJ files, same topology)\n"
+               "  FRAMES_DIR       a folder of OBJ/PLY frames: each consecutive pair is a step\n"
+               "\n"
+               "built-in scene\n"
+               "  --triangles N    resolution, 64 .. 100000000 (default 20000; e.g. 1000 to 10000000)\n"
+               "  --frame F        first frame (default 30: the folded cloth is landing on the ball)\n"
+               "  --steps K        steps to run (default 3; for FRAMES_DIR: all)\n"
+               "\n"
+               "pipeline\n"
+               "  --device D       auto (default: the GPU when there is one), gpu, cpu\n"
+               "  --bv B           bounding volume of the swept triangles: aabb (default), obb\n"
+               "  --scheduler S    GPU traversal load balancer: lazy (default, lazy work stealing),\n"
+               "                   gproximity, static\n"
+               "  --method M       narrow phase: filtered-inclusion (default; conservative: never misses\n"
+               "                   a contact), inclusion (conservative), cubic (fast, can miss contacts)\n"
+               "  --precision P    narrow-phase precision: double (default), float\n"
+               "  --separation D   minimum separation: report features that come closer than D (default 0)\n"
+               "  --tolerance T    time resolution of the times of impact (default 1e-6)\n"
+               "  --max-iterations N  narrow-phase work bound per pair; past it a pair counts as a\n"
+               "                   contact (default 16384)\n"
+               "  --no-front-tracking  traverse from the root every step\n"
+               "  --check          also run the CPU oracle (sort-and-sweep, every candidate pair) and\n"
+               "                   compare contacts pair for pair (slow on large scenes)\n"
+               "\n"
+               "output\n"
+               "  --json           machine-readable output on stdout\n"
+               "  -h, --help       this text\n"
+               "\n"
+               "Exit status: 0 done; 1 bad input or error; 2 a ground-truth contact was missed (or --check\n"
+               "found a difference).\n");
+}
+
+long long parse_integer(const std::string& option, const std::string& text, long long lo, long long hi) {
+  char* end = nullptr;
+  const long long v = std::strtoll(text.c_str(), &end, 10);
+  if (text.empty() || *end != '\0' || v < lo || v > hi)
+    throw lwsccd::InputError("command line", option,
+                             "expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" + text + "'");
+  return v;
+}
+
+double parse_number(const std::string& option, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0') throw lwsccd::InputError("command line", option, "expected a number, got '" + text + "'");
+  return v;
+}
+
+std::string parse_choice(const std::string& option, const std::string& text, const std::vector<std::string>& allowed) {
+  if (std::find(allowed.begin(), allowed.end(), text) != allowed.end()) return text;
+  std::string list;
+  for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+  throw lwsccd::InputError("command line", option, "expected one of " + list + ", got '" + text + "'");
 }
 
 Options parse(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&](const char* name) -> std::string {
-      if (i + 1 >= argc) throw lwsccd::InputError("command line", name, "needs a value");
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw lwsccd::InputError("command line", a, "needs a value");
       return argv[++i];
     };
     if (a == "-h" || a == "--help") {
       print_usage(stdout);
       std::exit(0);
     } else if (a == "--triangles") {
-      const std::string v = value("--triangles");
-      char* end = nullptr;
-      const long long n = std::strtoll(v.c_str(), &end, 10);
-      if (*end != '\0' || n < 64 || n > 100000000)
-        throw lwsccd::InputError("command line", "--triangles", "expected an integer in [64, 1e8], got '" + v + "'");
-      o.builtin_triangles = static_cast<std::size_t>(n);
+      o.triangles = static_cast<std::size_t>(parse_integer(a, value(), 64, 100000000));
+    } else if (a == "--frame") {
+      o.first_frame = static_cast<std::size_t>(parse_integer(a, value(), 0, 100000));
+    } else if (a == "--steps") {
+      o.steps = static_cast<std::size_t>(parse_integer(a, value(), 1, 100000));
+    } else if (a == "--device") {
+      o.device = parse_choice(a, value(), {"auto", "gpu", "cpu"});
     } else if (a == "--bv") {
-      o.bv = value("--bv");
-      if (o.bv != "aabb" && o.bv != "obb") throw lwsccd::InputError("command line", "--bv", "expected aabb or obb, got '" + o.bv + "'");
-    } else if (a == "--precision") {
-      o.precision = value("--precision");
-      if (o.precision != "float" && o.precision != "double")
-        throw lwsccd::InputError("command line", "--precision", "expected float or double, got '" + o.precision + "'");
+      o.policies.bv = parse_choice(a, value(), {"aabb", "obb"});
+    } else if (a == "--scheduler") {
+      o.policies.scheduler = parse_choice(a, value(), {"lazy", "gproximity", "static"});
     } else if (a == "--method") {
-      o.method = value("--method");
-      if (o.method != "filtered-inclusion" && o.method != "inclusion" && o.method != "cubic" && o.method != "none")
-        throw lwsccd::InputError("command line", "--method",
-                                 "expected filtered-inclusion, inclusion, cubic or none, got '" + o.method + "'");
+      o.policies.method = parse_choice(a, value(), {"filtered-inclusion", "inclusion", "cubic"});
+    } else if (a == "--precision") {
+      o.policies.precision = parse_choice(a, value(), {"double", "float"});
     } else if (a == "--separation") {
-      const std::string v = value("--separation");
-      char* end = nullptr;
-      o.min_separation = std::strtod(v.c_str(), &end);
-      if (*end != '\0' || !(o.min_separation >= 0))
-        throw lwsccd::InputError("command line", "--separation", "expected a number >= 0, got '" + v + "'");
-    } else if (a == "--brute") {
-      o.brute = true;
+      o.params.min_separation = parse_number(a, value());
+    } else if (a == "--tolerance") {
+      o.params.tolerance = parse_number(a, value());
+    } else if (a == "--max-iterations") {
+      o.params.max_iterations = static_cast<int>(parse_integer(a, value(), 1, 1 << 30));
+    } else if (a == "--no-front-tracking") {
+      o.params.front_tracking = false;
+    } else if (a == "--check") {
+      o.check = true;
     } else if (a == "--json") {
       o.json = true;
     } else if (!a.empty() && a[0] == '-') {
@@ -98,156 +143,182 @@ Options parse(int argc, char** argv) {
     }
   }
   if (o.inputs.size() > 2) throw lwsccd::InputError("command line", "", "at most two inputs (see --help)");
+  o.params.validate();
   return o;
+}
+
+/// Where the steps come from: one topology (and body layout), then steps until there are none.
+struct StepSource {
+  std::string description;
+  std::shared_ptr<const lwsccd::TriangleMesh> mesh;
+  lwsccd::BodyLayout layout;
+  std::size_t num_steps = 0;
+  std::function<lwsccd::Step(std::size_t)> step;  ///< step i, in order
+  const lwsccd::GroundTruth* truth = nullptr;     ///< for a scene folder with ground truth
+};
+
+struct Inputs {
+  std::unique_ptr<lwsccd::ClothBallSimulation> simulation;
+  std::unique_ptr<lwsccd::Scene> scene;
+  std::unique_ptr<lwsccd::Sequence> sequence;
+  std::unique_ptr<lwsccd::Step> two_frames;
+};
+
+StepSource open_source(const Options& o, Inputs& in) {
+  namespace fs = std::filesystem;
+  StepSource src;
+  if (o.inputs.empty()) {
+    in.simulation = std::make_unique<lwsccd::ClothBallSimulation>(o.triangles);
+    in.simulation->advance(o.first_frame);
+    src.mesh = in.simulation->mesh();
+    src.layout = in.simulation->layout();
+    src.num_steps = o.steps ? o.steps : 3;
+    src.description = "built-in scene: a folded cloth (" + std::to_string(in.simulation->cloth_triangles()) +
+                      " triangles, self-colliding) dropped on a rigid ball (" +
+                      std::to_string(src.mesh->num_faces() - in.simulation->cloth_triangles()) + " triangles), frames " +
+                      std::to_string(o.first_frame) + " to " + std::to_string(o.first_frame + src.num_steps);
+    src.step = [&in](std::size_t) { return in.simulation->next_step(); };
+  } else if (o.inputs.size() == 2) {
+    in.two_frames = std::make_unique<lwsccd::Step>(lwsccd::load_step(o.inputs[0], o.inputs[1]));
+    src.mesh = in.two_frames->mesh;
+    src.num_steps = 1;
+    src.description = "two frames: " + o.inputs[0] + " -> " + o.inputs[1];
+    src.step = [&in](std::size_t) { return *in.two_frames; };
+  } else if (fs::is_directory(fs::path(o.inputs[0]) / "frames")) {
+    in.scene = std::make_unique<lwsccd::Scene>(lwsccd::load_scene(o.inputs[0]));
+    src.mesh = in.scene->step.mesh;
+    src.num_steps = 1;
+    src.truth = in.scene->has_ground_truth ? &in.scene->truth : nullptr;
+    src.description = "scene " + in.scene->name + " (" + in.scene->step.name + ")" +
+                      (src.truth ? ", with ground truth" : ", no ground truth");
+    src.step = [&in](std::size_t) { return in.scene->step; };
+  } else if (fs::is_directory(o.inputs[0])) {
+    in.sequence = std::make_unique<lwsccd::Sequence>(lwsccd::load_sequence(o.inputs[0]));
+    src.mesh = in.sequence->mesh();
+    src.num_steps = o.steps ? std::min(o.steps, in.sequence->num_steps()) : in.sequence->num_steps();
+    src.description = "sequence " + o.inputs[0] + ": " + std::to_string(in.sequence->num_frames()) + " frames";
+    src.step = [&in](std::size_t i) { return in.sequence->step(i); };
+  } else {
+    throw lwsccd::InputError(o.inputs[0], "", "is neither a scene folder, a folder of frames, nor one of two frame files");
+  }
+  return src;
 }
 
 struct StepReport {
   std::string name;
-  lwsccd::index_t vertices = 0, edges = 0, faces = 0;
-  std::size_t degenerate_faces = 0, triangle_pairs = 0, adjacent_pairs = 0, vf_pairs = 0, ee_pairs = 0;
-  std::size_t tested_vf = 0, tested_ee = 0, hits_vf = 0, hits_ee = 0, gave_up = 0;
-  double earliest_toi = 1;
-  double ms_bvs = 0, ms_pairs = 0, ms_features = 0, ms_narrow = 0;
+  ccd_app::StepOutcome outcome;
   bool has_truth = false;
-  std::size_t true_vf = 0, true_ee = 0, missed_vf = 0, missed_ee = 0;  // by the broad phase
-  std::size_t false_negatives = 0, false_positives = 0;                 // of the narrow phase
+  std::size_t true_contacts = 0, false_negatives = 0, false_positives = 0;
+  bool checked = false;
+  std::size_t check_differences = 0;
 };
 
-double ms_since(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
-}
-
-template <class BV>
-void candidate_pairs(const lwsccd::Step& step, const lwsccd::BodyLayout& layout, bool brute, StepReport& r,
-                     std::vector<lwsccd::TrianglePair>& pairs) {
-  auto t = std::chrono::steady_clock::now();
-  const auto bvs = lwsccd::swept_triangle_bvs<BV>(*step.mesh, step.x0, step.x1);
-  r.ms_bvs = ms_since(t);
-  t = std::chrono::steady_clock::now();
-  if constexpr (std::is_same<BV, lwsccd::Aabb<typename BV::scalar_type>>::value) {
-    pairs = brute ? lwsccd::brute_force_pairs(*step.mesh, bvs, layout) : lwsccd::sweep_and_prune_pairs(*step.mesh, bvs, layout);
-  } else {
-    pairs = lwsccd::brute_force_pairs(*step.mesh, bvs, layout);
-  }
-  r.ms_pairs = ms_since(t);
-}
-
-template <class Method, class T>
-void run_method(const lwsccd::Step& step, const lwsccd::FeaturePairs& tested, const lwsccd::CcdParams<T>& params,
-                StepReport& r, std::vector<std::pair<lwsccd::index_t, lwsccd::index_t>>& hit_vf,
-                std::vector<std::pair<lwsccd::index_t, lwsccd::index_t>>& hit_ee) {
-  const auto result = lwsccd::cpu::test_feature_pairs<Method, T>(*step.mesh, step.x0, step.x1, tested, params);
-  r.hits_vf = result.vf.size();
-  r.hits_ee = result.ee.size();
-  r.gave_up = result.gave_up;
-  r.earliest_toi = static_cast<double>(result.earliest_toi);
-  for (const auto& h : result.vf) hit_vf.emplace_back(h.first, h.second);
-  for (const auto& h : result.ee) hit_ee.emplace_back(h.first, h.second);
-}
-
-template <class T>
-void narrow_phase(const lwsccd::Step& step, const lwsccd::FeaturePairs& tested, const Options& o, StepReport& r,
-                  std::vector<std::pair<lwsccd::index_t, lwsccd::index_t>>& hit_vf,
-                  std::vector<std::pair<lwsccd::index_t, lwsccd::index_t>>& hit_ee) {
-  lwsccd::CcdParams<T> params;
-  params.min_separation = static_cast<T>(o.min_separation);
-  if (o.method == "filtered-inclusion") run_method<lwsccd::Filtered<lwsccd::InclusionCcd>, T>(step, tested, params, r, hit_vf, hit_ee);
-  if (o.method == "inclusion") run_method<lwsccd::InclusionCcd, T>(step, tested, params, r, hit_vf, hit_ee);
-  if (o.method == "cubic") run_method<lwsccd::CubicCcd, T>(step, tested, params, r, hit_vf, hit_ee);
-}
-
-StepReport run_step(const lwsccd::Step& step, const lwsccd::BodyLayout& layout, const Options& o,
-                    const lwsccd::GroundTruth* truth) {
-  StepReport r;
-  const lwsccd::TriangleMesh& mesh = *step.mesh;
-  r.name = step.name;
-  r.vertices = mesh.num_vertices();
-  r.edges = mesh.num_edges();
-  r.faces = mesh.num_faces();
-  r.degenerate_faces = lwsccd::find_degenerate_faces(mesh, step.x0).size();
-  std::vector<lwsccd::TrianglePair> pairs;
-  if (o.bv == "aabb" && o.precision == "double") candidate_pairs<lwsccd::Aabbd>(step, layout, o.brute, r, pairs);
-  if (o.bv == "aabb" && o.precision == "float") candidate_pairs<lwsccd::Aabbf>(step, layout, o.brute, r, pairs);
-  if (o.bv == "obb" && o.precision == "double") candidate_pairs<lwsccd::Obbd>(step, layout, o.brute, r, pairs);
-  if (o.bv == "obb" && o.precision == "float") candidate_pairs<lwsccd::Obbf>(step, layout, o.brute, r, pairs);
-  r.triangle_pairs = pairs.size();
-  for (const auto& p : pairs) r.adjacent_pairs += p.adjacent;
-  auto t = std::chrono::steady_clock::now();
-  const lwsccd::FeaturePairs fp = lwsccd::feature_pairs(mesh, pairs);
-  // What the narrow phase tests: adjacent triangle pairs culled, their orphan pairs kept.
-  const lwsccd::FeaturePairs tested = lwsccd::culled_feature_pairs(mesh, pairs, lwsccd::find_orphan_sets(mesh));
-  r.ms_features = ms_since(t);
-  r.vf_pairs = fp.vf.size();
-  r.ee_pairs = fp.ee.size();
-  r.tested_vf = tested.vf.size();
-  r.tested_ee = tested.ee.size();
-  std::vector<std::pair<lwsccd::index_t, lwsccd::index_t>> hit_vf, hit_ee;
-  if (o.method != "none") {
-    t = std::chrono::steady_clock::now();
-    if (o.precision == "double") narrow_phase<double>(step, tested, o, r, hit_vf, hit_ee);
-    else narrow_phase<float>(step, tested, o, r, hit_vf, hit_ee);
-    r.ms_narrow = ms_since(t);
-  }
-  if (truth) {
-    r.has_truth = true;
-    for (std::size_t i = 0; i < truth->vf.size(); ++i)
-      if (truth->vf_collides[i]) {
-        ++r.true_vf;
-        r.missed_vf += !std::binary_search(fp.vf.begin(), fp.vf.end(), truth->vf[i]);
-      }
-    for (std::size_t i = 0; i < truth->ee.size(); ++i)
-      if (truth->ee_collides[i]) {
-        ++r.true_ee;
-        r.missed_ee += !std::binary_search(fp.ee.begin(), fp.ee.end(), truth->ee[i]);
-      }
-    if (o.method != "none") {
-      auto score = [&](const auto& truth_pairs, const std::vector<bool>& collides, const auto& hits) {
-        for (std::size_t i = 0; i < truth_pairs.size(); ++i) {
-          const bool hit = std::binary_search(hits.begin(), hits.end(), truth_pairs[i]);
-          r.false_negatives += collides[i] && !hit;
-          r.false_positives += !collides[i] && hit;
-        }
-      };
-      score(truth->vf, truth->vf_collides, hit_vf);
-      score(truth->ee, truth->ee_collides, hit_ee);
+void score_against_truth(const lwsccd::GroundTruth& truth, StepReport& r) {
+  r.has_truth = true;
+  auto score = [&](const auto& pairs, const std::vector<bool>& collides, const auto& hits) {
+    for (std::size_t i = 0; i < pairs.size(); ++i) {
+      const bool hit = std::binary_search(hits.begin(), hits.end(), lwsccd::FeatureHit<double>{pairs[i].first, pairs[i].second, 0});
+      r.true_contacts += collides[i];
+      r.false_negatives += collides[i] && !hit;
+      r.false_positives += !collides[i] && hit;
     }
-  }
-  return r;
+  };
+  score(truth.vf, truth.vf_collides, r.outcome.contacts.vf);
+  score(truth.ee, truth.ee_collides, r.outcome.contacts.ee);
 }
 
-void print_text(const StepReport& r, bool first) {
-  if (first) {
-    std::printf("%-26s %8s %8s %5s | %10s %10s %10s | %9s %9s %8s %8s %12s | %7s %7s %7s %8s\n", "step", "vertices",
-                "faces", "degen", "tri pairs", "adjacent", "feat pairs", "tested vf", "tested ee", "hits vf", "hits ee",
-                "earliest TOI", "bv ms", "pair ms", "feat ms", "ccd ms");
-  }
-  std::printf("%-26s %8d %8d %5zu | %10zu %10zu %10zu | %9zu %9zu %8zu %8zu %12.6g | %7.1f %7.1f %7.1f %8.1f\n",
-              r.name.c_str(), r.vertices, r.faces, r.degenerate_faces, r.triangle_pairs, r.adjacent_pairs,
-              r.vf_pairs + r.ee_pairs, r.tested_vf, r.tested_ee, r.hits_vf, r.hits_ee, r.earliest_toi, r.ms_bvs,
-              r.ms_pairs, r.ms_features, r.ms_narrow);
-  if (r.gave_up) std::printf("  %zu hits came from the method's bounded-work fallback (conservative)\n", r.gave_up);
-  if (r.has_truth)
-    std::printf("  ground truth: %zu vf + %zu ee true pairs; missed by the broad phase: %zu vf, %zu ee; "
-                "narrow phase: %zu false negatives, %zu false positives\n",
-                r.true_vf, r.true_ee, r.missed_vf, r.missed_ee, r.false_negatives, r.false_positives);
+// The CPU oracle for --check: every candidate of sort-and-sweep over swept AABBs (not the BVH),
+// adjacent pairs left to the orphans, the same narrow phase. Counts contacts that differ.
+std::size_t oracle_differences(const lwsccd::Step& step, const lwsccd::BodyLayout& layout, const Options& o,
+                               const lwsccd::NarrowPhaseResult<double>& contacts) {
+  return ccd_app::dispatch_policies(o.policies, [&](auto, auto method, auto scalar) {
+    using Method = typename decltype(method)::type;
+    using T = typename decltype(scalar)::type;
+    const lwsccd::TriangleMesh& mesh = *step.mesh;
+    std::vector<lwsccd::TrianglePair> candidates;
+    for (const auto& p : lwsccd::sweep_and_prune_pairs(mesh, lwsccd::swept_triangle_bvs<lwsccd::Aabbd>(mesh, step.x0, step.x1), layout))
+      if (!p.adjacent) candidates.push_back(p);
+    const auto orphans = lwsccd::orphans_for_layout(mesh, lwsccd::find_orphan_sets(mesh), layout);
+    lwsccd::CcdParams<T> ccd;
+    ccd.min_separation = static_cast<T>(o.params.min_separation);
+    ccd.tolerance = static_cast<T>(o.params.tolerance);
+    ccd.max_iterations = o.params.max_iterations;
+    const auto expected = ccd_app::to_double(lwsccd::cpu::test_feature_pairs<Method, T>(
+        mesh, step.x0, step.x1, lwsccd::culled_feature_pairs(mesh, candidates, orphans), ccd));
+    auto differences = [](const auto& a, const auto& b) {
+      std::size_t d = 0, i = 0, j = 0;
+      while (i < a.size() || j < b.size()) {
+        if (j == b.size() || (i < a.size() && a[i] < b[j])) ++d, ++i;
+        else if (i == a.size() || b[j] < a[i]) ++d, ++j;
+        else d += a[i].toi != b[j].toi, ++i, ++j;
+      }
+      return d;
+    };
+    return differences(contacts.vf, expected.vf) + differences(contacts.ee, expected.ee);
+  });
 }
 
-void print_json(const std::vector<StepReport>& reports, const Options& o) {
-  std::printf("{\n  \"bv\": \"%s\", \"precision\": \"%s\", \"method\": \"%s\", \"backend\": \"cpu\",\n  \"steps\": [\n",
-              o.bv.c_str(), o.precision.c_str(), o.method.c_str());
+void print_progress(std::size_t done, std::size_t total) {
+  const int width = 40;
+  const int filled = static_cast<int>(width * done / std::max<std::size_t>(total, 1));
+  std::fprintf(stderr, "\r[%s%s] %zu/%zu steps", std::string(static_cast<std::size_t>(filled), '#').c_str(),
+               std::string(static_cast<std::size_t>(width - filled), '.').c_str(), done, total);
+  if (done == total) std::fprintf(stderr, "\n");
+  std::fflush(stderr);
+}
+
+void print_table(const StepSource& src, const std::string& backend, const Options& o, const std::vector<StepReport>& reports) {
+  std::printf("lwsccd-ccd: %s\n", src.description.c_str());
+  std::printf("  %d vertices, %d triangles; %s | BV %s | %s%s | %s, %s | front tracking %s\n", src.mesh->num_vertices(),
+              src.mesh->num_faces(), backend.c_str(), o.policies.bv.c_str(),
+              backend == "CPU" ? "" : "scheduler ", backend == "CPU" ? "work stealing" : o.policies.scheduler.c_str(),
+              o.policies.method.c_str(), o.policies.precision.c_str(), o.params.front_tracking ? "on" : "off");
+  std::printf("\n%-40s | %8s %7s %8s %8s %8s | %10s %9s %9s %9s %9s | %7s %7s %12s\n", "step", "total ms", "refit",
+              "traverse", "features", "narrow", "BVTT nodes", "front", "tri pairs", "VF pairs", "EE pairs", "VF hits",
+              "EE hits", "earliest TOI");
+  for (const StepReport& r : reports) {
+    const lwsccd::StepStats& s = r.outcome.stats;
+    std::printf("%-40s | %8.2f %7.3f %8.3f %8.3f %8.2f | %10zu %9zu %9zu %9zu %9zu | %7zu %7zu %12.6g\n", r.name.c_str(),
+                s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.bvtt_nodes, s.front_size,
+                s.triangle_pairs, s.feature_pairs_vf, s.feature_pairs_ee, s.hits_vf, s.hits_ee,
+                r.outcome.contacts.earliest_toi);
+    if (s.gave_up) std::printf("  %zu contacts from the method's work bound (conservative answers)\n", s.gave_up);
+    if (s.peak_device_bytes) std::printf("  peak device memory %.1f MiB\n", double(s.peak_device_bytes) / (1 << 20));
+    if (r.has_truth)
+      std::printf("  ground truth: %zu true contacts; %zu false negatives, %zu false positives\n", r.true_contacts,
+                  r.false_negatives, r.false_positives);
+    if (r.checked) std::printf("  CPU oracle check: %zu contacts differ\n", r.check_differences);
+  }
+  if (reports.size() > 2) {
+    std::vector<double> totals;
+    for (const auto& r : reports) totals.push_back(r.outcome.stats.total_ms);
+    std::sort(totals.begin(), totals.end());
+    std::printf("\n%zu steps: median %.2f ms per step (first step, with the BVH build: %.2f ms)\n", reports.size(),
+                totals[totals.size() / 2], reports.front().outcome.stats.total_ms);
+  }
+}
+
+void print_json(const StepSource& src, const std::string& backend, const Options& o, const std::vector<StepReport>& reports) {
+  std::printf("{\n  \"input\": \"%s\", \"vertices\": %d, \"triangles\": %d,\n", src.description.c_str(),
+              src.mesh->num_vertices(), src.mesh->num_faces());
+  std::printf("  \"backend\": \"%s\", \"bv\": \"%s\", \"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", "
+              "\"front_tracking\": %s,\n  \"steps\": [\n",
+              backend.c_str(), o.policies.bv.c_str(), backend == "CPU" ? "work-stealing" : o.policies.scheduler.c_str(),
+              o.policies.method.c_str(), o.policies.precision.c_str(), o.params.front_tracking ? "true" : "false");
   for (std::size_t i = 0; i < reports.size(); ++i) {
     const StepReport& r = reports[i];
-    std::printf("    {\"name\": \"%s\", \"vertices\": %d, \"edges\": %d, \"faces\": %d, \"degenerate_faces\": %zu, "
-                "\"triangle_pairs\": %zu, \"adjacent_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, "
-                "\"tested_vf\": %zu, \"tested_ee\": %zu, \"hits_vf\": %zu, \"hits_ee\": %zu, \"gave_up\": %zu, "
-                "\"earliest_toi\": %.17g, \"ms\": {\"bvs\": %.3f, \"pairs\": %.3f, \"features\": %.3f, \"narrow\": %.3f}",
-                r.name.c_str(), r.vertices, r.edges, r.faces, r.degenerate_faces, r.triangle_pairs, r.adjacent_pairs,
-                r.vf_pairs, r.ee_pairs, r.tested_vf, r.tested_ee, r.hits_vf, r.hits_ee, r.gave_up, r.earliest_toi,
-                r.ms_bvs, r.ms_pairs, r.ms_features, r.ms_narrow);
+    const lwsccd::StepStats& s = r.outcome.stats;
+    std::printf("    {\"name\": \"%s\", \"ms\": {\"total\": %.4f, \"refit\": %.4f, \"traverse\": %.4f, \"features\": %.4f, "
+                "\"narrow\": %.4f}, \"rebuilt\": %s, \"restarted_from_root\": %s, \"bvtt_nodes\": %zu, \"front\": %zu, "
+                "\"triangle_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, \"vf_hits\": %zu, \"ee_hits\": %zu, "
+                "\"gave_up\": %zu, \"earliest_toi\": %.17g, \"peak_device_bytes\": %zu",
+                r.name.c_str(), s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.rebuilt ? "true" : "false",
+                s.restarted_from_root ? "true" : "false", s.bvtt_nodes, s.front_size, s.triangle_pairs, s.feature_pairs_vf,
+                s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, r.outcome.contacts.earliest_toi, s.peak_device_bytes);
     if (r.has_truth)
-      std::printf(", \"truth\": {\"true_vf\": %zu, \"true_ee\": %zu, \"missed_vf\": %zu, \"missed_ee\": %zu, "
-                  "\"false_negatives\": %zu, \"false_positives\": %zu}",
-                  r.true_vf, r.true_ee, r.missed_vf, r.missed_ee, r.false_negatives, r.false_positives);
+      std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.true_contacts,
+                  r.false_negatives, r.false_positives);
+    if (r.checked) std::printf(", \"check_differences\": %zu", r.check_differences);
     std::printf("}%s\n", i + 1 < reports.size() ? "," : "");
   }
   std::printf("  ]\n}\n");
@@ -258,37 +329,61 @@ void print_json(const std::vector<StepReport>& reports, const Options& o) {
 int main(int argc, char** argv) {
   try {
     const Options o = parse(argc, argv);
+    Inputs in;
+    const StepSource src = open_source(o, in);
+    const std::string gpu = ccd_app::gpu_name();
+    if (o.device == "gpu" && gpu.empty())
+      throw lwsccd::Error("--device gpu: no CUDA device found (or lwsccd-ccd was built without CUDA); use --device cpu");
+    const bool on_gpu = o.device == "gpu" || (o.device == "auto" && !gpu.empty());
+    const std::string backend = on_gpu ? "GPU " + gpu : "CPU";
+    auto pipeline = on_gpu ? ccd_app::make_gpu_pipeline(src.mesh, src.layout, o.params, o.policies)
+                           : ccd_app::make_cpu_pipeline(src.mesh, src.layout, o.params, o.policies);
+    const bool progress = src.num_steps > 1 && isatty(STDERR_FILENO);
     std::vector<StepReport> reports;
-    namespace fs = std::filesystem;
-    if (o.inputs.empty()) {
-      const lwsccd::MultiBodyStep scene = lwsccd::make_cloth_ball_scene(o.builtin_triangles);
-      if (!o.json) std::printf("built-in scene: cloth (self-colliding) over a rigid ball, CPU backend\n");
-      reports.push_back(run_step(scene.step, scene.layout, o, nullptr));
-    } else if (o.inputs.size() == 2) {
-      reports.push_back(run_step(lwsccd::load_step(o.inputs[0], o.inputs[1]), {}, o, nullptr));
-    } else if (fs::is_directory(fs::path(o.inputs[0]) / "frames")) {
-      const lwsccd::Scene scene = lwsccd::load_scene(o.inputs[0]);
-      reports.push_back(run_step(scene.step, {}, o, scene.has_ground_truth ? &scene.truth : nullptr));
-    } else if (fs::is_directory(o.inputs[0])) {
-      const lwsccd::Sequence seq = lwsccd::load_sequence(o.inputs[0]);
-      for (std::size_t s = 0; s < seq.num_steps(); ++s) {
-        reports.push_back(run_step(seq.step(s), {}, o, nullptr));
-        if (!o.json) std::fprintf(stderr, "\rstep %zu/%zu", s + 1, seq.num_steps());
+    for (std::size_t i = 0; i < src.num_steps; ++i) {
+      const lwsccd::Step step = src.step(i);
+      StepReport r;
+      r.name = step.name;
+      r.outcome = pipeline->step(step.x0, step.x1);
+      if (src.truth) score_against_truth(*src.truth, r);
+      if (o.check) {
+        r.checked = true;
+        r.check_differences = oracle_differences(step, src.layout, o, r.outcome.contacts);
       }
-      if (!o.json) std::fprintf(stderr, "\n");
-    } else {
-      throw lwsccd::InputError(o.inputs[0], "", "is neither a scene folder, a folder of frames, nor one of two frame files");
+      reports.push_back(std::move(r));
+      if (progress) print_progress(i + 1, src.num_steps);
     }
-    if (o.json) {
-      print_json(reports, o);
-    } else {
-      for (std::size_t i = 0; i < reports.size(); ++i) print_text(reports[i], i == 0);
-    }
+    if (o.json) print_json(src, backend, o, reports);
+    else print_table(src, backend, o, reports);
+    const bool conservative = o.policies.method != "cubic";
     for (const auto& r : reports)
-      if (r.missed_vf + r.missed_ee > 0 || (o.method != "cubic" && r.false_negatives > 0)) return 2;  // a missed contact
+      if ((conservative && r.false_negatives > 0) || r.check_differences > 0) return 2;
     return 0;
   } catch (const lwsccd::Error& e) {
     std::fprintf(stderr, "lwsccd-ccd: error: %s\n", e.what());
     return 1;
   }
 }
+
+// The CPU backend (this translation unit is plain C++).
+namespace ccd_app {
+
+std::unique_ptr<AnyPipeline> make_cpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
+                                               const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
+                                               const PolicyChoice& choice) {
+  return dispatch_policies(choice, [&](auto bv, auto method, auto scalar) -> std::unique_ptr<AnyPipeline> {
+    using Pipeline = lwsccd::cpu::CcdPipeline<typename decltype(bv)::type, typename decltype(method)::type,
+                                              typename decltype(scalar)::type>;
+    return std::make_unique<PipelineAdapter<Pipeline>>(mesh, layout, params);
+  });
+}
+
+#ifndef LWSCCD_CCD_WITH_GPU
+std::string gpu_name() { return ""; }
+std::unique_ptr<AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh>, const lwsccd::BodyLayout&,
+                                               const lwsccd::PipelineParams&, const PolicyChoice&) {
+  throw lwsccd::Error("lwsccd-ccd was built without CUDA: no GPU backend");
+}
+#endif
+
+}  // namespace ccd_app

@@ -87,7 +87,7 @@ TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from devi
   CHECK(g.stats.hits_vf + g.stats.hits_ee > 0);
   CHECK(g.stats.bvtt_nodes == c.stats.bvtt_nodes);  // the same pruning on both sides
   // The same step from device-resident positions, in a fresh pipeline and in this one.
-  DeviceBuffer<Vec3d> x0, x1;
+  gpu::DeviceBuffer<Vec3d> x0, x1;
   x0.upload(scene.step.x0);
   x1.upload(scene.step.x1);
   gpu::CcdPipeline<> fresh(scene.step.mesh, scene.layout);

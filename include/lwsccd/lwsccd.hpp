@@ -19,5 +19,7 @@
 #include "lwsccd/oracle.hpp"
 #include "lwsccd/query_io.hpp"
 #include "lwsccd/orphans.hpp"
+#include "lwsccd/pipeline.hpp"
 #include "lwsccd/scenes.hpp"
+#include "lwsccd/simulation.hpp"
 #include "lwsccd/vec.hpp"

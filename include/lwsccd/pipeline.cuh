@@ -69,7 +69,7 @@ template <class BV>
 __global__ void node_body_kernel(BvhView<BV> bvh, const index_t* changes, const index_t* face_body, index_t* node_body) {
   const index_t node = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
   if (node >= bvh.num_nodes()) return;
-  node_body[node] = node_body_of(bvh.ranges[node], changes, bvh.leaf_primitive, face_body);
+  node_body[node] = lwsccd::detail::node_body_of(bvh.ranges[node], changes, bvh.leaf_primitive, face_body);
 }
 
 }  // namespace detail

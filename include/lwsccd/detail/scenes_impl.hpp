@@ -3,7 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
+#include <cstdint>
+#include <unordered_map>
 #include <memory>
 #include <string>
 
@@ -23,9 +24,10 @@ inline void icosphere(int level, std::vector<Vec3d>& points, std::vector<Face>& 
            {{3, 8, 9}},  {{4, 9, 5}},  {{2, 4, 11}}, {{6, 2, 10}}, {{8, 6, 7}},   {{9, 8, 1}}};
   for (auto& p : points) p *= 1.0 / norm(p);
   for (int l = 0; l < level; ++l) {
-    std::map<std::pair<index_t, index_t>, index_t> midpoint;
+    std::unordered_map<std::uint64_t, index_t> midpoint;
+    midpoint.reserve(faces.size() * 2);
     auto mid = [&](index_t a, index_t b) {
-      const auto key = std::make_pair(std::min(a, b), std::max(a, b));
+      const std::uint64_t key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) | static_cast<std::uint32_t>(std::max(a, b));
       const auto it = midpoint.find(key);
       if (it != midpoint.end()) return it->second;
       Vec3d m = (points[a] + points[b]) * 0.5;
@@ -43,6 +45,13 @@ inline void icosphere(int level, std::vector<Vec3d>& points, std::vector<Face>& 
     }
     faces.swap(next);
   }
+}
+
+// The icosphere level whose size is closest to 20% of a scene's triangles (at least level 1).
+inline int ball_level(std::size_t target_triangles) {
+  int level = 1;
+  while (20.0 * std::pow(4.0, level + 1) <= 0.2 * double(target_triangles)) ++level;
+  return level;
 }
 
 // Cloth draped over a ball of radius r at the origin, (u, v) in [-1, 1]^2: it rests on top of
@@ -63,12 +72,9 @@ inline Vec3d draped_cloth_point(double u, double v, double r, double drop) {
 
 inline MultiBodyStep make_cloth_ball_scene(std::size_t target_triangles) {
   target_triangles = std::max<std::size_t>(target_triangles, 64);
-  // Ball: the icosphere level whose size is closest to 20% of the target (at least level 1).
-  int level = 1;
-  while (20.0 * std::pow(4.0, level + 1) <= 0.2 * double(target_triangles)) ++level;
   std::vector<Vec3d> ball_points;
   std::vector<Face> ball_faces;
-  detail::icosphere(level, ball_points, ball_faces);
+  detail::icosphere(detail::ball_level(target_triangles), ball_points, ball_faces);
   const std::size_t cloth_target = target_triangles > ball_faces.size() + 8 ? target_triangles - ball_faces.size() : 8;
   const int n = std::max(2, static_cast<int>(std::lround(std::sqrt(double(cloth_target) / 2.0))));
 
