@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace lwsccd_bench {
@@ -36,10 +37,16 @@ struct BenchArgs {
   std::string data, json;
   int reps = 1;
   std::vector<std::string> flags;  ///< extra flags that were given (from `known_flags`)
+  std::vector<std::pair<std::string, std::string>> values;  ///< extra options with a value ("--name=" in known_flags)
   bool has(const std::string& flag) const {
     for (const auto& f : flags)
       if (f == flag) return true;
     return false;
+  }
+  std::string value(const std::string& option, const std::string& otherwise) const {
+    for (const auto& v : values)
+      if (v.first == option) return v.second;
+    return otherwise;
   }
 };
 
@@ -51,9 +58,13 @@ inline BenchArgs parse_bench_args(int argc, char** argv, int default_reps, const
   args.reps = default_reps;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    bool known = false;
-    for (const auto& f : known_flags) known = known || a == f;
-    if (a == "--data" && i + 1 < argc) args.data = argv[++i];
+    bool known = false, with_value = false;
+    for (const auto& f : known_flags) {
+      known = known || a == f;
+      with_value = with_value || (!f.empty() && f.back() == '=' && a == f.substr(0, f.size() - 1));
+    }
+    if (with_value && i + 1 < argc) args.values.emplace_back(a, argv[++i]);
+    else if (a == "--data" && i + 1 < argc) args.data = argv[++i];
     else if (a == "--json" && i + 1 < argc) args.json = argv[++i];
     else if (a == "--reps" && i + 1 < argc) args.reps = std::max(1, std::atoi(argv[++i]));
     else if (known) args.flags.push_back(a);

@@ -364,26 +364,3 @@ int main(int argc, char** argv) {
     return 1;
   }
 }
-
-// The CPU backend (this translation unit is plain C++).
-namespace ccd_app {
-
-std::unique_ptr<AnyPipeline> make_cpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
-                                               const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
-                                               const PolicyChoice& choice) {
-  return dispatch_policies(choice, [&](auto bv, auto method, auto scalar) -> std::unique_ptr<AnyPipeline> {
-    using Pipeline = lwsccd::cpu::CcdPipeline<typename decltype(bv)::type, typename decltype(method)::type,
-                                              typename decltype(scalar)::type>;
-    return std::make_unique<PipelineAdapter<Pipeline>>(mesh, layout, params);
-  });
-}
-
-#ifndef LWSCCD_CCD_WITH_GPU
-std::string gpu_name() { return ""; }
-std::unique_ptr<AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh>, const lwsccd::BodyLayout&,
-                                               const lwsccd::PipelineParams&, const PolicyChoice&) {
-  throw lwsccd::Error("lwsccd-ccd was built without CUDA: no GPU backend");
-}
-#endif
-
-}  // namespace ccd_app

@@ -19,8 +19,9 @@ namespace lwsccd {
 /// gravity, stretch, shear and bending constraints, the ball and the floor pushing the cloth out,
 /// friction on contact); the rendered cloth interpolates it bilinearly at the requested
 /// resolution. So every resolution shows the same folds, and making a frame costs little next to
-/// the collision detection on it. There is no cloth-cloth collision response: layers that fold
-/// onto each other pass through, which is what gives the CCD its self contacts.
+/// the collision detection on it. Cloth-cloth response is crude (coarse vertices keep a thickness
+/// apart): layers rest on each other without merging, and faces that slide fast still pass
+/// through between vertices, which is what gives the CCD its self contacts.
 ///
 /// Bodies (layout()): 0 the cloth (deforming, self-colliding), 1 the ball (rigid, never moves).
 class ClothBallSimulation {
@@ -36,15 +37,21 @@ class ClothBallSimulation {
   const std::vector<Vec3d>& positions() const { return positions_; }
   /// Advances the simulation by `frames` frames.
   void advance(std::size_t frames = 1);
-  /// The step from the current frame to the next one; advances by one frame.
+  /// The next CCD step; advances the scene by its length. A frame is cut into substeps() steps so
+  /// that a step moves the cloth about as far at every resolution, relative to its triangles
+  /// (as a simulator's time step shrinks with its mesh): the candidate pairs then grow with the
+  /// triangle count, not with its square.
   Step next_step();
+  int substeps() const { return substeps_; }
 
  private:
   void simulate_frame();
-  void refine();
+  void refine(const std::vector<Vec3d>& coarse_x);
+  void repel_layers(std::vector<Vec3d>& x) const;
 
   int coarse_ = 0, fine_ = 0;  // cloth cells per side
-  std::vector<Vec3d> coarse_x_, coarse_v_;
+  int substeps_ = 1, substep_ = 0;
+  std::vector<Vec3d> coarse_x_, coarse_v_, frame_start_;
   std::vector<Vec3d> positions_;
   std::size_t ball_vertex_offset_ = 0, frame_ = 0;
   std::shared_ptr<const TriangleMesh> mesh_;

@@ -3,6 +3,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <utility>
+#include <vector>
 #include <string>
 
 #include "lwsccd/detail/scenes_impl.hpp"
@@ -22,6 +26,7 @@ struct ClothBallSetup {
   static constexpr double kFrameSeconds = 1.0 / 60.0;
   static constexpr int kSubsteps = 8, kIterations = 4, kMaxCoarseCells = 64;
   static constexpr double kFoldRadius = 0.02;
+  static constexpr double kThickness = 0.6;  // in coarse cells
   static constexpr double kGravity = -9.81, kDamping = 0.998, kFriction = 0.6, kBendStiffness = 0.2;
 };
 }  // namespace detail
@@ -78,22 +83,36 @@ inline ClothBallSimulation::ClothBallSimulation(std::size_t target_triangles) {
   layout_.face_body.assign(static_cast<std::size_t>(mesh_->num_faces()), 1);
   std::fill(layout_.face_body.begin(), layout_.face_body.begin() + static_cast<std::ptrdiff_t>(cloth_faces), 0);
   layout_.body_self_collides = {true, false};
-  refine();
+  substeps_ = std::max(1, static_cast<int>(std::lround(double(fine_) / coarse_)));
+  refine(coarse_x_);
 }
 
 inline void ClothBallSimulation::advance(std::size_t frames) {
   for (std::size_t f = 0; f < frames; ++f) simulate_frame();
-  refine();
+  substep_ = 0;
+  refine(coarse_x_);
 }
 
 inline Step ClothBallSimulation::next_step() {
+  // A frame's motion is linear between its coarse end states, so a substep is an exact part of it.
+  if (substep_ == 0) {
+    frame_start_ = coarse_x_;
+    simulate_frame();
+  }
+  auto at = [&](int sub) {
+    const double s = double(sub) / substeps_;
+    std::vector<Vec3d> coarse(coarse_x_.size());
+    for (std::size_t k = 0; k < coarse.size(); ++k) coarse[k] = frame_start_[k] * (1 - s) + coarse_x_[k] * s;
+    refine(coarse);
+    return positions_;
+  };
   Step step;
   step.mesh = mesh_;
-  step.x0 = positions_;
-  step.name = "builtin-cloth-ball-" + std::to_string(mesh_->num_faces()) + " frame " + std::to_string(frame_) + "->" +
-              std::to_string(frame_ + 1);
-  advance(1);
-  step.x1 = positions_;
+  step.name = "builtin-cloth-ball-" + std::to_string(mesh_->num_faces()) + " frame " + std::to_string(frame_ - 1) +
+              (substeps_ > 1 ? "." + std::to_string(substep_) + "/" + std::to_string(substeps_) : std::string());
+  step.x0 = substep_ == 0 ? at(0) : positions_;
+  step.x1 = at(substep_ + 1);
+  substep_ = (substep_ + 1) % substeps_;
   return step;
 }
 
@@ -149,6 +168,7 @@ inline void ClothBallSimulation::simulate_frame() {
           touching[k] = 1;
         }
       }
+      repel_layers(predicted);  // after the ball and floor, so that upper layers move out, not in
     }
     for (std::size_t k = 0; k < coarse_x_.size(); ++k) {
       coarse_v_[k] = (predicted[k] - coarse_x_[k]) * (S::kDamping / dt);
@@ -159,8 +179,50 @@ inline void ClothBallSimulation::simulate_frame() {
   ++frame_;
 }
 
+// Cloth thickness, crudely: coarse vertices that are not grid neighbours and come closer than
+// kThickness cells are pushed apart (a hash grid finds them). Layers then stay apart where they
+// rest on each other, as in a real simulation; where they slide fast, faces still pass through
+// between the vertices, and those are the self contacts.
+inline void ClothBallSimulation::repel_layers(std::vector<Vec3d>& x) const {
+  using S = detail::ClothBallSetup;
+  const int w = coarse_ + 1;
+  const double thickness = S::kThickness * S::kClothSide / coarse_, inv = 1.0 / thickness;
+  auto cell_key = [&](const Vec3d& p) {
+    const auto c = [&](double v) { return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(v * inv)) + (1 << 20)); };
+    return (c(p.x) << 42) | (c(p.y) << 21) | c(p.z);
+  };
+  std::vector<std::pair<std::uint64_t, int>> cells(x.size());
+  for (std::size_t k = 0; k < x.size(); ++k) cells[k] = {cell_key(x[k]), static_cast<int>(k)};
+  std::sort(cells.begin(), cells.end());
+  auto find_cell = [&](std::uint64_t key) {
+    return std::lower_bound(cells.begin(), cells.end(), std::make_pair(key, -1));
+  };
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    const int a = static_cast<int>(k), ai = a % w, aj = a / w;
+    const auto c = [&](double v) { return static_cast<std::int64_t>(std::floor(v * inv)); };
+    const std::int64_t cx = c(x[k].x), cy = c(x[k].y), cz = c(x[k].z);
+    for (std::int64_t dx = -1; dx <= 1; ++dx)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        for (std::int64_t dz = -1; dz <= 1; ++dz) {
+          const Vec3d probe{(double(cx + dx) + 0.5) * thickness, (double(cy + dy) + 0.5) * thickness,
+                            (double(cz + dz) + 0.5) * thickness};
+          const std::uint64_t key = cell_key(probe);
+          for (auto it = find_cell(key); it != cells.end() && it->first == key; ++it) {
+            const int b = it->second;
+            if (b <= a || (std::abs(b % w - ai) <= 2 && std::abs(b / w - aj) <= 2)) continue;  // near on the cloth
+            const Vec3d d = x[b] - x[a];
+            const double len = norm(d);
+            if (len >= thickness || len <= 0) continue;
+            const Vec3d fix = d * (0.5 * (thickness - len) / len);
+            x[a] -= fix;
+            x[b] += fix;
+          }
+        }
+  }
+}
+
 // Bilinear interpolation of the coarse cloth at the fine grid's vertices.
-inline void ClothBallSimulation::refine() {
+inline void ClothBallSimulation::refine(const std::vector<Vec3d>& coarse_x) {
   const int m = coarse_, n = fine_, w = m + 1;
   for (int j = 0; j <= n; ++j) {
     const double sj = double(j) * m / n;
@@ -171,8 +233,8 @@ inline void ClothBallSimulation::refine() {
       const int ci = std::min(static_cast<int>(si), m - 1);
       const double fi = si - ci;
       const int a = cj * w + ci;
-      const Vec3d bottom = coarse_x_[a] * (1 - fi) + coarse_x_[a + 1] * fi;
-      const Vec3d top = coarse_x_[a + w] * (1 - fi) + coarse_x_[a + w + 1] * fi;
+      const Vec3d bottom = coarse_x[a] * (1 - fi) + coarse_x[a + 1] * fi;
+      const Vec3d top = coarse_x[a + w] * (1 - fi) + coarse_x[a + w + 1] * fi;
       positions_[static_cast<std::size_t>(j * (n + 1) + i)] = bottom * (1 - fj) + top * fj;
     }
   }

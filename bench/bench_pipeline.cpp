@@ -1,0 +1,233 @@
+// lwsccd-bench-pipeline — the whole CCD step (host positions in, contacts on the host out), per
+// stage, over the real scenes, the horse-gallop sequence and the built-in simulation at several
+// sizes, for the policies a sweep names. The first step (BVH build, traversal from the root) is
+// reported apart from the steady state (refit, traversal from the front: medians of --reps steps).
+// Scenes with ground truth also give false negatives and positives. JSON rows feed
+// bench/plot_pipeline.py (docs/BENCHMARKS.md).
+//
+// Sweeps:
+//   schedulers  every GPU scheduler x BV x precision (filtered inclusion): data scenes, horse,
+//               built-in 100K
+//   methods     every narrow-phase method x precision (lazy, AABB): the scenes with ground truth
+//   scaling     the default policies on the built-in scene at --sizes (default 1K..10M)
+//   all         the three
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench_common.hpp"
+#include "ccd_app.hpp"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/simulation.hpp"
+
+namespace {
+
+struct Row {
+  std::string sweep, scene, step;  // step: first | steady
+  lwsccd::index_t triangles = 0;
+  ccd_app::PolicyChoice policies;
+  int steps_measured = 0;
+  double total = 0, refit = 0, traverse = 0, features = 0, narrow = 0;
+  lwsccd::StepStats last;  // counts of the last measured step
+  double earliest_toi = 1;
+  bool has_truth = false;
+  std::size_t false_negatives = 0, false_positives = 0;
+};
+
+struct Scenario {
+  std::string name;
+  std::shared_ptr<const lwsccd::TriangleMesh> mesh;
+  lwsccd::BodyLayout layout;
+  std::function<lwsccd::Step(std::size_t)> step;  // step i (0: the first)
+  std::size_t available_steps = 0;                // 0: unbounded
+  const lwsccd::GroundTruth* truth = nullptr;
+};
+
+void score(const lwsccd::GroundTruth& truth, const lwsccd::NarrowPhaseResult<double>& c, Row& row) {
+  row.has_truth = true;
+  auto count = [&](const auto& pairs, const std::vector<bool>& collides, const auto& hits) {
+    for (std::size_t i = 0; i < pairs.size(); ++i) {
+      const bool hit = std::binary_search(hits.begin(), hits.end(), lwsccd::FeatureHit<double>{pairs[i].first, pairs[i].second, 0});
+      row.false_negatives += collides[i] && !hit;
+      row.false_positives += !collides[i] && hit;
+    }
+  };
+  count(truth.vf, truth.vf_collides, c.vf);
+  count(truth.ee, truth.ee_collides, c.ee);
+}
+
+// The first step, then `reps` steady steps (the sequence's next steps, or the same step again).
+void measure(const Scenario& sc, const std::string& sweep, const ccd_app::PolicyChoice& policies, const std::string& device,
+             int reps, std::vector<Row>& rows) {
+  lwsccd::PipelineParams params;
+  auto pipeline = device == "gpu" ? ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies)
+                                  : ccd_app::make_cpu_pipeline(sc.mesh, sc.layout, params, policies);
+  std::size_t steps = static_cast<std::size_t>(reps) + 1;
+  if (sc.available_steps) steps = std::min(steps, sc.available_steps);
+  std::vector<ccd_app::StepOutcome> outcomes;
+  for (std::size_t i = 0; i < steps; ++i) {
+    const lwsccd::Step step = sc.step(i);
+    outcomes.push_back(pipeline->step(step.x0, step.x1));
+  }
+  auto make_row = [&](const char* which, std::size_t from, std::size_t to) {
+    Row r;
+    r.sweep = sweep;
+    r.scene = sc.name;
+    r.step = which;
+    r.triangles = sc.mesh->num_faces();
+    r.policies = policies;
+    r.steps_measured = static_cast<int>(to - from);
+    auto med = [&](double lwsccd::StepStats::*field) {
+      std::vector<double> v;
+      for (std::size_t i = from; i < to; ++i) v.push_back(outcomes[i].stats.*field);
+      return lwsccd_bench::median(v);
+    };
+    r.total = med(&lwsccd::StepStats::total_ms);
+    r.refit = med(&lwsccd::StepStats::refit_ms);
+    r.traverse = med(&lwsccd::StepStats::traverse_ms);
+    r.features = med(&lwsccd::StepStats::features_ms);
+    r.narrow = med(&lwsccd::StepStats::narrow_ms);
+    r.last = outcomes[to - 1].stats;
+    for (std::size_t i = from; i < to; ++i) r.earliest_toi = std::min(r.earliest_toi, outcomes[i].contacts.earliest_toi);
+    if (sc.truth) score(*sc.truth, outcomes[to - 1].contacts, r);
+    return r;
+  };
+  rows.push_back(make_row("first", 0, 1));
+  if (outcomes.size() > 1) rows.push_back(make_row("steady", 1, outcomes.size()));
+  for (std::size_t k = rows.size() - (outcomes.size() > 1 ? 2 : 1); k < rows.size(); ++k) {
+    const Row& r = rows[k];
+    std::printf("%-10s %-24s %9d %-4s %-10s %-18s %-6s %-6s %9.2f %8.3f %8.3f %8.3f %9.2f %10zu %9zu %8zu %9.3g %8.1f", r.sweep.c_str(),
+                r.scene.c_str(), r.triangles, r.policies.bv.c_str(), device == "gpu" ? r.policies.scheduler.c_str() : "cpu",
+                r.policies.method.c_str(), r.policies.precision.c_str(), r.step.c_str(), r.total, r.refit, r.traverse,
+                r.features, r.narrow, r.last.triangle_pairs, r.last.feature_pairs_vf + r.last.feature_pairs_ee,
+                r.last.hits_vf + r.last.hits_ee, r.earliest_toi, double(r.last.peak_device_bytes) / (1 << 20));
+    if (r.has_truth) std::printf("  FN %zu FP %zu", r.false_negatives, r.false_positives);
+    std::printf("\n");
+    std::fflush(stdout);
+  }
+}
+
+std::vector<std::size_t> parse_sizes(const std::string& text) {
+  std::vector<std::size_t> sizes;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ','))
+    if (!item.empty()) sizes.push_back(static_cast<std::size_t>(std::stod(item)));
+  return sizes;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const auto args = lwsccd_bench::parse_bench_args(
+      argc, argv, 5, {"--sweep=", "--device=", "--sizes="},
+      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|scaling] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
+      "                             [--data DIR] [--reps N] [--json FILE]");
+  try {
+    const std::string sweep = args.value("--sweep", "all");
+    const std::string gpu = ccd_app::gpu_name();
+    const std::string device = args.value("--device", gpu.empty() ? "cpu" : "gpu");
+    if (device == "gpu" && gpu.empty()) {
+      std::fprintf(stderr, "lwsccd-bench-pipeline: no CUDA device; nothing to measure (--device cpu runs the CPU backend)\n");
+      return 77;
+    }
+    const std::vector<std::size_t> sizes = parse_sizes(args.value("--sizes", "1000,10000,100000,1000000,10000000"));
+    const std::string dir = lwsccd_bench::data_dir(args.data, LWSCCD_BENCH_DATA_DIR);
+    std::printf("lwsccd-bench-pipeline: %s; sweep %s; medians of %d steady steps; times in ms, host to host\n",
+                device == "gpu" ? ("GPU " + gpu).c_str() : "CPU backend", sweep.c_str(), args.reps);
+    std::printf("%-10s %-24s %9s %-4s %-10s %-18s %-6s %-6s %9s %8s %8s %8s %9s %10s %9s %8s %9s %8s\n", "sweep", "scene",
+                "triangles", "bv", "scheduler", "method", "prec", "step", "total", "refit", "traverse", "features", "narrow",
+                "tri pairs", "feat prs", "contacts", "TOI", "peak MiB");
+    std::vector<Row> rows;
+
+    // Scenarios, made on demand (the large built-in ones take memory).
+    std::vector<std::unique_ptr<lwsccd::Scene>> scenes;
+    auto data_scenario = [&](const std::string& name) {
+      scenes.push_back(std::make_unique<lwsccd::Scene>(lwsccd::load_scene(dir + "/scenes/" + name)));
+      const lwsccd::Scene* s = scenes.back().get();
+      return Scenario{name, s->step.mesh, {}, [s](std::size_t) { return s->step; }, 0, s->has_ground_truth ? &s->truth : nullptr};
+    };
+    std::unique_ptr<lwsccd::Sequence> horse;
+    auto horse_scenario = [&]() {
+      if (!horse) horse = std::make_unique<lwsccd::Sequence>(lwsccd::load_sequence(dir + "/sequences/horse-gallop"));
+      const lwsccd::Sequence* h = horse.get();
+      return Scenario{"horse-gallop", h->mesh(), {}, [h](std::size_t i) { return h->step(i); }, h->num_steps(), nullptr};
+    };
+    auto builtin_scenario = [&](std::size_t triangles, std::shared_ptr<lwsccd::ClothBallSimulation>& sim) {
+      sim = std::make_shared<lwsccd::ClothBallSimulation>(triangles);
+      sim->advance(30);
+      lwsccd::ClothBallSimulation* s = sim.get();
+      return Scenario{"builtin-" + std::to_string(s->mesh()->num_faces()), s->mesh(), s->layout(),
+                      [s](std::size_t) { return s->next_step(); }, 0, nullptr};
+    };
+    const std::vector<std::string> truth_scenes = {"cloth-ball", "cloth-funnel", "armadillo-rollers"};
+    const bool have_data = std::ifstream(dir + "/scenes/cloth-ball/frames/cloth_ball92.ply").good();
+    if (!have_data) std::printf("(no shared data at %s: built-in scenes only)\n", dir.c_str());
+
+    if (sweep == "all" || sweep == "schedulers") {
+      const std::vector<std::string> schedulers =
+          device == "gpu" ? std::vector<std::string>{"static", "gproximity", "lazy"} : std::vector<std::string>{"lazy"};
+      auto sweep_policies = [&](const std::function<Scenario()>& make) {
+        for (const char* bv : {"aabb", "obb"})
+          for (const char* precision : {"double", "float"})
+            for (const auto& scheduler : schedulers) {
+              ccd_app::PolicyChoice p;
+              p.bv = bv;
+              p.precision = precision;
+              p.scheduler = scheduler;
+              measure(make(), "schedulers", p, device, args.reps, rows);
+            }
+      };
+      if (have_data) {
+        for (const auto& name : truth_scenes) sweep_policies([&] { return data_scenario(name); });
+        sweep_policies([&] { return horse_scenario(); });
+      }
+      std::shared_ptr<lwsccd::ClothBallSimulation> sim;
+      sweep_policies([&] { return builtin_scenario(100000, sim); });
+    }
+    if ((sweep == "all" || sweep == "methods") && have_data) {
+      for (const auto& name : truth_scenes)
+        for (const char* method : {"filtered-inclusion", "inclusion", "cubic"})
+          for (const char* precision : {"double", "float"}) {
+            ccd_app::PolicyChoice p;
+            p.method = method;
+            p.precision = precision;
+            measure(data_scenario(name), "methods", p, device, args.reps, rows);
+          }
+    }
+    if (sweep == "all" || sweep == "scaling") {
+      for (const std::size_t n : sizes) {
+        std::shared_ptr<lwsccd::ClothBallSimulation> sim;
+        measure(builtin_scenario(n, sim), "scaling", ccd_app::PolicyChoice{}, device, args.reps, rows);
+      }
+    }
+
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+      const Row& r = rows[i];
+      std::fprintf(f,
+                   "{\"device\": \"%s\", \"sweep\": \"%s\", \"scene\": \"%s\", \"triangles\": %d, \"bv\": \"%s\", "
+                   "\"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"step\": \"%s\", \"steps_measured\": %d, "
+                   "\"total_ms\": %.4f, \"refit_ms\": %.4f, \"traverse_ms\": %.4f, \"features_ms\": %.4f, \"narrow_ms\": %.4f, "
+                   "\"bvtt_nodes\": %zu, \"front\": %zu, \"triangle_pairs\": %zu, \"feature_pairs\": %zu, \"contacts\": %zu, "
+                   "\"gave_up\": %zu, \"earliest_toi\": %.17g, \"peak_device_bytes\": %zu",
+                   device == "gpu" ? gpu.c_str() : "CPU", r.sweep.c_str(), r.scene.c_str(), r.triangles, r.policies.bv.c_str(),
+                   device == "gpu" ? r.policies.scheduler.c_str() : "cpu-work-stealing", r.policies.method.c_str(),
+                   r.policies.precision.c_str(), r.step.c_str(), r.steps_measured, r.total, r.refit, r.traverse, r.features,
+                   r.narrow, r.last.bvtt_nodes, r.last.front_size, r.last.triangle_pairs,
+                   r.last.feature_pairs_vf + r.last.feature_pairs_ee, r.last.hits_vf + r.last.hits_ee, r.last.gave_up,
+                   r.earliest_toi, r.last.peak_device_bytes);
+      if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.false_negatives, r.false_positives);
+      std::fprintf(f, "}");
+    });
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "lwsccd-bench-pipeline: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
