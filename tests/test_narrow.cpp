@@ -51,9 +51,11 @@ bool coplanar_somewhere(const Q& q) {
 
 struct TinyHeap {
   static constexpr int kMaxBoxes = 2;
+  static constexpr int kBatch = 32;
 };
 struct SmallHeap {
   static constexpr int kMaxBoxes = 16;
+  static constexpr int kBatch = 4;
 };
 
 }  // namespace

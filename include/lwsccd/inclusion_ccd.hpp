@@ -29,6 +29,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 
 #include "lwsccd/ccd_filters.hpp"
 #include "lwsccd/ccd_query.hpp"
@@ -39,7 +40,8 @@ namespace lwsccd {
 
 /// Tuning knobs of InclusionCcd.
 struct InclusionPolicy {
-  static constexpr int kMaxBoxes = 256;  ///< live boxes per query (a per-thread heap: 4 KiB on the GPU)
+  static constexpr int kMaxBoxes = 256;  ///< live boxes per query (a heap: 4 KiB on the GPU)
+  static constexpr int kBatch = 32;      ///< boxes examined per round: a warp's lanes on the GPU, in turn elsewhere
 };
 
 namespace detail {
@@ -48,6 +50,7 @@ namespace detail {
 struct DyadicBox {
   std::uint32_t idx[3];
   std::uint8_t level[3];
+  std::uint8_t accepted;  ///< passed the contact test in a round that could not report it yet
 };
 
 // Earliest time of a box as an integer on the finest grid, for ordering.
@@ -98,23 +101,26 @@ struct BoxHeap {
     if (size > 0) items[i] = last;
     return top;
   }
-  /// Makes room for b when full: the latest box (b itself if none is later) leaves the heap
-  /// and is returned; the rest of the heap and b stay.
-  LWSCCD_HD DyadicBox push_evicting_latest(const DyadicBox& b) {
-    int latest = size / 2;  // the latest box is a leaf
-    for (int i = latest + 1; i < size && i < kCapacity; ++i)
-      if (box_before(items[latest], items[i])) latest = i;
-    if (!box_before(b, items[latest])) return b;
-    const DyadicBox evicted = items[latest];
-    int i = latest;
-    while (i > 0) {
-      const int parent = (i - 1) / 2;
-      if (!box_before(b, items[parent])) break;
-      items[i] = items[parent];
-      i = parent;
+  /// Makes room when full: keeps the earliest three quarters (as a sorted array, which is a
+  /// heap) and drops the rest; returns the time key of the earliest box dropped. One pass of
+  /// pops per quarter of a heap, instead of a search for the latest box at every push.
+  LWSCCD_HD std::uint64_t drop_latest_quarter() {
+    const int n = size, keep = n - (n + 3) / 4;
+    for (int j = 0; j < keep; ++j) {
+      const DyadicBox earliest = pop();
+      items[n - 1 - j] = earliest;  // the slot pop() just freed: descending from the end
     }
-    items[i] = b;
-    return evicted;
+    const std::uint64_t dropped = box_time_key(items[0]);  // the earliest of the rest
+    // Ascending into the front (the ranges overlap when more than half is kept: swap inwards
+    // to reverse the kept block, then move it down).
+    for (int a = n - keep, b = n - 1; a < b; ++a, --b) {
+      const DyadicBox x = items[a];
+      items[a] = items[b];
+      items[b] = x;
+    }
+    for (int j = 0; j < keep; ++j) items[j] = items[n - keep + j];
+    size = keep;
+    return dropped;
   }
 };
 
@@ -183,10 +189,24 @@ LWSCCD_HD bool is_vertex_face(const EdgeEdgeQuery<T>*) {
   return false;
 }
 
-template <class Policy, class Q, class T>
-LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
+/// What a query needs for examining boxes, computed once.
+template <class T>
+struct InclusionSetup {
+  Vec3<T> eps;        ///< rounding bound of F per axis
+  T d = T(0);         ///< minimum separation
+  T delta = T(0);     ///< distance that counts as contact (motion in `tolerance` of time)
+  T eta = T(0);       ///< widening of a box's time range for the time filter
+  T bern[4] = {0, 0, 0, 0}, bern_bound = T(0);
+  int max_level = 1;  ///< finest level per dimension
+  bool vf = false, time_filter = false;
+  bool separated = false;  ///< the time filter excludes the whole step
+};
+
+template <class Q, class T>
+LWSCCD_HD InclusionSetup<T> inclusion_setup(const Q& q, const CcdParams<T>& params) {
+  InclusionSetup<T> s;
   const T unit = unit_roundoff<T>();
-  const T d = params.min_separation;
+  s.d = params.min_separation;
   // Rounding bound per axis, and the length scale for the tolerance test.
   const Vec3<T>* pts = q.points();
   Vec3<T> m{0, 0, 0};
@@ -196,125 +216,219 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
     const T moved = max_component(abs(vsub(pts[i + 4], pts[i])));
     motion = moved > motion ? moved : motion;
   }
-  const Vec3<T> eps = vadd(vscale(m, T(128) * unit), Vec3<T>{1, 1, 1} * (T(64) * std::numeric_limits<T>::denorm_min()));
+  s.eps = vadd(vscale(m, T(128) * unit), Vec3<T>{1, 1, 1} * (T(64) * std::numeric_limits<T>::denorm_min()));
   // Distance that counts as contact: how far the features move in `tolerance` of time, so the
   // reported time stays within the tolerance of the real one (a resting pair must really touch).
-  const T delta = fmul(params.tolerance, motion);
+  s.delta = fmul(params.tolerance, motion);
   // Finest level: time resolution `tolerance`, within T's mantissa and the key's 40 bits.
   int max_level = static_cast<int>(std::ceil(-std::log2(static_cast<double>(params.tolerance))));
   max_level = max_level < 1 ? 1 : max_level;
   const int mantissa = std::numeric_limits<T>::digits - 1;
   max_level = max_level > mantissa ? mantissa : max_level;
-  max_level = max_level > 31 ? 31 : max_level;  // 32-bit box indices
-  const bool vf = is_vertex_face(&q);
+  s.max_level = max_level > 31 ? 31 : max_level;  // 32-bit box indices
+  s.vf = is_vertex_face(&q);
   // Time filter (contact only): the coplanarity cubic must vanish at a contact, so a time range
   // on which its Bernstein coefficients share a sign is excluded for every (u, v).
-  const bool time_filter = d == T(0);
-  T bern[4] = {0, 0, 0, 0}, bern_bound = T(0), bern_max = T(0);
-  if (time_filter) {
-    bern_bound = coplanarity_bernstein(q, bern);
-    for (int i = 0; i < 4; ++i) bern_max = std::fabs(bern[i]) > bern_max ? std::fabs(bern[i]) : bern_max;
-    if (same_sign_beyond(bern, bern_bound)) return {};
+  s.time_filter = s.d == T(0);
+  if (s.time_filter) {
+    s.bern_bound = coplanarity_bernstein(q, s.bern);
+    T bern_max = T(0);
+    for (int i = 0; i < 4; ++i) bern_max = std::fabs(s.bern[i]) > bern_max ? std::fabs(s.bern[i]) : bern_max;
+    s.separated = same_sign_beyond(s.bern, s.bern_bound);
     // Restricting adds at most 6 rounded convex steps per coefficient, and the interval is
     // widened by eta so that rounding of its ends cannot uncover a root at a box boundary.
-    bern_bound = fadd(bern_bound, fmul(T(16) * unit, bern_max));
+    s.bern_bound = fadd(s.bern_bound, fmul(T(16) * unit, bern_max));
   }
-  const T eta = T(8) * unit;
+  s.eta = T(8) * unit;
+  return s;
+}
 
-  // When the heap is full, the latest box is dropped and the earliest dropped time remembered.
-  // Once every box before that time is excluded, the search restarts from the whole domain with
-  // the times before it cut off (they are excluded already): bounded memory without the false
-  // "hit at the current time" that giving up at a full heap would answer (seen on a sliver
-  // triangle in cloth-ball, where that hit was at t = 0).
-  constexpr std::uint64_t kNone = ~std::uint64_t(0);
-  const DyadicBox whole{{0, 0, 0}, {0, 0, 0}};
+enum class BoxVerdict : std::uint8_t { excluded, accepted, split_t, split_u, split_v };
+
+/// One box's test: excluded (no contact in it), accepted (contact within tolerance, or finest),
+/// or which dimension to split. Times before `t_floor` are already excluded (the box is cut).
+template <class Q, class T>
+LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const DyadicBox& box, std::uint64_t floor_key,
+                                 T t_floor) {
+  if (box.accepted) return BoxVerdict::accepted;
+  T t[2], u[2], v[2];
+  T* dims[3] = {t, u, v};
+  for (int k = 0; k < 3; ++k) {
+    dims[k][0] = dyadic<T>(box.idx[k], box.level[k]);
+    dims[k][1] = dyadic<T>(box.idx[k] + 1, box.level[k]);
+  }
+  if (box_time_key(box) < floor_key) t[0] = t_floor;
+  if (s.time_filter && (box.level[0] > 0 || floor_key > 0)) {
+    T sub[4];
+    const T t_lo = t[0] > s.eta ? fsub(t[0], s.eta) : T(0);
+    const T t_hi = t[1] < fsub(T(1), s.eta) ? fadd(t[1], s.eta) : T(1);
+    bernstein_restrict(s.bern, t_lo, t_hi, sub);
+    if (same_sign_beyond(sub, s.bern_bound)) return BoxVerdict::excluded;
+  }
+  Vec3<T> f[2][2][2];
+  corner_values(q, t, u, v, f);
+  bool within_tolerance = true;
+  for (int k = 0; k < 3; ++k) {
+    T fmin = f[0][0][0][k], fmax = fmin;
+    for (int c = 1; c < 8; ++c) {
+      const T x = f[c >> 2][(c >> 1) & 1][c & 1][k];
+      fmin = x < fmin ? x : fmin;
+      fmax = x > fmax ? x : fmax;
+    }
+    const T low = fsub(fmin, s.eps[k]), high = fadd(fmax, s.eps[k]);
+    if (low > s.d || high < -s.d) return BoxVerdict::excluded;
+    // Contact up to `delta`, and up to the rounding bound, which no subdivision can resolve.
+    const T reach = fadd(fadd(s.d, s.delta), fmul(T(2), s.eps[k]));
+    within_tolerance = within_tolerance && high <= reach && low >= -reach;
+  }
+  const bool finest = box.level[0] >= s.max_level && box.level[1] >= s.max_level && box.level[2] >= s.max_level;
+  if (within_tolerance || finest) return BoxVerdict::accepted;
+  // Split the dimension along which F varies most (time first on ties).
+  int split = -1;
+  T best = T(-1);
+  for (int k = 0; k < 3; ++k) {
+    if (box.level[k] >= s.max_level) continue;
+    T spread = T(0);
+    for (int c = 0; c < 8; ++c) {
+      if ((c >> (2 - k)) & 1) continue;  // corners on the low side of dimension k
+      const int c_hi = c | (1 << (2 - k));
+      const Vec3<T> diff = vsub(f[c_hi >> 2][(c_hi >> 1) & 1][c_hi & 1], f[c >> 2][(c >> 1) & 1][c & 1]);
+      const T w = max_component(abs(diff));
+      spread = w > spread ? w : spread;
+    }
+    if (spread > best) {
+      best = spread;
+      split = k;
+    }
+  }
+  return static_cast<BoxVerdict>(static_cast<int>(BoxVerdict::split_t) + split);
+}
+
+/// The search over boxes, in rounds: take the (up to) kBatch earliest boxes, examine them all
+/// (apart, so that a warp's lanes can do it together), then apply the verdicts in time order. A
+/// box that passes is the contact when every earlier box of its round was excluded (then no
+/// contact can come before it: everything earlier is excluded); otherwise it goes back, marked,
+/// and the earlier boxes' halves are looked at first. The same rounds run one box after the
+/// other on the CPU and in one GPU thread, so every backend gives the same answer.
+///
+/// Bounded memory: when the heap is full, its latest quarter is dropped and the earliest dropped
+/// time remembered. Once every box before that time is excluded, the search restarts from the
+/// whole domain with the times before it cut off (they are excluded already): a full heap costs
+/// time, not the false "hit at the current time" that giving up would answer (seen on a sliver
+/// triangle in cloth-ball, where that hit was at t = 0).
+template <class Policy, class T>
+struct InclusionSearch {
+  static_assert(Policy::kMaxBoxes >= 2, "lwsccd: InclusionCcd policy: kMaxBoxes must be at least 2");
+  static_assert(Policy::kBatch >= 1 && Policy::kBatch <= 32, "lwsccd: InclusionCcd policy: kBatch must be in [1, 32]");
+  static constexpr std::uint64_t kNone = ~std::uint64_t(0);
+  enum class Round : std::uint8_t { examine, no_contact, gave_up };
+
+  BoxHeap<Policy::kMaxBoxes> heap;
+  DyadicBox batch[Policy::kBatch];
+  int batch_size = 0, examined = 0;
   std::uint64_t floor_key = 0, evicted_key = kNone;
   T t_floor = T(0);
-  BoxHeap<Policy::kMaxBoxes> heap;
-  heap.push(whole);
-  int examined = 0;
+
+  LWSCCD_HD void start() {
+    heap.size = 0;
+    heap.push(DyadicBox{{0, 0, 0}, {0, 0, 0}, 0});
+    examined = 0;
+    floor_key = 0;
+    evicted_key = kNone;
+    t_floor = T(0);
+  }
+  LWSCCD_HD T time_of(const DyadicBox& b) const {
+    return box_time_key(b) < floor_key ? t_floor : dyadic<T>(b.idx[0], b.level[0]);
+  }
+  /// Fills the next round's batch, restarting past dropped boxes when needed. On gave_up,
+  /// `result` holds the conservative answer.
+  LWSCCD_HD Round next_round(int max_iterations, CcdResult<T>& result) {
+    batch_size = 0;
+    while (batch_size < Policy::kBatch) {
+      if (heap.size == 0 || (evicted_key != kNone && box_time_key(heap.items[0]) >= evicted_key)) {
+        if (batch_size > 0) break;
+        if (evicted_key == kNone) return Round::no_contact;  // everything excluded
+        // No time excluded since the last restart: the heap is too small for this query.
+        if (evicted_key == floor_key) {
+          result = {true, t_floor, true};
+          return Round::gave_up;
+        }
+        floor_key = evicted_key;
+        t_floor = std::ldexp(static_cast<T>(floor_key), -40);  // a box's time: exact in T
+        evicted_key = kNone;
+        heap.size = 0;
+        heap.push(DyadicBox{{0, 0, 0}, {0, 0, 0}, 0});
+      }
+      const DyadicBox box = heap.pop();
+      if ((static_cast<std::uint64_t>(box.idx[0]) + 1) << (40 - box.level[0]) <= floor_key) continue;  // before the cut
+      batch[batch_size++] = box;
+    }
+    if (examined >= max_iterations) {
+      result = {true, time_of(batch[0]), true};  // the earliest time not excluded
+      return Round::gave_up;
+    }
+    for (int i = 0; i < batch_size; ++i) examined += batch[i].accepted ? 0 : 1;
+    return Round::examine;
+  }
+  /// Applies the round's verdicts in order; true when `result` is the answer.
+  LWSCCD_HD bool apply(const BoxVerdict* verdicts, bool vf, CcdResult<T>& result) {
+    bool split_before = false;
+    for (int i = 0; i < batch_size; ++i) {
+      const DyadicBox& box = batch[i];
+      if (verdicts[i] == BoxVerdict::excluded) continue;
+      if (verdicts[i] == BoxVerdict::accepted) {
+        if (!split_before) {
+          result = {true, time_of(box), false};
+          return true;
+        }
+        DyadicBox marked = box;
+        marked.accepted = 1;
+        keep(marked);
+        continue;
+      }
+      split_before = true;
+      const int split = static_cast<int>(verdicts[i]) - static_cast<int>(BoxVerdict::split_t);
+      for (int half = 0; half < 2; ++half) {
+        DyadicBox child = box;
+        child.idx[split] = box.idx[split] * 2 + static_cast<std::uint32_t>(half);
+        child.level[split] = static_cast<std::uint8_t>(box.level[split] + 1);
+        if (vf) {  // vertex-face: drop boxes entirely beyond u + v = 1 (exact integer test)
+          const std::uint64_t ulo = static_cast<std::uint64_t>(child.idx[1]) << (40 - child.level[1]);
+          const std::uint64_t vlo = static_cast<std::uint64_t>(child.idx[2]) << (40 - child.level[2]);
+          if (ulo + vlo > (std::uint64_t(1) << 40)) continue;
+        }
+        keep(child);
+      }
+    }
+    return false;
+  }
+  LWSCCD_HD void keep(const DyadicBox& b) {
+    if (heap.size == Policy::kMaxBoxes) {
+      const std::uint64_t dropped = heap.drop_latest_quarter();
+      evicted_key = dropped < evicted_key ? dropped : evicted_key;
+    }
+    // A box at or after a dropped time is searched again after the restart anyway.
+    if (evicted_key != kNone && box_time_key(b) >= evicted_key) return;
+    heap.push(b);
+  }
+};
+
+/// The whole search in one thread (the CPU, or one GPU thread per query).
+template <class Policy, class Q, class T>
+LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
+  const InclusionSetup<T> setup = inclusion_setup(q, params);
+  if (setup.separated) return {};
+  InclusionSearch<Policy, T> search;
+  search.start();
+  BoxVerdict verdicts[Policy::kBatch];
+  CcdResult<T> result;
   while (true) {
-    if (heap.size == 0 || (evicted_key != kNone && box_time_key(heap.items[0]) >= evicted_key)) {
-      if (evicted_key == kNone) return {};  // everything excluded
-      // No time excluded since the last restart: the heap is too small for this query.
-      if (evicted_key == floor_key) return {true, t_floor, true};
-      floor_key = evicted_key;
-      t_floor = std::ldexp(static_cast<T>(floor_key), -40);  // a box's time: exact in T
-      evicted_key = kNone;
-      heap.size = 0;
-      heap.push(whole);
-    }
-    const DyadicBox box = heap.pop();
-    if ((static_cast<std::uint64_t>(box.idx[0]) + 1) << (40 - box.level[0]) <= floor_key) continue;  // before the cut
-    const T toi = box_time_key(box) < floor_key ? t_floor : dyadic<T>(box.idx[0], box.level[0]);
-    if (++examined > params.max_iterations) return {true, toi, true};
-    T t[2], u[2], v[2];
-    T* dims[3] = {t, u, v};
-    for (int k = 0; k < 3; ++k) {
-      dims[k][0] = dyadic<T>(box.idx[k], box.level[k]);
-      dims[k][1] = dyadic<T>(box.idx[k] + 1, box.level[k]);
-    }
-    t[0] = toi;
-    if (time_filter && (box.level[0] > 0 || floor_key > 0)) {
-      T sub[4];
-      const T t_lo = t[0] > eta ? fsub(t[0], eta) : T(0);
-      const T t_hi = t[1] < fsub(T(1), eta) ? fadd(t[1], eta) : T(1);
-      bernstein_restrict(bern, t_lo, t_hi, sub);
-      if (same_sign_beyond(sub, bern_bound)) continue;
-    }
-    Vec3<T> f[2][2][2];
-    corner_values(q, t, u, v, f);
-    bool excluded = false, within_tolerance = true;
-    for (int k = 0; k < 3 && !excluded; ++k) {
-      T fmin = f[0][0][0][k], fmax = fmin;
-      for (int c = 1; c < 8; ++c) {
-        const T x = f[c >> 2][(c >> 1) & 1][c & 1][k];
-        fmin = x < fmin ? x : fmin;
-        fmax = x > fmax ? x : fmax;
-      }
-      const T low = fsub(fmin, eps[k]), high = fadd(fmax, eps[k]);
-      excluded = low > d || high < -d;
-      // Contact up to `delta`, and up to the rounding bound, which no subdivision can resolve.
-      const T reach = fadd(fadd(d, delta), fmul(T(2), eps[k]));
-      within_tolerance = within_tolerance && high <= reach && low >= -reach;
-    }
-    if (excluded) continue;
-    const bool finest = box.level[0] >= max_level && box.level[1] >= max_level && box.level[2] >= max_level;
-    if (within_tolerance || finest) return {true, toi, false};
-    // Split the dimension along which F varies most (time first on ties).
-    int split = -1;
-    T best = T(-1);
-    for (int k = 0; k < 3; ++k) {
-      if (box.level[k] >= max_level) continue;
-      T spread = T(0);
-      for (int c = 0; c < 8; ++c) {
-        if ((c >> (2 - k)) & 1) continue;  // corners on the low side of dimension k
-        const int c_hi = c | (1 << (2 - k));
-        const Vec3<T> diff = vsub(f[c_hi >> 2][(c_hi >> 1) & 1][c_hi & 1], f[c >> 2][(c >> 1) & 1][c & 1]);
-        const T w = max_component(abs(diff));
-        spread = w > spread ? w : spread;
-      }
-      if (spread > best) {
-        best = spread;
-        split = k;
-      }
-    }
-    for (int half = 0; half < 2; ++half) {
-      DyadicBox child = box;
-      child.idx[split] = box.idx[split] * 2 + static_cast<std::uint32_t>(half);
-      child.level[split] = static_cast<std::uint8_t>(box.level[split] + 1);
-      if (vf) {  // vertex-face: drop boxes entirely beyond u + v = 1 (exact integer test)
-        const std::uint64_t ulo = static_cast<std::uint64_t>(child.idx[1]) << (40 - child.level[1]);
-        const std::uint64_t vlo = static_cast<std::uint64_t>(child.idx[2]) << (40 - child.level[2]);
-        if (ulo + vlo > (std::uint64_t(1) << 40)) continue;
-      }
-      if (heap.size < Policy::kMaxBoxes) {
-        heap.push(child);
-      } else {
-        const std::uint64_t dropped = box_time_key(heap.push_evicting_latest(child));
-        evicted_key = dropped < evicted_key ? dropped : evicted_key;
-      }
-    }
+    const auto round = search.next_round(params.max_iterations, result);
+    if (round == InclusionSearch<Policy, T>::Round::no_contact) return {};
+    if (round == InclusionSearch<Policy, T>::Round::gave_up) return result;
+    for (int i = 0; i < search.batch_size; ++i)
+      verdicts[i] = examine_box(q, setup, search.batch[i], search.floor_key, search.t_floor);
+    if (search.apply(verdicts, setup.vf, result)) return result;
   }
 }
 
@@ -344,6 +458,23 @@ struct InclusionCcdT {
   }
 };
 using InclusionCcd = InclusionCcdT<>;
+
+namespace detail {
+/// Methods whose full test is InclusionCcd's search (alone, or behind the non-penetration
+/// filter): the GPU batch runs that search with a warp per query.
+template <class Method>
+struct inclusion_search_of : std::false_type {};
+template <class Policy>
+struct inclusion_search_of<InclusionCcdT<Policy>> : std::true_type {
+  using policy = Policy;
+  static constexpr bool filtered = false;
+};
+template <class Policy>
+struct inclusion_search_of<Filtered<InclusionCcdT<Policy>>> : std::true_type {
+  using policy = Policy;
+  static constexpr bool filtered = true;
+};
+}  // namespace detail
 
 template <class Policy>
 struct filtered_name<InclusionCcdT<Policy>> {

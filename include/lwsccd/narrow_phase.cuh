@@ -32,12 +32,14 @@ struct DeviceMeshFeatures {
 
 /// Knobs of the GPU narrow phase.
 struct NarrowPhasePolicy {
-  static constexpr int kBlock = 128;
+  static constexpr int kBlock = 128;               ///< threads per block, a thread per query
+  static constexpr int kSearchWarpsPerBlock = 4;   ///< InclusionCcd's searches: a warp per query
 };
 
 /// Runs a CCD method over device lists of candidate pairs. Methods with a quick_reject (the
 /// conservative inclusion method, filtered methods) run in two passes: the cheap first step on
-/// every pair, then the full test on the compacted survivors; the answers are the same. Owns its scratch and output buffers
+/// every pair, then the full test on the compacted survivors; the answers are the same. The
+/// inclusion method's full test runs a warp per query (its rounds of boxes on the lanes). Owns its scratch and output buffers
 /// (reused across calls; they only grow).
 template <class Method, class T, class Policy = NarrowPhasePolicy>
 class NarrowPhase {

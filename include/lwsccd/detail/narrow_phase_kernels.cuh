@@ -3,6 +3,7 @@
 
 #include <thrust/iterator/transform_iterator.h>
 
+#include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase.cuh"
 
 namespace lwsccd::gpu {
@@ -42,6 +43,67 @@ __global__ void quick_reject_kernel(MeshFeatures mesh, const Vec3<P>* x0, const 
     rejected = Method::quick_reject(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
   }
   keep[i] = rejected ? 0 : 1;
+}
+
+// Second pass for InclusionCcd (filtered or not): a warp per query. Lane 0 keeps the search's
+// heap in shared memory and forms each round; the lanes examine the round's boxes at once. Same
+// rounds as the one-thread search, hence the same answers, with a long search's latency cut by up
+// to the round size.
+template <class Method, bool kVertexFace, class T, class P, int kWarps>
+__global__ void __launch_bounds__(32 * kWarps)
+    inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* pairs,
+                          std::size_t n, CcdParams<T> params, FeatureHit<T>* staged, unsigned char* flags,
+                          unsigned long long* gave_up) {
+  using Traits = lwsccd::detail::inclusion_search_of<Method>;
+  using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
+  using Round = typename Search::Round;
+  using lwsccd::detail::BoxVerdict;
+  static_assert(Traits::policy::kBatch <= 32, "lwsccd: a round must fit in a warp");
+  // Raw storage: shared variables cannot have constructors; start() initializes a search.
+  __shared__ alignas(Search) unsigned char storage[kWarps * sizeof(Search)];
+  __shared__ BoxVerdict verdicts[kWarps][32];
+  __shared__ CcdResult<T> results[kWarps];
+  __shared__ int state[kWarps];
+  const int warp = static_cast<int>(threadIdx.x) / 32, lane = static_cast<int>(threadIdx.x) % 32;
+  Search& search = reinterpret_cast<Search*>(storage)[warp];
+  for (std::size_t i = static_cast<std::size_t>(blockIdx.x) * kWarps + warp; i < n;
+       i += static_cast<std::size_t>(gridDim.x) * kWarps) {
+    const std::pair<index_t, index_t> p = pairs[i];
+    CcdResult<T> r;
+    auto solve = [&](const auto& q) {
+      if (Traits::filtered && !non_penetration_filter(q, params)) return;
+      const auto setup = lwsccd::detail::inclusion_setup(q, params);
+      if (setup.separated) return;
+      if (lane == 0) search.start();
+      __syncwarp();
+      while (true) {
+        if (lane == 0) state[warp] = static_cast<int>(search.next_round(params.max_iterations, results[warp]));
+        __syncwarp();
+        const Round round = static_cast<Round>(state[warp]);
+        if (round != Round::examine) {
+          if (round == Round::gave_up) r = results[warp];
+          return;
+        }
+        if (lane < search.batch_size)
+          verdicts[warp][lane] = lwsccd::detail::examine_box(q, setup, search.batch[lane], search.floor_key, search.t_floor);
+        __syncwarp();
+        if (lane == 0) state[warp] = search.apply(verdicts[warp], setup.vf, results[warp]) ? 1 : 0;
+        __syncwarp();
+        const bool done = state[warp] != 0;
+        if (done) r = results[warp];
+        __syncwarp();  // everyone has read before lane 0 writes again
+        if (done) return;
+      }
+    };
+    if constexpr (kVertexFace) solve(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second));
+    else solve(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second));
+    if (lane == 0) {
+      staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
+      flags[i] = r.hit ? 1 : 0;
+      if (r.gave_up) atomicAdd(gave_up, 1ull);
+    }
+    __syncwarp();
+  }
 }
 
 template <class T>
@@ -147,9 +209,16 @@ void NarrowPhase<Method, T, Policy>::run_list(const MeshFeatures& mesh, const Ve
       tested = static_cast<std::size_t>(kept);
     }
     if (tested == 0) continue;
-    const unsigned blocks = static_cast<unsigned>((tested + Policy::kBlock - 1) / Policy::kBlock);
-    detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, stream>>>(
-        mesh, x0, x1, chunk_pairs, tested, params, staged_.data(), flags_.data(), counters_.data() + 1);
+    if constexpr (lwsccd::detail::inclusion_search_of<Method>::value) {
+      constexpr int kWarps = Policy::kSearchWarpsPerBlock;
+      const unsigned blocks = static_cast<unsigned>((tested + kWarps - 1) / kWarps);
+      detail::inclusion_warp_kernel<Method, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, stream>>>(
+          mesh, x0, x1, chunk_pairs, tested, params, staged_.data(), flags_.data(), counters_.data() + 1);
+    } else {
+      const unsigned blocks = static_cast<unsigned>((tested + Policy::kBlock - 1) / Policy::kBlock);
+      detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, stream>>>(
+          mesh, x0, x1, chunk_pairs, tested, params, staged_.data(), flags_.data(), counters_.data() + 1);
+    }
     LWSCCD_CUDA_CHECK_LAUNCH();
     std::size_t bytes = scratch_.size();
     LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(scratch_.data(), bytes, staged_.data(), flags_.data(), out.data() + count,
