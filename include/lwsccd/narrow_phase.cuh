@@ -52,37 +52,65 @@ class NarrowPhase {
   explicit NarrowPhase(std::size_t chunk_pairs = std::size_t(1) << 22, std::size_t initial_capacity = 1 << 16)
       : chunk_(std::max<std::size_t>(chunk_pairs, 1)), initial_capacity_(std::max<std::size_t>(initial_capacity, 1)) {}
 
-  /// Tests `num_vf` vertex-face and `num_ee` edge-edge pairs (device arrays of id pairs).
-  /// Synchronizes once per chunk (to size the output); the hits stay on the device until
+  /// Tests `num_vf` vertex-face and `num_ee` edge-edge pairs (device arrays of id pairs). The
+  /// two lists run on streams of their own, overlapping; `stream` is ordered before and after
+  /// them. Synchronizes once per chunk (to size the outputs); the hits stay on the device until
   /// download().
   template <class P>
   void run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* vf, std::size_t num_vf,
            const Pair* ee, std::size_t num_ee, const CcdParams<T>& params, cudaStream_t stream = nullptr);
 
-  std::size_t num_vf_hits() const { return vf_count_; }
-  std::size_t num_ee_hits() const { return ee_count_; }
+  NarrowPhase(const NarrowPhase&) = delete;
+  NarrowPhase& operator=(const NarrowPhase&) = delete;
+  ~NarrowPhase() {
+    for (auto& l : lists_) {
+      if (l.stream) cudaStreamDestroy(l.stream);
+      if (l.done) cudaEventDestroy(l.done);
+    }
+    if (start_) cudaEventDestroy(start_);
+  }
+
+  std::size_t num_vf_hits() const { return lists_[0].count; }
+  std::size_t num_ee_hits() const { return lists_[1].count; }
   T earliest_toi() const { return earliest_; }
   std::size_t gave_up() const { return gave_up_; }
   /// Copies the hits to the host, sorted like the CPU backend's.
   NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
   std::size_t device_bytes() const {
-    return vf_hits_.capacity_bytes() + ee_hits_.capacity_bytes() + staged_.capacity_bytes() + flags_.capacity_bytes() +
-           scratch_.capacity_bytes() + pair_scratch_.capacity_bytes() + survivors_.capacity_bytes() +
-           counters_.capacity_bytes() + toi_.capacity_bytes();
+    std::size_t bytes = toi_.capacity_bytes() + reduce_scratch_.capacity_bytes();
+    for (const auto& l : lists_)
+      bytes += l.hits.capacity_bytes() + l.staged.capacity_bytes() + l.flags.capacity_bytes() + l.scratch.capacity_bytes() +
+               l.survivors.capacity_bytes() + l.counters.capacity_bytes();
+    return bytes;
   }
 
  private:
+  // One list's buffers (vertex-face or edge-edge) and its stream.
+  struct List {
+    DeviceBuffer<FeatureHit<T>> hits, staged;
+    DeviceBuffer<unsigned char> flags, scratch;
+    DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
+    DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up
+    std::size_t count = 0, num_survivors = 0, tested = 0;
+    const Pair* to_test = nullptr;  ///< survivors, or the input pairs for one-pass methods
+    cudaStream_t stream = nullptr;
+    cudaEvent_t done = nullptr;
+  };
+
+  void ensure_streams();
   template <class P, bool kVertexFace>
-  void run_list(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs, std::size_t n,
-                const CcdParams<T>& params, DeviceBuffer<FeatureHit<T>>& out, std::size_t& count, cudaStream_t stream);
+  void first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs, std::size_t n,
+                  const CcdParams<T>& params, List& list);
+  template <class P, bool kVertexFace>
+  void launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params, List& list,
+                    std::size_t begin, std::size_t m);
 
   std::size_t chunk_, initial_capacity_;
-  DeviceBuffer<FeatureHit<T>> vf_hits_, ee_hits_, staged_;
-  DeviceBuffer<unsigned char> flags_, scratch_, pair_scratch_;
-  DeviceBuffer<unsigned long long> survivors_;  ///< pairs left after Method::quick_reject (two-pass methods)
-  DeviceBuffer<unsigned long long> counters_;  ///< [0]: selected in the chunk, [1]: gave up
+  List lists_[2];  ///< vertex-face, edge-edge
+  cudaEvent_t start_ = nullptr;
   DeviceBuffer<T> toi_;
-  std::size_t vf_count_ = 0, ee_count_ = 0, gave_up_ = 0;
+  DeviceBuffer<unsigned char> reduce_scratch_;
+  std::size_t gave_up_ = 0;
   T earliest_ = T(1);
 };
 

@@ -119,115 +119,170 @@ struct MinOp {
 }  // namespace detail
 
 template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::ensure_streams() {
+  if (start_) return;
+  LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&start_, cudaEventDisableTiming));
+  for (auto& l : lists_) {
+    LWSCCD_CUDA_CHECK(cudaStreamCreateWithFlags(&l.stream, cudaStreamNonBlocking));
+    LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&l.done, cudaEventDisableTiming));
+  }
+}
+
+template <class Method, class T, class Policy>
 template <class P>
 void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                          const Pair* vf, std::size_t num_vf, const Pair* ee, std::size_t num_ee,
                                          const CcdParams<T>& params, cudaStream_t stream) {
-  vf_count_ = ee_count_ = gave_up_ = 0;
+  ensure_streams();
+  gave_up_ = 0;
   earliest_ = T(1);
-  counters_.resize_discard(2);
-  LWSCCD_CUDA_CHECK(cudaMemsetAsync(counters_.data(), 0, 2 * sizeof(unsigned long long), stream));
-  run_list<P, true>(mesh.view(), x0, x1, vf, num_vf, params, vf_hits_, vf_count_, stream);
-  run_list<P, false>(mesh.view(), x0, x1, ee, num_ee, params, ee_hits_, ee_count_, stream);
-  unsigned long long gave = 0;
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&gave, counters_.data() + 1, sizeof gave, cudaMemcpyDeviceToHost, stream));
-  // Earliest TOI over both lists.
+  const MeshFeatures view = mesh.view();
+  // The lists start once `stream`'s work (positions, pairs) is done.
+  LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
+  for (auto& l : lists_) {
+    l.count = l.tested = 0;
+    l.counters.resize_discard(2);
+    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 2 * sizeof(unsigned long long), l.stream));
+  }
+  first_pass<P, true>(view, x0, x1, vf, num_vf, params, lists_[0]);
+  first_pass<P, false>(view, x0, x1, ee, num_ee, params, lists_[1]);
+  // The full test, a chunk of each list at a time on its stream: the lists overlap, and a list's
+  // long searches hold up only its own chunk.
+  // Two-pass methods: room for every survivor at once; one-pass methods grow chunk by chunk.
+  for (auto& l : lists_) {
+    const std::size_t room = lwsccd::detail::has_quick_reject<Method>::value ? l.num_survivors : 0;
+    if (l.hits.size() < std::max(initial_capacity_, room)) l.hits.resize_discard(std::max(initial_capacity_, room));
+  }
+  while (lists_[0].tested < lists_[0].num_survivors || lists_[1].tested < lists_[1].num_survivors) {
+    std::size_t launched[2] = {0, 0};
+    for (int k = 0; k < 2; ++k) {
+      List& l = lists_[k];
+      const std::size_t m = std::min(chunk_, l.num_survivors - l.tested);
+      if (m == 0) continue;
+      if (k == 0) launch_chunk<P, true>(view, x0, x1, params, l, l.tested, m);
+      else launch_chunk<P, false>(view, x0, x1, params, l, l.tested, m);
+      launched[k] = m;
+    }
+    for (int k = 0; k < 2; ++k) {
+      if (!launched[k]) continue;
+      List& l = lists_[k];
+      unsigned long long selected = 0;
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&selected, l.counters.data(), sizeof selected, cudaMemcpyDeviceToHost, l.stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
+      l.count += static_cast<std::size_t>(selected);
+      l.tested += launched[k];
+    }
+  }
+  // Earliest TOI over both lists, and the bounded-work count.
   toi_.resize_discard(1);
-  for (int list = 0; list < 2; ++list) {
-    const std::size_t count = list == 0 ? vf_count_ : ee_count_;
-    if (count == 0) continue;
-    const FeatureHit<T>* hits = list == 0 ? vf_hits_.data() : ee_hits_.data();
-    const auto tois = thrust::make_transform_iterator(hits, detail::HitToi<T>{});
+  for (auto& l : lists_) {
+    unsigned long long gave = 0;
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&gave, l.counters.data() + 1, sizeof gave, cudaMemcpyDeviceToHost, l.stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
+    gave_up_ += static_cast<std::size_t>(gave);
+    if (l.count == 0) continue;
+    const auto tois = thrust::make_transform_iterator(l.hits.data(), detail::HitToi<T>{});
     std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, tois, toi_.data(), static_cast<std::int64_t>(count),
+    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, tois, toi_.data(), static_cast<std::int64_t>(l.count),
                                                 detail::MinOp<T>{}, T(1), stream));
-    scratch_.resize_discard(std::max(bytes, scratch_.size()));
-    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(scratch_.data(), bytes, tois, toi_.data(),
-                                                static_cast<std::int64_t>(count), detail::MinOp<T>{}, T(1), stream));
+    reduce_scratch_.resize_discard(std::max(bytes, reduce_scratch_.size()));
+    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(reduce_scratch_.data(), bytes, tois, toi_.data(),
+                                                static_cast<std::int64_t>(l.count), detail::MinOp<T>{}, T(1), stream));
     T list_min = T(1);
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&list_min, toi_.data(), sizeof(T), cudaMemcpyDeviceToHost, stream));
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
     earliest_ = list_min < earliest_ ? list_min : earliest_;
   }
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  gave_up_ = static_cast<std::size_t>(gave);
 }
 
+// Pass 1 of two-pass methods, on the list's stream: the cheap first step for every pair, chunk
+// by chunk, and the survivors compacted into one list (so that the full test runs on all of them
+// at once). One-pass methods test the input pairs directly.
 template <class Method, class T, class Policy>
 template <class P, bool kVertexFace>
-void NarrowPhase<Method, T, Policy>::run_list(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                              const Pair* pairs, std::size_t n, const CcdParams<T>& params,
-                                              DeviceBuffer<FeatureHit<T>>& out, std::size_t& count,
-                                              cudaStream_t stream) {
-  count = 0;
-  if (n == 0) return;
-  const std::size_t chunk = std::min(chunk_, n);
-  staged_.resize_discard(std::max(staged_.size(), chunk));
-  flags_.resize_discard(std::max(flags_.size(), chunk));
-  if (out.size() < initial_capacity_) out.resize_discard(initial_capacity_);
-  std::size_t select_bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, select_bytes, staged_.data(), flags_.data(), out.data(),
-                                               counters_.data(), static_cast<std::int64_t>(chunk), stream));
-  scratch_.resize_discard(std::max(select_bytes, scratch_.size()));
-  for (std::size_t begin = 0; begin < n; begin += chunk) {
-    const std::size_t m = std::min(chunk, n - begin);
-    // Grow (keeping what is there) until a whole chunk of hits fits: nothing is ever dropped.
-    if (out.size() - count < m) {
-      std::size_t capacity = out.size();
-      while (capacity - count < m) capacity *= 2;
-      DeviceBuffer<FeatureHit<T>> bigger(capacity);
-      if (count)
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), out.data(), count * sizeof(FeatureHit<T>),
-                                          cudaMemcpyDeviceToDevice, stream));
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-      out = std::move(bigger);
-    }
-    const Pair* chunk_pairs = pairs + begin;
-    std::size_t tested = m;
-    if constexpr (lwsccd::detail::has_quick_reject<Method>::value) {
-      // Two passes: the cheap first step for every pair, then the full method on the survivors
-      // only, compacted so that whole warps run the long searches together.
-      survivors_.resize_discard(std::max(survivors_.size(), chunk));
-      const unsigned quick_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-      detail::quick_reject_kernel<Method, kVertexFace, T, P><<<quick_blocks, Policy::kBlock, 0, stream>>>(
-          mesh, x0, x1, chunk_pairs, m, params, flags_.data());
+void NarrowPhase<Method, T, Policy>::first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                const Pair* pairs, std::size_t n, const CcdParams<T>& params, List& list) {
+  list.num_survivors = n;
+  list.to_test = pairs;
+  if constexpr (lwsccd::detail::has_quick_reject<Method>::value) {
+    list.num_survivors = 0;
+    if (n == 0) return;
+    const std::size_t chunk = std::min(chunk_, n);
+    list.flags.resize_discard(std::max(list.flags.size(), chunk));
+    // Compacted as 64-bit words: std::pair's assignment is host-only (a pair of 32-bit ids is
+    // 8 bytes, and device allocations and chunk offsets are 8-byte aligned).
+    static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
+    const auto* words = reinterpret_cast<const unsigned long long*>(pairs);
+    for (std::size_t begin = 0; begin < n; begin += chunk) {
+      const std::size_t m = std::min(chunk, n - begin);
+      const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+      detail::quick_reject_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+          mesh, x0, x1, pairs + begin, m, params, list.flags.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
-      // Compacted as 64-bit words: std::pair's assignment is host-only (a pair of 32-bit ids is
-      // 8 bytes, and device allocations and chunk offsets are 8-byte aligned).
-      static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
-      const auto* words = reinterpret_cast<const unsigned long long*>(chunk_pairs);
-      std::size_t pair_bytes = 0;
-      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, pair_bytes, words, flags_.data(), survivors_.data(),
-                                                   counters_.data(), static_cast<std::int64_t>(m), stream));
-      pair_scratch_.resize_discard(std::max(pair_bytes, pair_scratch_.size()));
-      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(pair_scratch_.data(), pair_bytes, words, flags_.data(),
-                                                   survivors_.data(), counters_.data(), static_cast<std::int64_t>(m), stream));
+      // Room for every pair of this chunk after those kept so far (grown keeping them).
+      if (list.survivors.size() < list.num_survivors + m) {
+        DeviceBuffer<unsigned long long> bigger(std::max(list.num_survivors + m, 2 * list.survivors.size()));
+        if (list.num_survivors)
+          LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.survivors.data(), list.num_survivors * sizeof(unsigned long long),
+                                            cudaMemcpyDeviceToDevice, list.stream));
+        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+        list.survivors = std::move(bigger);
+      }
+      std::size_t bytes = 0;
+      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, words + begin, list.flags.data(),
+                                                   list.survivors.data() + list.num_survivors, list.counters.data(),
+                                                   static_cast<std::int64_t>(m), list.stream));
+      list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
+      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, words + begin, list.flags.data(),
+                                                   list.survivors.data() + list.num_survivors, list.counters.data(),
+                                                   static_cast<std::int64_t>(m), list.stream));
       unsigned long long kept = 0;
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&kept, counters_.data(), sizeof kept, cudaMemcpyDeviceToHost, stream));
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-      chunk_pairs = reinterpret_cast<const Pair*>(survivors_.data());
-      tested = static_cast<std::size_t>(kept);
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&kept, list.counters.data(), sizeof kept, cudaMemcpyDeviceToHost, list.stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+      list.num_survivors += static_cast<std::size_t>(kept);
     }
-    if (tested == 0) continue;
-    if constexpr (lwsccd::detail::inclusion_search_of<Method>::value) {
-      constexpr int kWarps = Policy::kSearchWarpsPerBlock;
-      const unsigned blocks = static_cast<unsigned>((tested + kWarps - 1) / kWarps);
-      detail::inclusion_warp_kernel<Method, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, stream>>>(
-          mesh, x0, x1, chunk_pairs, tested, params, staged_.data(), flags_.data(), counters_.data() + 1);
-    } else {
-      const unsigned blocks = static_cast<unsigned>((tested + Policy::kBlock - 1) / Policy::kBlock);
-      detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, stream>>>(
-          mesh, x0, x1, chunk_pairs, tested, params, staged_.data(), flags_.data(), counters_.data() + 1);
-    }
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    std::size_t bytes = scratch_.size();
-    LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(scratch_.data(), bytes, staged_.data(), flags_.data(), out.data() + count,
-                                                 counters_.data(), static_cast<std::int64_t>(tested), stream));
-    unsigned long long selected = 0;
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&selected, counters_.data(), sizeof selected, cudaMemcpyDeviceToHost, stream));
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-    count += static_cast<std::size_t>(selected);
+    list.to_test = reinterpret_cast<const Pair*>(list.survivors.data());
   }
+}
+
+// The full test of to_test[begin, begin + m) on the list's stream, hits compacted after the
+// list's earlier ones (hits has room for every survivor).
+template <class Method, class T, class Policy>
+template <class P, bool kVertexFace>
+void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                  const CcdParams<T>& params, List& list, std::size_t begin, std::size_t m) {
+  list.staged.resize_discard(std::max(list.staged.size(), m));
+  list.flags.resize_discard(std::max(list.flags.size(), m));
+  const Pair* pairs = list.to_test + begin;
+  if constexpr (lwsccd::detail::inclusion_search_of<Method>::value) {
+    constexpr int kWarps = Policy::kSearchWarpsPerBlock;
+    const unsigned blocks = static_cast<unsigned>((m + kWarps - 1) / kWarps);
+    detail::inclusion_warp_kernel<Method, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
+        mesh, x0, x1, pairs, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
+  } else {
+    const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+    detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+        mesh, x0, x1, pairs, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
+  }
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  if (list.hits.size() < list.count + m) {  // (one-pass methods: grown keeping the hits)
+    DeviceBuffer<FeatureHit<T>> bigger(std::max(list.count + m, 2 * list.hits.size()));
+    if (list.count)
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.hits.data(), list.count * sizeof(FeatureHit<T>),
+                                        cudaMemcpyDeviceToDevice, list.stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+    list.hits = std::move(bigger);
+  }
+  std::size_t bytes = 0;
+  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, list.staged.data(), list.flags.data(),
+                                               list.hits.data() + list.count, list.counters.data(),
+                                               static_cast<std::int64_t>(m), list.stream));
+  list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
+  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, list.staged.data(), list.flags.data(),
+                                               list.hits.data() + list.count, list.counters.data(),
+                                               static_cast<std::int64_t>(m), list.stream));
 }
 
 template <class Method, class T, class Policy>
@@ -238,8 +293,8 @@ NarrowPhaseResult<T> NarrowPhase<Method, T, Policy>::download(cudaStream_t strea
     if (count)
       LWSCCD_CUDA_CHECK(cudaMemcpyAsync(dst.data(), buffer.data(), count * sizeof(FeatureHit<T>), cudaMemcpyDeviceToHost, stream));
   };
-  fetch(vf_hits_, vf_count_, r.vf);
-  fetch(ee_hits_, ee_count_, r.ee);
+  fetch(lists_[0].hits, lists_[0].count, r.vf);
+  fetch(lists_[1].hits, lists_[1].count, r.ee);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
   std::sort(r.vf.begin(), r.vf.end());
   std::sort(r.ee.begin(), r.ee.end());
