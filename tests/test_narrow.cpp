@@ -54,7 +54,7 @@ struct TinyHeap {
   static constexpr int kBatch = 32;
 };
 struct SmallHeap {
-  static constexpr int kMaxBoxes = 16;
+  static constexpr int kMaxBoxes = 32;
   static constexpr int kBatch = 4;
 };
 
@@ -182,7 +182,7 @@ TEMPLATE_TEST_CASE("a full box heap costs time, not a wrong answer", "[narrow]",
   using T = TestType;
   CcdParams<T> params;
   params.max_iterations = 1 << 20;
-  // A heap of 16 boxes overflows soon; the search drops the latest boxes and searches again
+  // A store of 32 boxes overflows soon; the search drops the latest boxes and searches again
   // from where the excluded part reaches: the same answers as with room to spare.
   const auto edges = InclusionCcdT<SmallHeap>::edge_edge(crossing_edges<T>(T(1), T(-3)), params);  // touch at t = 0.25
   REQUIRE(edges.hit);

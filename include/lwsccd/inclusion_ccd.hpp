@@ -40,7 +40,7 @@ namespace lwsccd {
 
 /// Tuning knobs of InclusionCcd.
 struct InclusionPolicy {
-  static constexpr int kMaxBoxes = 256;  ///< live boxes per query (a heap: 4 KiB on the GPU)
+  static constexpr int kMaxBoxes = 256;  ///< live boxes per query (sorted, double-buffered: 10 KiB on the GPU)
   static constexpr int kBatch = 32;      ///< boxes examined per round: a warp's lanes on the GPU, in turn elsewhere
 };
 
@@ -57,77 +57,20 @@ struct DyadicBox {
 LWSCCD_HD inline std::uint64_t box_time_key(const DyadicBox& b) {
   return static_cast<std::uint64_t>(b.idx[0]) << (40 - b.level[0]);
 }
-// Heap order: earlier first; at equal times the smaller (deeper) box first, so that ties dive.
+// The search's order: earlier first; at equal times the smaller (deeper) box first, so that
+// ties dive; then any fixed order, so that the order is total (two distinct boxes are never
+// tied) and "the k earliest boxes" is the same set however they are stored.
 LWSCCD_HD inline bool box_before(const DyadicBox& a, const DyadicBox& b) {
   const std::uint64_t ka = box_time_key(a), kb = box_time_key(b);
   if (ka != kb) return ka < kb;
-  return a.level[0] + a.level[1] + a.level[2] > b.level[0] + b.level[1] + b.level[2];
+  const int la = a.level[0] + a.level[1] + a.level[2], lb = b.level[0] + b.level[1] + b.level[2];
+  if (la != lb) return la > lb;
+  for (int k = 0; k < 3; ++k)
+    if (a.level[k] != b.level[k]) return a.level[k] < b.level[k];
+  for (int k = 0; k < 3; ++k)
+    if (a.idx[k] != b.idx[k]) return a.idx[k] < b.idx[k];
+  return false;
 }
-
-// The heap's slots are written before they are read; GCC cannot see it through the indices.
-#if defined(__GNUC__) && !defined(__clang__) && !defined(__CUDACC__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#define LWSCCD_HEAP_DIAGNOSTICS_PUSHED
-#endif
-template <int kCapacity>
-struct BoxHeap {
-  DyadicBox items[kCapacity];
-  int size = 0;
-  LWSCCD_HD bool push(const DyadicBox& b) {
-    if (size == kCapacity) return false;
-    int i = size++;
-    while (i > 0) {
-      const int parent = (i - 1) / 2;
-      if (!box_before(b, items[parent])) break;
-      items[i] = items[parent];
-      i = parent;
-    }
-    items[i] = b;
-    return true;
-  }
-  LWSCCD_HD DyadicBox pop() {
-    const DyadicBox top = items[0];
-    const DyadicBox last = items[--size];
-    int i = 0;
-    while (true) {
-      int child = 2 * i + 1;
-      if (child >= size) break;
-      if (child + 1 < size && child + 1 < kCapacity && box_before(items[child + 1], items[child])) ++child;
-      if (!box_before(items[child], last)) break;
-      items[i] = items[child];
-      i = child;
-    }
-    if (size > 0) items[i] = last;
-    return top;
-  }
-  /// Makes room when full: keeps the earliest three quarters (as a sorted array, which is a
-  /// heap) and drops the rest; returns the time key of the earliest box dropped. One pass of
-  /// pops per quarter of a heap, instead of a search for the latest box at every push.
-  LWSCCD_HD std::uint64_t drop_latest_quarter() {
-    const int n = size, keep = n - (n + 3) / 4;
-    for (int j = 0; j < keep; ++j) {
-      const DyadicBox earliest = pop();
-      items[n - 1 - j] = earliest;  // the slot pop() just freed: descending from the end
-    }
-    const std::uint64_t dropped = box_time_key(items[0]);  // the earliest of the rest
-    // Ascending into the front (the ranges overlap when more than half is kept: swap inwards
-    // to reverse the kept block, then move it down).
-    for (int a = n - keep, b = n - 1; a < b; ++a, --b) {
-      const DyadicBox x = items[a];
-      items[a] = items[b];
-      items[b] = x;
-    }
-    for (int j = 0; j < keep; ++j) items[j] = items[n - keep + j];
-    size = keep;
-    return dropped;
-  }
-};
-
-#ifdef LWSCCD_HEAP_DIAGNOSTICS_PUSHED
-#pragma GCC diagnostic pop
-#undef LWSCCD_HEAP_DIAGNOSTICS_PUSHED
-#endif
 
 template <class T>
 LWSCCD_HD T dyadic(std::uint32_t idx, int level) {
@@ -308,31 +251,45 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
 /// (apart, so that a warp's lanes can do it together), then apply the verdicts in time order. A
 /// box that passes is the contact when every earlier box of its round was excluded (then no
 /// contact can come before it: everything earlier is excluded); otherwise it goes back, marked,
-/// and the earlier boxes' halves are looked at first. The same rounds run one box after the
-/// other on the CPU and in one GPU thread, so every backend gives the same answer.
+/// and the earlier boxes' halves are looked at first. The live boxes are kept sorted (by
+/// box_before, a total order), the round's new boxes merged in: one thread does it in turn here,
+/// a warp does it in parallel on the GPU (narrow_phase_kernels.cuh), with the same sets, rounds and
+/// answers.
 ///
-/// Bounded memory: when the heap is full, its latest quarter is dropped and the earliest dropped
-/// time remembered. Once every box before that time is excluded, the search restarts from the
-/// whole domain with the times before it cut off (they are excluded already): a full heap costs
-/// time, not the false "hit at the current time" that giving up would answer (seen on a sliver
-/// triangle in cloth-ball, where that hit was at t = 0).
+/// Bounded memory: when more than kMaxBoxes boxes are live after a round, only the earliest
+/// three quarters are kept and the earliest dropped time is remembered. Once every box before that
+/// time is excluded, the search restarts from the whole domain with the times before it cut off
+/// (they are excluded already): a full store costs time, not the false "hit at the current time"
+/// that giving up would answer (seen on a sliver triangle in cloth-ball, where that hit was at
+/// t = 0).
 template <class Policy, class T>
 struct InclusionSearch {
   static_assert(Policy::kMaxBoxes >= 2, "lwsccd: InclusionCcd policy: kMaxBoxes must be at least 2");
   static_assert(Policy::kBatch >= 1 && Policy::kBatch <= 32, "lwsccd: InclusionCcd policy: kBatch must be in [1, 32]");
+  static constexpr int kBatch = Policy::kBatch;
+  static constexpr int kCapacity = Policy::kMaxBoxes;
+  static constexpr int kKeep = kCapacity - kCapacity / 4;  ///< kept when more than kCapacity are live
+  static constexpr int kFresh = 2 * kBatch;                ///< new boxes of a round, at most
+  static constexpr int kRoom = kCapacity + kFresh;
   static constexpr std::uint64_t kNone = ~std::uint64_t(0);
   enum class Round : std::uint8_t { examine, no_contact, gave_up };
 
-  BoxHeap<Policy::kMaxBoxes> heap;
-  DyadicBox batch[Policy::kBatch];
-  int batch_size = 0, examined = 0;
+  DyadicBox items[2][kRoom];  ///< live boxes, sorted: items[current][head, head + size)
+  int current = 0, head = 0, size = 0, batch_size = 0, examined = 0;
   std::uint64_t floor_key = 0, evicted_key = kNone;
   T t_floor = T(0);
 
+  LWSCCD_HD const DyadicBox* batch() const { return items[current] + head - batch_size; }
+  LWSCCD_HD const DyadicBox* live() const { return items[current] + head; }
+
+  LWSCCD_HD void restart_whole() {
+    current = head = 0;
+    size = 1;
+    items[0][0] = DyadicBox{{0, 0, 0}, {0, 0, 0}, 0};
+  }
   LWSCCD_HD void start() {
-    heap.size = 0;
-    heap.push(DyadicBox{{0, 0, 0}, {0, 0, 0}, 0});
-    examined = 0;
+    restart_whole();
+    batch_size = examined = 0;
     floor_key = 0;
     evicted_key = kNone;
     t_floor = T(0);
@@ -340,76 +297,110 @@ struct InclusionSearch {
   LWSCCD_HD T time_of(const DyadicBox& b) const {
     return box_time_key(b) < floor_key ? t_floor : dyadic<T>(b.idx[0], b.level[0]);
   }
-  /// Fills the next round's batch, restarting past dropped boxes when needed. On gave_up,
+  /// Takes the next round's boxes (restarting past dropped boxes when needed). On gave_up,
   /// `result` holds the conservative answer.
   LWSCCD_HD Round next_round(int max_iterations, CcdResult<T>& result) {
-    batch_size = 0;
-    while (batch_size < Policy::kBatch) {
-      if (heap.size == 0 || (evicted_key != kNone && box_time_key(heap.items[0]) >= evicted_key)) {
-        if (batch_size > 0) break;
-        if (evicted_key == kNone) return Round::no_contact;  // everything excluded
-        // No time excluded since the last restart: the heap is too small for this query.
-        if (evicted_key == floor_key) {
-          result = {true, t_floor, true};
-          return Round::gave_up;
-        }
-        floor_key = evicted_key;
-        t_floor = std::ldexp(static_cast<T>(floor_key), -40);  // a box's time: exact in T
-        evicted_key = kNone;
-        heap.size = 0;
-        heap.push(DyadicBox{{0, 0, 0}, {0, 0, 0}, 0});
+    while (size == 0 || (evicted_key != kNone && box_time_key(items[current][head]) >= evicted_key)) {
+      if (evicted_key == kNone) return Round::no_contact;  // everything excluded
+      // No time excluded since the last restart: the store is too small for this query.
+      if (evicted_key == floor_key) {
+        result = {true, t_floor, true};
+        return Round::gave_up;
       }
-      const DyadicBox box = heap.pop();
-      if ((static_cast<std::uint64_t>(box.idx[0]) + 1) << (40 - box.level[0]) <= floor_key) continue;  // before the cut
-      batch[batch_size++] = box;
+      floor_key = evicted_key;
+      t_floor = std::ldexp(static_cast<T>(floor_key), -40);  // a box's time: exact in T
+      evicted_key = kNone;
+      restart_whole();
     }
+    const DyadicBox* first = items[current] + head;
+    int k = 0;
+    while (k < kBatch && k < size && (evicted_key == kNone || box_time_key(first[k]) < evicted_key)) ++k;
+    batch_size = k;
+    head += k;
+    size -= k;
     if (examined >= max_iterations) {
-      result = {true, time_of(batch[0]), true};  // the earliest time not excluded
+      result = {true, time_of(first[0]), true};  // the earliest time not excluded
       return Round::gave_up;
     }
-    for (int i = 0; i < batch_size; ++i) examined += batch[i].accepted ? 0 : 1;
+    for (int i = 0; i < k; ++i) examined += first[i].accepted ? 0 : 1;
     return Round::examine;
   }
-  /// Applies the round's verdicts in order; true when `result` is the answer.
-  LWSCCD_HD bool apply(const BoxVerdict* verdicts, bool vf, CcdResult<T>& result) {
-    bool split_before = false;
-    for (int i = 0; i < batch_size; ++i) {
-      const DyadicBox& box = batch[i];
-      if (verdicts[i] == BoxVerdict::excluded) continue;
-      if (verdicts[i] == BoxVerdict::accepted) {
-        if (!split_before) {
-          result = {true, time_of(box), false};
-          return true;
-        }
-        DyadicBox marked = box;
-        marked.accepted = 1;
-        keep(marked);
-        continue;
-      }
-      split_before = true;
-      const int split = static_cast<int>(verdicts[i]) - static_cast<int>(BoxVerdict::split_t);
-      for (int half = 0; half < 2; ++half) {
-        DyadicBox child = box;
-        child.idx[split] = box.idx[split] * 2 + static_cast<std::uint32_t>(half);
-        child.level[split] = static_cast<std::uint8_t>(box.level[split] + 1);
-        if (vf) {  // vertex-face: drop boxes entirely beyond u + v = 1 (exact integer test)
-          const std::uint64_t ulo = static_cast<std::uint64_t>(child.idx[1]) << (40 - child.level[1]);
-          const std::uint64_t vlo = static_cast<std::uint64_t>(child.idx[2]) << (40 - child.level[2]);
-          if (ulo + vlo > (std::uint64_t(1) << 40)) continue;
-        }
-        keep(child);
-      }
+  /// Whether the verdicts answer the query: the first accepted box of the round, if no box
+  /// before it was split. Returns its index, or -1.
+  LWSCCD_HD static int answer_index(const BoxVerdict* verdicts, int n) {
+    for (int i = 0; i < n; ++i) {
+      if (verdicts[i] == BoxVerdict::accepted) return i;
+      if (verdicts[i] != BoxVerdict::excluded) return -1;
     }
-    return false;
+    return -1;
   }
-  LWSCCD_HD void keep(const DyadicBox& b) {
-    if (heap.size == Policy::kMaxBoxes) {
-      const std::uint64_t dropped = heap.drop_latest_quarter();
-      evicted_key = dropped < evicted_key ? dropped : evicted_key;
+  /// The new boxes a verdict gives (0 to 2): the two halves of a split box, or an accepted box
+  /// marked; without those that cannot matter (beyond u + v = 1 for vertex-face, before the cut,
+  /// or at or after a dropped time: searched again after the restart).
+  LWSCCD_HD int fresh_boxes(const DyadicBox& box, BoxVerdict verdict, bool vf, DyadicBox out[2]) const {
+    int n = 0;
+    auto keep = [&](const DyadicBox& b) {
+      if ((static_cast<std::uint64_t>(b.idx[0]) + 1) << (40 - b.level[0]) <= floor_key) return;  // before the cut
+      if (evicted_key != kNone && box_time_key(b) >= evicted_key) return;
+      out[n++] = b;
+    };
+    if (verdict == BoxVerdict::excluded) return 0;
+    if (verdict == BoxVerdict::accepted) {
+      DyadicBox marked = box;
+      marked.accepted = 1;
+      keep(marked);
+      return n;
     }
-    // A box at or after a dropped time is searched again after the restart anyway.
-    if (evicted_key != kNone && box_time_key(b) >= evicted_key) return;
-    heap.push(b);
+    const int split = static_cast<int>(verdict) - static_cast<int>(BoxVerdict::split_t);
+    for (int half = 0; half < 2; ++half) {
+      DyadicBox child = box;
+      child.idx[split] = box.idx[split] * 2 + static_cast<std::uint32_t>(half);
+      child.level[split] = static_cast<std::uint8_t>(box.level[split] + 1);
+      if (vf) {  // vertex-face: drop boxes entirely beyond u + v = 1 (exact integer test)
+        const std::uint64_t ulo = static_cast<std::uint64_t>(child.idx[1]) << (40 - child.level[1]);
+        const std::uint64_t vlo = static_cast<std::uint64_t>(child.idx[2]) << (40 - child.level[2]);
+        if (ulo + vlo > (std::uint64_t(1) << 40)) continue;
+      }
+      keep(child);
+    }
+    return n;
+  }
+  /// One thread's round end: the answer, or the new boxes merged into the live ones (kept to the
+  /// earliest kKeep when more than kCapacity). True when `result` is the answer.
+  LWSCCD_HD bool apply(const BoxVerdict* verdicts, bool vf, CcdResult<T>& result) {
+    const DyadicBox* round = batch();
+    const int answer = answer_index(verdicts, batch_size);
+    if (answer >= 0) {
+      result = {true, time_of(round[answer]), false};
+      return true;
+    }
+    DyadicBox fresh[kFresh];
+    int nf = 0;
+    for (int i = 0; i < batch_size; ++i) nf += fresh_boxes(round[i], verdicts[i], vf, fresh + nf);
+    for (int i = 1; i < nf; ++i)  // insertion sort: at most 2 kBatch boxes
+      for (int j = i; j > 0 && box_before(fresh[j], fresh[j - 1]); --j) {
+        const DyadicBox x = fresh[j];
+        fresh[j] = fresh[j - 1];
+        fresh[j - 1] = x;
+      }
+    const DyadicBox* a = live();
+    DyadicBox* out = items[1 - current];
+    const int total = size + nf, limit = total > kCapacity ? kKeep : total;
+    int i = 0, j = 0;
+    for (int o = 0; o <= limit && o < total; ++o) {
+      const bool take_a = j == nf || (i < size && box_before(a[i], fresh[j]));
+      const DyadicBox& next = take_a ? a[i++] : fresh[j++];
+      if (o < limit) {
+        out[o] = next;
+      } else {  // the earliest dropped box
+        const std::uint64_t dropped = box_time_key(next);
+        evicted_key = dropped < evicted_key ? dropped : evicted_key;
+      }
+    }
+    current = 1 - current;
+    head = 0;
+    size = limit;
+    return false;
   }
 };
 
@@ -427,7 +418,7 @@ LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
     if (round == InclusionSearch<Policy, T>::Round::no_contact) return {};
     if (round == InclusionSearch<Policy, T>::Round::gave_up) return result;
     for (int i = 0; i < search.batch_size; ++i)
-      verdicts[i] = examine_box(q, setup, search.batch[i], search.floor_key, search.t_floor);
+      verdicts[i] = examine_box(q, setup, search.batch()[i], search.floor_key, search.t_floor);
     if (search.apply(verdicts, setup.vf, result)) return result;
   }
 }

@@ -33,7 +33,7 @@ struct DeviceMeshFeatures {
 /// Knobs of the GPU narrow phase.
 struct NarrowPhasePolicy {
   static constexpr int kBlock = 128;               ///< threads per block, a thread per query
-  static constexpr int kSearchWarpsPerBlock = 4;   ///< InclusionCcd's searches: a warp per query
+  static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches: a warp per query (~12 KiB of shared memory each)
 };
 
 /// Runs a CCD method over device lists of candidate pairs. Methods with a quick_reject (the

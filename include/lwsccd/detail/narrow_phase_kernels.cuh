@@ -45,10 +45,22 @@ __global__ void quick_reject_kernel(MeshFeatures mesh, const Vec3<P>* x0, const 
   keep[i] = rejected ? 0 : 1;
 }
 
-// Second pass for InclusionCcd (filtered or not): a warp per query. Lane 0 keeps the search's
-// heap in shared memory and forms each round; the lanes examine the round's boxes at once. Same
-// rounds as the one-thread search, hence the same answers, with a long search's latency cut by up
-// to the round size.
+// The rank of `x` among the n sorted boxes at `sorted` (how many come before it).
+LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, const lwsccd::detail::DyadicBox& x) {
+  int lo = 0, hi = n;
+  while (lo < hi) {
+    const int mid = (lo + hi) / 2;
+    if (lwsccd::detail::box_before(sorted[mid], x)) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+// Second pass for InclusionCcd (filtered or not): a warp per query. The rounds of
+// detail::InclusionSearch with the work spread over the lanes: each lane examines one box of the
+// round and makes its new boxes; the new boxes are ranked among themselves and merged into the
+// sorted live boxes by rank, every lane placing its own. Same sets and answers as the one-thread
+// search (the order is total), with a long search's latency cut to that of its rounds.
 template <class Method, bool kVertexFace, class T, class P, int kWarps>
 __global__ void __launch_bounds__(32 * kWarps)
     inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* pairs,
@@ -58,11 +70,14 @@ __global__ void __launch_bounds__(32 * kWarps)
   using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
   using Round = typename Search::Round;
   using lwsccd::detail::BoxVerdict;
-  static_assert(Traits::policy::kBatch <= 32, "lwsccd: a round must fit in a warp");
+  using lwsccd::detail::DyadicBox;
+  constexpr int kFresh = Search::kFresh;
+  static_assert(Search::kBatch <= 32, "lwsccd: a round must fit in a warp");
   // Raw storage: shared variables cannot have constructors; start() initializes a search.
   __shared__ alignas(Search) unsigned char storage[kWarps * sizeof(Search)];
-  __shared__ BoxVerdict verdicts[kWarps][32];
+  __shared__ DyadicBox fresh_raw[kWarps][kFresh], fresh_sorted[kWarps][kFresh];
   __shared__ CcdResult<T> results[kWarps];
+  __shared__ unsigned long long dropped[kWarps];
   __shared__ int state[kWarps];
   const int warp = static_cast<int>(threadIdx.x) / 32, lane = static_cast<int>(threadIdx.x) % 32;
   Search& search = reinterpret_cast<Search*>(storage)[warp];
@@ -84,15 +99,61 @@ __global__ void __launch_bounds__(32 * kWarps)
           if (round == Round::gave_up) r = results[warp];
           return;
         }
-        if (lane < search.batch_size)
-          verdicts[warp][lane] = lwsccd::detail::examine_box(q, setup, search.batch[lane], search.floor_key, search.t_floor);
+        const int k = search.batch_size;
+        const DyadicBox* batch = search.batch();
+        BoxVerdict verdict = BoxVerdict::excluded;
+        if (lane < k) verdict = lwsccd::detail::examine_box(q, setup, batch[lane], search.floor_key, search.t_floor);
+        // The answer: the first accepted box with no split box before it in the round.
+        const unsigned accepted = __ballot_sync(0xffffffffu, lane < k && verdict == BoxVerdict::accepted);
+        const unsigned split = __ballot_sync(0xffffffffu, lane < k && verdict != BoxVerdict::accepted &&
+                                                                verdict != BoxVerdict::excluded);
+        const int first_accepted = accepted ? __ffs(accepted) - 1 : 32, first_split = split ? __ffs(split) - 1 : 32;
+        if (first_accepted < first_split) {
+          r = {true, search.time_of(batch[first_accepted]), false};
+          __syncwarp();
+          return;
+        }
+        // This lane's new boxes, then their ranks among all the round's new boxes.
+        DyadicBox mine[2];
+        const int count = lane < k ? search.fresh_boxes(batch[lane], verdict, setup.vf, mine) : 0;
+        fresh_raw[warp][2 * lane] = mine[0];
+        fresh_raw[warp][2 * lane + 1] = mine[1];
+        const unsigned has_one = __ballot_sync(0xffffffffu, count >= 1), has_two = __ballot_sync(0xffffffffu, count == 2);
+        const int nf = __popc(has_one) + __popc(has_two);
         __syncwarp();
-        if (lane == 0) state[warp] = search.apply(verdicts[warp], setup.vf, results[warp]) ? 1 : 0;
+        for (int c = 0; c < count; ++c) {
+          int rank = 0;
+          for (int other = 0; other < 32; ++other) {
+            const int other_count = ((has_one >> other) & 1u) + ((has_two >> other) & 1u);
+            for (int oc = 0; oc < other_count; ++oc)
+              rank += lwsccd::detail::box_before(fresh_raw[warp][2 * other + oc], mine[c]) ? 1 : 0;
+          }
+          fresh_sorted[warp][rank] = mine[c];
+        }
         __syncwarp();
-        const bool done = state[warp] != 0;
-        if (done) r = results[warp];
-        __syncwarp();  // everyone has read before lane 0 writes again
-        if (done) return;
+        // Merge by rank into the other buffer, keeping the earliest kKeep when over capacity.
+        const DyadicBox* live = search.live();
+        const int size = search.size, total = size + nf;
+        const int limit = total > Search::kCapacity ? Search::kKeep : total;
+        DyadicBox* out = search.items[1 - search.current];
+        for (int a = lane; a < size; a += 32) {
+          const int pos = a + rank_in(fresh_sorted[warp], nf, live[a]);
+          if (pos < limit) out[pos] = live[a];
+          else if (pos == limit) dropped[warp] = lwsccd::detail::box_time_key(live[a]);
+        }
+        for (int b = lane; b < nf; b += 32) {
+          const int pos = b + rank_in(live, size, fresh_sorted[warp][b]);
+          if (pos < limit) out[pos] = fresh_sorted[warp][b];
+          else if (pos == limit) dropped[warp] = lwsccd::detail::box_time_key(fresh_sorted[warp][b]);
+        }
+        __syncwarp();
+        if (lane == 0) {
+          if (total > limit) search.evicted_key = dropped[warp] < search.evicted_key ? dropped[warp] : search.evicted_key;
+          search.current = 1 - search.current;
+          search.head = 0;
+          search.size = limit;
+        }
+        __syncwarp();
       }
     };
     if constexpr (kVertexFace) solve(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second));
