@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds and runs the main program, lwsccd-ccd, on a fresh Debian machine: installs what it
 # needs, builds only that program, then runs it with the arguments given (none: the built-in
-# cloth-ball scene, no data needed). It runs on the CPU backend; see README.md.
+# scene, no data needed): on the GPU when there is one, else on the CPU backend; see README.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 packages=(cmake g++ make ccache)
@@ -13,6 +13,14 @@ if [ ${#missing[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}"
 fi
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DLWSCCD_BUILD_TESTS=OFF -DLWSCCD_BUILD_BENCH=OFF >/dev/null
+# The GPU backend is built when there is a GPU to run it and nvcc to build it; otherwise the
+# program is the CPU backend alone (and builds in a fraction of the time).
+cuda=OFF
+if nvidia-smi -L >/dev/null 2>&1 && { command -v nvcc >/dev/null 2>&1 || [ -x /usr/local/cuda/bin/nvcc ]; }; then
+  cuda=ON
+  command -v nvcc >/dev/null 2>&1 || export PATH="/usr/local/cuda/bin:$PATH"
+fi
+echo "lwsccd: building lwsccd-ccd (GPU backend: $cuda)" >&2
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DLWSCCD_ENABLE_CUDA=$cuda -DLWSCCD_BUILD_TESTS=OFF -DLWSCCD_BUILD_BENCH=OFF >/dev/null
 cmake --build build -j"$(nproc)" --target lwsccd-ccd
 exec ./build/examples/lwsccd-ccd "$@"

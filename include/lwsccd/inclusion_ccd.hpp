@@ -262,15 +262,21 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
 /// (they are excluded already): a full store costs time, not the false "hit at the current time"
 /// that giving up would answer (seen on a sliver triangle in cloth-ball, where that hit was at
 /// t = 0).
-template <class Policy, class T>
+///
+/// kStore (at most kMaxBoxes) is the room this instance has: a search that would keep more live
+/// boxes than that stops with `overflow` set, so that a small first attempt (a GPU thread with
+/// little memory) can hand the query over to a full one, which then gives the same answer.
+template <class Policy, class T, int kStore = Policy::kMaxBoxes>
 struct InclusionSearch {
   static_assert(Policy::kMaxBoxes >= 2, "lwsccd: InclusionCcd policy: kMaxBoxes must be at least 2");
   static_assert(Policy::kBatch >= 1 && Policy::kBatch <= 32, "lwsccd: InclusionCcd policy: kBatch must be in [1, 32]");
+  static_assert(kStore >= 1 && kStore <= Policy::kMaxBoxes, "lwsccd: InclusionSearch: kStore must be in [1, kMaxBoxes]");
   static constexpr int kBatch = Policy::kBatch;
   static constexpr int kCapacity = Policy::kMaxBoxes;
   static constexpr int kKeep = kCapacity - kCapacity / 4;  ///< kept when more than kCapacity are live
   static constexpr int kFresh = 2 * kBatch;                ///< new boxes of a round, at most
-  static constexpr int kRoom = kCapacity + kFresh;
+  static constexpr int kRoom = kStore + kFresh;
+  bool overflow = false;  ///< more live boxes than kStore: this instance cannot go on
   static constexpr std::uint64_t kNone = ~std::uint64_t(0);
   enum class Round : std::uint8_t { examine, no_contact, gave_up };
 
@@ -400,27 +406,42 @@ struct InclusionSearch {
     current = 1 - current;
     head = 0;
     size = limit;
+    overflow = limit > kStore;
     return false;
   }
 };
 
-/// The whole search in one thread (the CPU, or one GPU thread per query).
-template <class Policy, class Q, class T>
-LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
+/// The search in one thread, for at most `max_rounds` rounds and kStore live boxes: false when
+/// it stopped before the answer (then a full search must answer: the GPU's warp search).
+template <class Policy, int kStore, class Q, class T>
+LWSCCD_HD bool inclusion_try(const Q& q, const CcdParams<T>& params, int max_rounds, CcdResult<T>& result) {
+  result = {};
   const InclusionSetup<T> setup = inclusion_setup(q, params);
-  if (setup.separated) return {};
-  InclusionSearch<Policy, T> search;
+  if (setup.separated) return true;
+  InclusionSearch<Policy, T, kStore> search;
   search.start();
   BoxVerdict verdicts[Policy::kBatch];
-  CcdResult<T> result;
-  while (true) {
-    const auto round = search.next_round(params.max_iterations, result);
-    if (round == InclusionSearch<Policy, T>::Round::no_contact) return {};
-    if (round == InclusionSearch<Policy, T>::Round::gave_up) return result;
+  for (int round = 0; round < max_rounds; ++round) {
+    const auto next = search.next_round(params.max_iterations, result);
+    if (next == InclusionSearch<Policy, T, kStore>::Round::no_contact) {
+      result = {};
+      return true;
+    }
+    if (next == InclusionSearch<Policy, T, kStore>::Round::gave_up) return true;
     for (int i = 0; i < search.batch_size; ++i)
       verdicts[i] = examine_box(q, setup, search.batch()[i], search.floor_key, search.t_floor);
-    if (search.apply(verdicts, setup.vf, result)) return result;
+    if (search.apply(verdicts, setup.vf, result)) return true;
+    if (search.overflow) return false;
   }
+  return false;
+}
+
+/// The whole search in one thread (the CPU).
+template <class Policy, class Q, class T>
+LWSCCD_HD CcdResult<T> inclusion_solve(const Q& q, const CcdParams<T>& params) {
+  CcdResult<T> result;
+  inclusion_try<Policy, Policy::kMaxBoxes>(q, params, std::numeric_limits<int>::max(), result);
+  return result;
 }
 
 }  // namespace detail

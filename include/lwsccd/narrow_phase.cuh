@@ -33,7 +33,9 @@ struct DeviceMeshFeatures {
 /// Knobs of the GPU narrow phase.
 struct NarrowPhasePolicy {
   static constexpr int kBlock = 128;               ///< threads per block, a thread per query
-  static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches: a warp per query (~12 KiB of shared memory each)
+  static constexpr int kThreadRounds = 6;   ///< InclusionCcd: rounds of the one-thread attempt per query
+  static constexpr int kThreadBoxes = 64;   ///< InclusionCcd: live boxes the one-thread attempt may keep
+  static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~12 KiB of shared memory each)
 };
 
 /// Runs a CCD method over device lists of candidate pairs. Methods with a quick_reject (the
@@ -71,6 +73,8 @@ class NarrowPhase {
   }
 
   std::size_t num_vf_hits() const { return lists_[0].count; }
+  /// Queries of the last run that the one-thread attempt left to a warp search (InclusionCcd).
+  std::size_t warp_searches() const { return lists_[0].warp_searches + lists_[1].warp_searches; }
   std::size_t num_ee_hits() const { return lists_[1].count; }
   T earliest_toi() const { return earliest_; }
   std::size_t gave_up() const { return gave_up_; }
@@ -80,7 +84,8 @@ class NarrowPhase {
     std::size_t bytes = toi_.capacity_bytes() + reduce_scratch_.capacity_bytes();
     for (const auto& l : lists_)
       bytes += l.hits.capacity_bytes() + l.staged.capacity_bytes() + l.flags.capacity_bytes() + l.scratch.capacity_bytes() +
-               l.survivors.capacity_bytes() + l.counters.capacity_bytes();
+               l.survivors.capacity_bytes() + l.counters.capacity_bytes() + l.pending.capacity_bytes() +
+               l.pending_index.capacity_bytes();
     return bytes;
   }
 
@@ -90,8 +95,10 @@ class NarrowPhase {
     DeviceBuffer<FeatureHit<T>> hits, staged;
     DeviceBuffer<unsigned char> flags, scratch;
     DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
-    DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up
-    std::size_t count = 0, num_survivors = 0, tested = 0;
+    DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up, [2]: left to warp searches
+    DeviceBuffer<unsigned char> pending;         ///< per query: left open by the one-thread attempt
+    DeviceBuffer<unsigned> pending_index;
+    std::size_t count = 0, num_survivors = 0, tested = 0, warp_searches = 0;
     const Pair* to_test = nullptr;  ///< survivors, or the input pairs for one-pass methods
     cudaStream_t stream = nullptr;
     cudaEvent_t done = nullptr;

@@ -1,6 +1,7 @@
 // lwsccd — kernels and definitions for narrow_phase.cuh.
 #pragma once
 
+#include <thrust/iterator/counting_iterator.h>
 #include <thrust/iterator/transform_iterator.h>
 
 #include "lwsccd/inclusion_ccd.hpp"
@@ -45,6 +46,32 @@ __global__ void quick_reject_kernel(MeshFeatures mesh, const Vec3<P>* x0, const 
   keep[i] = rejected ? 0 : 1;
 }
 
+// Second pass, first attempt: the same search in one thread per query, for a few rounds and
+// little memory. Most queries end there; the others are flagged `pending` for the warp search
+// (which starts over and gives the answer the whole search gives).
+template <class Method, bool kVertexFace, class T, class P, int kRounds, int kStore>
+__global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                        const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
+                                        FeatureHit<T>* staged, unsigned char* flags, unsigned char* pending,
+                                        unsigned long long* gave_up) {
+  using Traits = lwsccd::detail::inclusion_search_of<Method>;
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const std::pair<index_t, index_t> p = pairs[i];
+  CcdResult<T> r;
+  bool done = true;
+  auto attempt = [&](const auto& q) {
+    if (Traits::filtered && !non_penetration_filter(q, params)) return;
+    done = lwsccd::detail::inclusion_try<typename Traits::policy, kStore>(q, params, kRounds, r);
+  };
+  if constexpr (kVertexFace) attempt(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second));
+  else attempt(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second));
+  pending[i] = done ? 0 : 1;
+  staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
+  flags[i] = done && r.hit ? 1 : 0;
+  if (done && r.gave_up) atomicAdd(gave_up, 1ull);
+}
+
 // The rank of `x` among the n sorted boxes at `sorted` (how many come before it).
 LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, const lwsccd::detail::DyadicBox& x) {
   int lo = 0, hi = n;
@@ -64,8 +91,8 @@ LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, con
 template <class Method, bool kVertexFace, class T, class P, int kWarps>
 __global__ void __launch_bounds__(32 * kWarps)
     inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* pairs,
-                          std::size_t n, CcdParams<T> params, FeatureHit<T>* staged, unsigned char* flags,
-                          unsigned long long* gave_up) {
+                          const unsigned* which, std::size_t n, CcdParams<T> params, FeatureHit<T>* staged,
+                          unsigned char* flags, unsigned long long* gave_up) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
   using Round = typename Search::Round;
@@ -81,8 +108,9 @@ __global__ void __launch_bounds__(32 * kWarps)
   __shared__ int state[kWarps];
   const int warp = static_cast<int>(threadIdx.x) / 32, lane = static_cast<int>(threadIdx.x) % 32;
   Search& search = reinterpret_cast<Search*>(storage)[warp];
-  for (std::size_t i = static_cast<std::size_t>(blockIdx.x) * kWarps + warp; i < n;
-       i += static_cast<std::size_t>(gridDim.x) * kWarps) {
+  for (std::size_t w = static_cast<std::size_t>(blockIdx.x) * kWarps + warp; w < n;
+       w += static_cast<std::size_t>(gridDim.x) * kWarps) {
+    const std::size_t i = which[w];
     const std::pair<index_t, index_t> p = pairs[i];
     CcdResult<T> r;
     auto solve = [&](const auto& q) {
@@ -201,10 +229,10 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
   // The lists start once `stream`'s work (positions, pairs) is done.
   LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
   for (auto& l : lists_) {
-    l.count = l.tested = 0;
-    l.counters.resize_discard(2);
+    l.count = l.tested = l.warp_searches = 0;
+    l.counters.resize_discard(3);
     LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 2 * sizeof(unsigned long long), l.stream));
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 3 * sizeof(unsigned long long), l.stream));
   }
   first_pass<P, true>(view, x0, x1, vf, num_vf, params, lists_[0]);
   first_pass<P, false>(view, x0, x1, ee, num_ee, params, lists_[1]);
@@ -318,10 +346,33 @@ void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, cons
   list.flags.resize_discard(std::max(list.flags.size(), m));
   const Pair* pairs = list.to_test + begin;
   if constexpr (lwsccd::detail::inclusion_search_of<Method>::value) {
-    constexpr int kWarps = Policy::kSearchWarpsPerBlock;
-    const unsigned blocks = static_cast<unsigned>((m + kWarps - 1) / kWarps);
-    detail::inclusion_warp_kernel<Method, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
-        mesh, x0, x1, pairs, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
+    // A thread per query for a few rounds, then a warp per query still open.
+    list.pending.resize_discard(std::max(list.pending.size(), m));
+    list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
+    const unsigned thread_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+    detail::inclusion_thread_kernel<Method, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
+        <<<thread_blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, pairs, m, params, list.staged.data(),
+                                                            list.flags.data(), list.pending.data(), list.counters.data() + 1);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const thrust::counting_iterator<unsigned> indices(0);
+    std::size_t bytes = 0;
+    LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, indices, list.pending.data(), list.pending_index.data(),
+                                                 list.counters.data() + 2, static_cast<std::int64_t>(m), list.stream));
+    list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
+    LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, indices, list.pending.data(),
+                                                 list.pending_index.data(), list.counters.data() + 2,
+                                                 static_cast<std::int64_t>(m), list.stream));
+    unsigned long long open = 0;
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&open, list.counters.data() + 2, sizeof open, cudaMemcpyDeviceToHost, list.stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+    list.warp_searches += static_cast<std::size_t>(open);
+    if (open) {
+      constexpr int kWarps = Policy::kSearchWarpsPerBlock;
+      const unsigned blocks = static_cast<unsigned>((open + kWarps - 1) / kWarps);
+      detail::inclusion_warp_kernel<Method, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
+          mesh, x0, x1, pairs, list.pending_index.data(), static_cast<std::size_t>(open), params, list.staged.data(),
+          list.flags.data(), list.counters.data() + 1);
+    }
   } else {
     const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
     detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
