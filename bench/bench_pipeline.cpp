@@ -10,7 +10,8 @@
 //               built-in 100K
 //   methods     every narrow-phase method x precision (lazy, AABB): the scenes with ground truth
 //   scaling     the default policies on the built-in scene at --sizes (default 1K..10M)
-//   all         the three
+//   default     the default policies on every scene (for the CPU backend: a short sweep)
+//   all         schedulers, methods and scaling
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -34,6 +35,7 @@ struct Row {
   ccd_app::PolicyChoice policies;
   int steps_measured = 0;
   double total = 0, refit = 0, traverse = 0, features = 0, narrow = 0;
+  double mean_total = 0;  // mean over the measured steps
   lwsccd::StepStats last;  // counts of the last measured step
   double earliest_toi = 1;
   bool has_truth = false;
@@ -68,8 +70,9 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
   lwsccd::PipelineParams params;
   auto pipeline = device == "gpu" ? ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies)
                                   : ccd_app::make_cpu_pipeline(sc.mesh, sc.layout, params, policies);
-  std::size_t steps = static_cast<std::size_t>(reps) + 1;
-  if (sc.available_steps) steps = std::min(steps, sc.available_steps);
+  // A sequence runs all its steps (its steady state is the median over them); other scenes
+  // repeat their step, or go on simulating, for `reps` steps after the first.
+  const std::size_t steps = sc.available_steps ? sc.available_steps : static_cast<std::size_t>(reps) + 1;
   std::vector<ccd_app::StepOutcome> outcomes;
   for (std::size_t i = 0; i < steps; ++i) {
     const lwsccd::Step step = sc.step(i);
@@ -89,6 +92,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       return lwsccd_bench::median(v);
     };
     r.total = med(&lwsccd::StepStats::total_ms);
+    for (std::size_t i = from; i < to; ++i) r.mean_total += outcomes[i].stats.total_ms / double(to - from);
     r.refit = med(&lwsccd::StepStats::refit_ms);
     r.traverse = med(&lwsccd::StepStats::traverse_ms);
     r.features = med(&lwsccd::StepStats::features_ms);
@@ -127,10 +131,12 @@ std::vector<std::size_t> parse_sizes(const std::string& text) {
 int main(int argc, char** argv) {
   const auto args = lwsccd_bench::parse_bench_args(
       argc, argv, 5, {"--sweep=", "--device=", "--sizes="},
-      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|scaling] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
+      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|scaling|default] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
       "                             [--data DIR] [--reps N] [--json FILE]");
   try {
     const std::string sweep = args.value("--sweep", "all");
+    if (sweep != "all" && sweep != "schedulers" && sweep != "methods" && sweep != "scaling" && sweep != "default")
+      throw lwsccd::InputError("command line", "--sweep", "expected all, schedulers, methods, scaling or default, got '" + sweep + "'");
     const std::string gpu = ccd_app::gpu_name();
     const std::string device = args.value("--device", gpu.empty() ? "cpu" : "gpu");
     if (device == "gpu" && gpu.empty()) {
@@ -201,6 +207,14 @@ int main(int argc, char** argv) {
             measure(data_scenario(name), "methods", p, device, args.reps, rows);
           }
     }
+    if (sweep == "default") {
+      if (have_data) {
+        for (const auto& name : truth_scenes) measure(data_scenario(name), "default", ccd_app::PolicyChoice{}, device, args.reps, rows);
+        measure(horse_scenario(), "default", ccd_app::PolicyChoice{}, device, args.reps, rows);
+      }
+      std::shared_ptr<lwsccd::ClothBallSimulation> sim;
+      measure(builtin_scenario(100000, sim), "default", ccd_app::PolicyChoice{}, device, args.reps, rows);
+    }
     if (sweep == "all" || sweep == "scaling") {
       for (const std::size_t n : sizes) {
         std::shared_ptr<lwsccd::ClothBallSimulation> sim;
@@ -213,15 +227,16 @@ int main(int argc, char** argv) {
       std::fprintf(f,
                    "{\"device\": \"%s\", \"sweep\": \"%s\", \"scene\": \"%s\", \"triangles\": %d, \"bv\": \"%s\", "
                    "\"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"step\": \"%s\", \"steps_measured\": %d, "
-                   "\"total_ms\": %.4f, \"refit_ms\": %.4f, \"traverse_ms\": %.4f, \"features_ms\": %.4f, \"narrow_ms\": %.4f, "
+                   "\"total_ms\": %.4f, \"mean_total_ms\": %.4f, \"refit_ms\": %.4f, \"traverse_ms\": %.4f, \"features_ms\": %.4f, \"narrow_ms\": %.4f, "
                    "\"bvtt_nodes\": %zu, \"front\": %zu, \"triangle_pairs\": %zu, \"feature_pairs\": %zu, \"contacts\": %zu, "
-                   "\"gave_up\": %zu, \"earliest_toi\": %.17g, \"peak_device_bytes\": %zu",
+                   "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
+                   "\"peak_device_bytes\": %zu",
                    device == "gpu" ? gpu.c_str() : "CPU", r.sweep.c_str(), r.scene.c_str(), r.triangles, r.policies.bv.c_str(),
                    device == "gpu" ? r.policies.scheduler.c_str() : "cpu-work-stealing", r.policies.method.c_str(),
-                   r.policies.precision.c_str(), r.step.c_str(), r.steps_measured, r.total, r.refit, r.traverse, r.features,
+                   r.policies.precision.c_str(), r.step.c_str(), r.steps_measured, r.total, r.mean_total, r.refit, r.traverse, r.features,
                    r.narrow, r.last.bvtt_nodes, r.last.front_size, r.last.triangle_pairs,
                    r.last.feature_pairs_vf + r.last.feature_pairs_ee, r.last.hits_vf + r.last.hits_ee, r.last.gave_up,
-                   r.earliest_toi, r.last.peak_device_bytes);
+                   r.last.narrow_survivors, r.last.narrow_warp_searches, r.earliest_toi, r.last.peak_device_bytes);
       if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.false_negatives, r.false_positives);
       std::fprintf(f, "}");
     });

@@ -72,13 +72,14 @@ def schedulers_chart(rows, out):
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
     for ax, key, title in ((axes[0], "traverse_ms", "traversal (from the front)"), (axes[1], "total_ms", "whole step")):
         width = 0.8 / max(1, len(combos))
+        palette = plt.cm.tab20.colors  # 20 distinct colours: one per combination
         for ci, combo in enumerate(combos):
             vals = []
             for s in scenes:
                 match = [r for r in sel if r["scene"] == s and (r["bv"], r["precision"], r["scheduler"]) == combo]
                 vals.append(match[0][key] if match else 0.0)
             ax.bar([i - 0.4 + (ci + 0.5) * width for i in range(len(scenes))], vals, width,
-                   label=f"{combo[2]} / {combo[0]} / {combo[1]}")
+                   color=palette[ci % len(palette)], label=f"{combo[2]} / {combo[0]} / {combo[1]}")
         ax.set_xticks(range(len(scenes)))
         ax.set_xticklabels(scenes, rotation=20, ha="right")
         ax.set_yscale("log")
@@ -105,6 +106,7 @@ def accuracy_chart(rows, out):
                            facecolors=colors[r["precision"]] if fill else "none", edgecolors=colors[r["precision"]], s=60)
         ax.set_xscale("log")
         ax.set_yscale("symlog", linthresh=1)
+        ax.set_ylim(bottom=-0.5)
         ax.set_xlabel("ms per step (log)")
         ax.set_ylabel("false negatives (filled) / positives (hollow)")
         ax.set_title(scene)

@@ -282,6 +282,9 @@ void print_table(const StepSource& src, const std::string& backend, const Option
                 s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.bvtt_nodes, s.front_size,
                 s.triangle_pairs, s.feature_pairs_vf, s.feature_pairs_ee, s.hits_vf, s.hits_ee,
                 r.outcome.contacts.earliest_toi);
+    if (s.narrow_survivors)
+      std::printf("  narrow phase: %zu pairs past the first pass, %zu of them searched by a warp\n", s.narrow_survivors,
+                  s.narrow_warp_searches);
     if (s.gave_up) std::printf("  %zu contacts from the method's work bound (conservative answers)\n", s.gave_up);
     if (s.peak_device_bytes) std::printf("  peak device memory %.1f MiB\n", double(s.peak_device_bytes) / (1 << 20));
     if (r.has_truth)
@@ -311,10 +314,12 @@ void print_json(const StepSource& src, const std::string& backend, const Options
     std::printf("    {\"name\": \"%s\", \"ms\": {\"total\": %.4f, \"refit\": %.4f, \"traverse\": %.4f, \"features\": %.4f, "
                 "\"narrow\": %.4f}, \"rebuilt\": %s, \"restarted_from_root\": %s, \"bvtt_nodes\": %zu, \"front\": %zu, "
                 "\"triangle_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, \"vf_hits\": %zu, \"ee_hits\": %zu, "
-                "\"gave_up\": %zu, \"earliest_toi\": %.17g, \"peak_device_bytes\": %zu",
+                "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
+                "\"peak_device_bytes\": %zu",
                 r.name.c_str(), s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.rebuilt ? "true" : "false",
                 s.restarted_from_root ? "true" : "false", s.bvtt_nodes, s.front_size, s.triangle_pairs, s.feature_pairs_vf,
-                s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, r.outcome.contacts.earliest_toi, s.peak_device_bytes);
+                s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, s.narrow_survivors, s.narrow_warp_searches,
+                r.outcome.contacts.earliest_toi, s.peak_device_bytes);
     if (r.has_truth)
       std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.true_contacts,
                   r.false_negatives, r.false_positives);

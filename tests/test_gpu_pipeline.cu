@@ -96,3 +96,31 @@ TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from devi
   CHECK_THROWS_AS(fresh.step_from_device(scene.step.x0.data(), x1.data()), InputError);
   CHECK_THROWS_AS(fresh.step_from_device(x0.data(), nullptr), InputError);
 }
+
+TEST_CASE("GPU pipeline over horse-gallop: front tracking equals fresh traversals and the CPU pipeline at every step",
+          "[gpu][pipeline][data]") {
+  if (!lwsccd_test::have_data()) {
+    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
+    return;
+  }
+  const Sequence seq = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
+  REQUIRE(seq.num_steps() == 47);
+  PipelineParams fresh_params;
+  fresh_params.front_tracking = false;
+  gpu::CcdPipeline<> tracked(seq.mesh()), fresh(seq.mesh(), fresh_params);
+  cpu::CcdPipeline<> cpu_tracked(seq.mesh());
+  std::size_t restarts = 0, contacts = 0;
+  for (std::size_t s = 0; s < seq.num_steps(); ++s) {
+    INFO("step " << s);
+    const Step step = seq.step(s);
+    const auto a = tracked.step(step.x0, step.x1);
+    require_same_contacts(a, fresh.step(step.x0, step.x1));
+    require_same_contacts(a, cpu_tracked.step(step.x0, step.x1));
+    restarts += a.stats.restarted_from_root;
+    contacts += a.stats.hits_vf + a.stats.hits_ee;
+  }
+  std::printf("horse-gallop (GPU pipeline): 47 steps, %zu contacts, %zu restarts from the root; equal to fresh "
+              "traversals and to the CPU pipeline at every step\n",
+              contacts, restarts);
+  CHECK(restarts < seq.num_steps());
+}

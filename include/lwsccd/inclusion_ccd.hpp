@@ -11,19 +11,20 @@
 // roundoff of T (see docs/NARROW_PHASE.md for the derivation; it also covers a relative
 // perturbation of u on every input, so a query rounded to float from exact data is covered).
 //
-// Boxes are examined in order of their earliest time (a min-heap), split along the dimension
+// Boxes are examined in rounds of the earliest ones (InclusionSearch), split along the dimension
 // that spreads F the most. A box that passes the test is reported as the contact when F over it
 // lies within contact up to the distance the features move in `tolerance` of time, or when it
-// cannot be split further (resolution `tolerance` in t, u and v). Its lower time bound is the reported time of impact: every box with an earlier
-// time was excluded, so no contact happens before it.
+// cannot be split further (resolution `tolerance` in t, u and v), and no earlier box of its
+// round was split. Its lower time bound is the reported time of impact: every box with an
+// earlier time was excluded, so no contact happens before it.
 //
 // GUARANTEE. Never answers "no collision" when the features come within `min_separation`
 // (infinity norm) at some time of the step, for the query as given or perturbed relatively by u;
-// the reported toi is a lower bound of the earliest such time. Bounded work: after
-// `max_iterations` boxes it answers "hit" at the earliest time not yet excluded (gave_up =
-// true): a false positive at worst, never a miss. Bounded memory: when its box heap
-// (Policy::kMaxBoxes) is full it drops the latest box and later searches again from the time
-// the excluded part reaches, so a full heap costs time, not a wrong answer.
+// the reported toi is a lower bound of the earliest such time. Bounded work: after about
+// `max_iterations` boxes (checked per round) it answers "hit" at the earliest time not yet
+// excluded (gave_up = true): a false positive at worst, never a miss. Bounded memory: when more
+// than Policy::kMaxBoxes boxes are live it drops the latest quarter and later searches again from
+// the time the excluded part reaches, so a full store costs time, not a wrong answer.
 #pragma once
 
 #include <cmath>

@@ -73,6 +73,8 @@ class NarrowPhase {
   }
 
   std::size_t num_vf_hits() const { return lists_[0].count; }
+  /// Pairs of the last run left for the full test by the first pass (all pairs for one-pass methods).
+  std::size_t survivors() const { return lists_[0].num_survivors + lists_[1].num_survivors; }
   /// Queries of the last run that the one-thread attempt left to a warp search (InclusionCcd).
   std::size_t warp_searches() const { return lists_[0].warp_searches + lists_[1].warp_searches; }
   std::size_t num_ee_hits() const { return lists_[1].count; }

@@ -164,6 +164,8 @@ class CcdPipeline {
     r.stats.hits_vf = r.contacts.vf.size();
     r.stats.hits_ee = r.contacts.ee.size();
     r.stats.gave_up = r.contacts.gave_up;
+    r.stats.narrow_survivors = narrow_.survivors();
+    r.stats.narrow_warp_searches = narrow_.warp_searches();
     r.stats.peak_device_bytes = memory_stats().peak;
     r.stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return r;

@@ -72,6 +72,8 @@ struct StepStats {
   double refit_ms = 0, traverse_ms = 0, features_ms = 0, narrow_ms = 0, total_ms = 0;
   std::size_t bvtt_nodes = 0, front_size = 0, triangle_pairs = 0, feature_pairs_vf = 0, feature_pairs_ee = 0;
   std::size_t hits_vf = 0, hits_ee = 0, gave_up = 0;
+  std::size_t narrow_survivors = 0;      ///< GPU: pairs the narrow phase's first pass left for the full test
+  std::size_t narrow_warp_searches = 0;  ///< GPU: of those, searched by a warp (still open after the thread's rounds)
   std::size_t peak_device_bytes = 0;
   bool rebuilt = false, restarted_from_root = false;
 };
