@@ -1,6 +1,8 @@
 // lwsccd — definitions for oracle.hpp.
 #pragma once
 
+#include <cstdint>
+
 #include <algorithm>
 #include <numeric>
 #include <thread>
@@ -102,6 +104,35 @@ std::vector<TrianglePair> sweep_and_prune_pairs(const TriangleMesh& mesh, const 
   return detail::merge_sorted(parts);
 }
 
+namespace detail {
+// Sorts id pairs by (first, second) and removes repeats: an LSD radix sort of the pairs packed as
+// 64-bit keys, 8 bits a pass, skipping the bytes that no key uses (ids are far below 2^32). Same
+// result as std::sort + std::unique, several times faster on the tens of millions of pairs of a
+// large scene.
+inline void sort_unique_pairs(std::vector<std::pair<index_t, index_t>>& pairs) {
+  const std::size_t n = pairs.size();
+  std::vector<std::uint64_t> keys(n), spare(n);
+  std::uint64_t used = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    keys[i] = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(pairs[i].first)) << 32) |
+              static_cast<std::uint32_t>(pairs[i].second);
+    used |= keys[i];
+  }
+  for (int shift = 0; shift < 64; shift += 8) {
+    if (((used >> shift) & 0xffu) == 0) continue;  // every key has 0 here: nothing to order
+    std::size_t count[257] = {};
+    for (const std::uint64_t k : keys) ++count[((k >> shift) & 0xffu) + 1];
+    for (int b = 0; b < 256; ++b) count[b + 1] += count[b];
+    for (const std::uint64_t k : keys) spare[count[(k >> shift) & 0xffu]++] = k;
+    keys.swap(spare);
+  }
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  pairs.resize(keys.size());
+  for (std::size_t i = 0; i < keys.size(); ++i)
+    pairs[i] = {static_cast<index_t>(keys[i] >> 32), static_cast<index_t>(keys[i] & 0xffffffffu)};
+}
+}  // namespace detail
+
 inline FeaturePairs feature_pairs(const TriangleMesh& mesh, const std::vector<TrianglePair>& pairs) {
   FeaturePairs out;
   out.vf.reserve(pairs.size() * 6);
@@ -127,10 +158,8 @@ inline FeaturePairs feature_pairs(const TriangleMesh& mesh, const std::vector<Tr
       }
     }
   }
-  for (auto* list : {&out.vf, &out.ee}) {
-    std::sort(list->begin(), list->end());
-    list->erase(std::unique(list->begin(), list->end()), list->end());
-  }
+  detail::sort_unique_pairs(out.vf);
+  detail::sort_unique_pairs(out.ee);
   return out;
 }
 
