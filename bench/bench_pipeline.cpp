@@ -39,7 +39,7 @@ struct Row {
   lwsccd::StepStats last;  // counts of the last measured step
   double earliest_toi = 1;
   bool has_truth = false;
-  std::size_t false_negatives = 0, false_positives = 0;
+  lwsccd::TruthScore truth;
 };
 
 struct Scenario {
@@ -50,19 +50,6 @@ struct Scenario {
   std::size_t available_steps = 0;                // 0: unbounded
   const lwsccd::GroundTruth* truth = nullptr;
 };
-
-void score(const lwsccd::GroundTruth& truth, const lwsccd::NarrowPhaseResult<double>& c, Row& row) {
-  row.has_truth = true;
-  auto count = [&](const auto& pairs, const std::vector<bool>& collides, const auto& hits) {
-    for (std::size_t i = 0; i < pairs.size(); ++i) {
-      const bool hit = std::binary_search(hits.begin(), hits.end(), lwsccd::FeatureHit<double>{pairs[i].first, pairs[i].second, 0});
-      row.false_negatives += collides[i] && !hit;
-      row.false_positives += !collides[i] && hit;
-    }
-  };
-  count(truth.vf, truth.vf_collides, c.vf);
-  count(truth.ee, truth.ee_collides, c.ee);
-}
 
 // The first step, then `reps` steady steps (the sequence's next steps, or the same step again).
 void measure(const Scenario& sc, const std::string& sweep, const ccd_app::PolicyChoice& policies, const std::string& device,
@@ -99,7 +86,10 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     r.narrow = med(&lwsccd::StepStats::narrow_ms);
     r.last = outcomes[to - 1].stats;
     for (std::size_t i = from; i < to; ++i) r.earliest_toi = std::min(r.earliest_toi, outcomes[i].contacts.earliest_toi);
-    if (sc.truth) score(*sc.truth, outcomes[to - 1].contacts, r);
+    if (sc.truth) {
+      r.has_truth = true;
+      r.truth = lwsccd::score_against_truth(*sc.truth, outcomes[to - 1].contacts);
+    }
     return r;
   };
   rows.push_back(make_row("first", 0, 1));
@@ -111,7 +101,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
                 r.policies.method.c_str(), r.policies.precision.c_str(), r.step.c_str(), r.total, r.refit, r.traverse,
                 r.features, r.narrow, r.last.triangle_pairs, r.last.feature_pairs_vf + r.last.feature_pairs_ee,
                 r.last.hits_vf + r.last.hits_ee, r.earliest_toi, double(r.last.peak_device_bytes) / (1 << 20));
-    if (r.has_truth) std::printf("  FN %zu FP %zu", r.false_negatives, r.false_positives);
+    if (r.has_truth) std::printf("  FN %zu FP %zu", r.truth.false_negatives, r.truth.false_positives);
     std::printf("\n");
     std::fflush(stdout);
   }
@@ -237,7 +227,8 @@ int main(int argc, char** argv) {
                    r.narrow, r.last.bvtt_nodes, r.last.front_size, r.last.triangle_pairs,
                    r.last.feature_pairs_vf + r.last.feature_pairs_ee, r.last.hits_vf + r.last.hits_ee, r.last.gave_up,
                    r.last.narrow_survivors, r.last.narrow_warp_searches, r.earliest_toi, r.last.peak_device_bytes);
-      if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.false_negatives, r.false_positives);
+      if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.truth.false_negatives,
+                                  r.truth.false_positives);
       std::fprintf(f, "}");
     });
   } catch (const std::exception& e) {

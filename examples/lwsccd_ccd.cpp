@@ -208,24 +208,10 @@ struct StepReport {
   std::string name;
   ccd_app::StepOutcome outcome;
   bool has_truth = false;
-  std::size_t true_contacts = 0, false_negatives = 0, false_positives = 0;
+  lwsccd::TruthScore truth;
   bool checked = false;
   std::size_t check_differences = 0;
 };
-
-void score_against_truth(const lwsccd::GroundTruth& truth, StepReport& r) {
-  r.has_truth = true;
-  auto score = [&](const auto& pairs, const std::vector<bool>& collides, const auto& hits) {
-    for (std::size_t i = 0; i < pairs.size(); ++i) {
-      const bool hit = std::binary_search(hits.begin(), hits.end(), lwsccd::FeatureHit<double>{pairs[i].first, pairs[i].second, 0});
-      r.true_contacts += collides[i];
-      r.false_negatives += collides[i] && !hit;
-      r.false_positives += !collides[i] && hit;
-    }
-  };
-  score(truth.vf, truth.vf_collides, r.outcome.contacts.vf);
-  score(truth.ee, truth.ee_collides, r.outcome.contacts.ee);
-}
 
 // The CPU oracle for --check: every candidate of sort-and-sweep over swept AABBs (not the BVH),
 // adjacent pairs left to the orphans, the same narrow phase. Counts contacts that differ.
@@ -288,8 +274,8 @@ void print_table(const StepSource& src, const std::string& backend, const Option
     if (s.gave_up) std::printf("  %zu contacts from the method's work bound (conservative answers)\n", s.gave_up);
     if (s.peak_device_bytes) std::printf("  peak device memory %.1f MiB\n", double(s.peak_device_bytes) / (1 << 20));
     if (r.has_truth)
-      std::printf("  ground truth: %zu true contacts; %zu false negatives, %zu false positives\n", r.true_contacts,
-                  r.false_negatives, r.false_positives);
+      std::printf("  ground truth: %zu true contacts; %zu false negatives, %zu false positives\n", r.truth.true_contacts,
+                  r.truth.false_negatives, r.truth.false_positives);
     if (r.checked) std::printf("  CPU oracle check: %zu contacts differ\n", r.check_differences);
   }
   if (reports.size() > 2) {
@@ -321,8 +307,8 @@ void print_json(const StepSource& src, const std::string& backend, const Options
                 s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, s.narrow_survivors, s.narrow_warp_searches,
                 r.outcome.contacts.earliest_toi, s.peak_device_bytes);
     if (r.has_truth)
-      std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.true_contacts,
-                  r.false_negatives, r.false_positives);
+      std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.truth.true_contacts,
+                  r.truth.false_negatives, r.truth.false_positives);
     if (r.checked) std::printf(", \"check_differences\": %zu", r.check_differences);
     std::printf("}%s\n", i + 1 < reports.size() ? "," : "");
   }
@@ -350,7 +336,10 @@ int main(int argc, char** argv) {
       StepReport r;
       r.name = step.name;
       r.outcome = pipeline->step(step.x0, step.x1);
-      if (src.truth) score_against_truth(*src.truth, r);
+      if (src.truth) {
+        r.has_truth = true;
+        r.truth = lwsccd::score_against_truth(*src.truth, r.outcome.contacts);
+      }
       if (o.check) {
         r.checked = true;
         r.check_differences = oracle_differences(step, src.layout, o, r.outcome.contacts);
@@ -362,7 +351,7 @@ int main(int argc, char** argv) {
     else print_table(src, backend, o, reports);
     const bool conservative = o.policies.method != "cubic";
     for (const auto& r : reports)
-      if ((conservative && r.false_negatives > 0) || r.check_differences > 0) return 2;
+      if ((conservative && r.truth.false_negatives > 0) || r.check_differences > 0) return 2;
     return 0;
   } catch (const lwsccd::Error& e) {
     std::fprintf(stderr, "lwsccd-ccd: error: %s\n", e.what());

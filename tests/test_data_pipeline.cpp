@@ -8,30 +8,12 @@
 
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/pipeline.hpp"
+#include "contact_compare.hpp"
 #include "test_support.hpp"
 
 using namespace lwsccd;
 
 namespace {
-
-struct TruthScore {
-  std::size_t false_negatives = 0, false_positives = 0;
-};
-
-template <class T>
-TruthScore score(const GroundTruth& truth, const NarrowPhaseResult<T>& contacts) {
-  TruthScore s;
-  auto count = [&](const auto& pairs, const std::vector<bool>& collides, const auto& hits) {
-    for (std::size_t i = 0; i < pairs.size(); ++i) {
-      const bool hit = std::binary_search(hits.begin(), hits.end(), FeatureHit<T>{pairs[i].first, pairs[i].second, T(0)});
-      s.false_negatives += collides[i] && !hit;
-      s.false_positives += !collides[i] && hit;
-    }
-  };
-  count(truth.vf, truth.vf_collides, contacts.vf);
-  count(truth.ee, truth.ee_collides, contacts.ee);
-  return s;
-}
 
 StepResult<double> run_scene(const std::string& name, Scene& scene) {
   scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
@@ -39,7 +21,7 @@ StepResult<double> run_scene(const std::string& name, Scene& scene) {
   cpu::CcdPipeline<> pipeline(scene.step.mesh);
   const auto start = std::chrono::steady_clock::now();
   auto r = pipeline.step(scene.step.x0, scene.step.x1);
-  const TruthScore s = score(scene.truth, r.contacts);
+  const TruthScore s = score_against_truth(scene.truth, r.contacts);
   std::printf("%s (CPU pipeline, %.1f s): %zu triangle pairs, %zu + %zu feature pairs, %zu + %zu contacts, earliest TOI "
               "%.9g, %zu bounded-work answers; ground truth: %zu false negatives, %zu false positives\n",
               name.c_str(), std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
@@ -89,19 +71,7 @@ TEST_CASE("CPU pipeline over horse-gallop: front tracking equals fresh traversal
     REQUIRE(a.stats.triangle_pairs == b.stats.triangle_pairs);
     REQUIRE(a.stats.feature_pairs_vf == b.stats.feature_pairs_vf);
     REQUIRE(a.stats.feature_pairs_ee == b.stats.feature_pairs_ee);
-    REQUIRE(a.contacts.vf.size() == b.contacts.vf.size());
-    REQUIRE(a.contacts.ee.size() == b.contacts.ee.size());
-    for (std::size_t i = 0; i < a.contacts.vf.size(); ++i) {
-      REQUIRE(a.contacts.vf[i].first == b.contacts.vf[i].first);
-      REQUIRE(a.contacts.vf[i].second == b.contacts.vf[i].second);
-      REQUIRE(a.contacts.vf[i].toi == b.contacts.vf[i].toi);
-    }
-    for (std::size_t i = 0; i < a.contacts.ee.size(); ++i) {
-      REQUIRE(a.contacts.ee[i].first == b.contacts.ee[i].first);
-      REQUIRE(a.contacts.ee[i].second == b.contacts.ee[i].second);
-      REQUIRE(a.contacts.ee[i].toi == b.contacts.ee[i].toi);
-    }
-    REQUIRE(a.contacts.earliest_toi == b.contacts.earliest_toi);
+    lwsccd_test::require_same_contacts(a.contacts, b.contacts);
     restarts += a.stats.restarted_from_root;
     tracked_nodes += a.stats.bvtt_nodes;
     fresh_nodes += b.stats.bvtt_nodes;

@@ -55,15 +55,7 @@ TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth
     const auto c = cpu_pipeline.step(scene.step.x0, scene.step.x1);
     require_same_contacts(g, c);
     // No ground-truth contact is missed by the whole pipeline.
-    std::size_t missed = 0;
-    for (std::size_t i = 0; i < scene.truth.vf.size(); ++i)
-      if (scene.truth.vf_collides[i])
-        missed += !std::binary_search(g.contacts.vf.begin(), g.contacts.vf.end(),
-                                      FeatureHit<double>{scene.truth.vf[i].first, scene.truth.vf[i].second, 0});
-    for (std::size_t i = 0; i < scene.truth.ee.size(); ++i)
-      if (scene.truth.ee_collides[i])
-        missed += !std::binary_search(g.contacts.ee.begin(), g.contacts.ee.end(),
-                                      FeatureHit<double>{scene.truth.ee[i].first, scene.truth.ee[i].second, 0});
+    const std::size_t missed = score_against_truth(scene.truth, g.contacts).false_negatives;
     std::printf("%s: GPU pipeline %.2f ms (refit %.3f, traverse %.3f, features %.3f, narrow %.3f), %zu + %zu contacts, "
                 "earliest TOI %.9g, %zu ground-truth contacts missed\n",
                 name, g.stats.total_ms, g.stats.refit_ms, g.stats.traverse_ms, g.stats.features_ms, g.stats.narrow_ms,

@@ -6,6 +6,7 @@
 
 #include "lwsccd/pipeline.hpp"
 #include "lwsccd/scenes.hpp"
+#include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;
@@ -60,17 +61,7 @@ TEST_CASE("CPU pipeline with bodies: a rigid ball costs no self traversal and no
   const auto r = with_bodies.step(scene.step.x0, scene.step.x1);
   const auto all = one_body.step(scene.step.x0, scene.step.x1);
   const auto expected = oracle_contacts(scene);
-  REQUIRE(r.contacts.vf.size() == expected.vf.size());
-  REQUIRE(r.contacts.ee.size() == expected.ee.size());
-  for (std::size_t i = 0; i < expected.vf.size(); ++i) {
-    REQUIRE(r.contacts.vf[i].first == expected.vf[i].first);
-    REQUIRE(r.contacts.vf[i].second == expected.vf[i].second);
-    REQUIRE(r.contacts.vf[i].toi == expected.vf[i].toi);
-  }
-  for (std::size_t i = 0; i < expected.ee.size(); ++i) {
-    REQUIRE(r.contacts.ee[i].first == expected.ee[i].first);
-    REQUIRE(r.contacts.ee[i].toi == expected.ee[i].toi);
-  }
+  lwsccd_test::require_same_contacts(r.contacts, expected);
   // Cloth-cloth and cloth-ball contacts exist; the ball's subtrees are pruned whole.
   CHECK(r.stats.hits_vf + r.stats.hits_ee > 0);
   CHECK(r.stats.bvtt_nodes < all.stats.bvtt_nodes);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lwsccd/ccd_query.hpp"
+#include "lwsccd/dataset.hpp"
 #include "lwsccd/detail/oracle_impl.hpp"
 #include "lwsccd/oracle.hpp"
 #include "lwsccd/query_io.hpp"
@@ -31,6 +32,31 @@ struct NarrowPhaseResult {
   T earliest_toi = T(1);              ///< 1 when nothing collides
   std::size_t gave_up = 0;            ///< hits answered by a method's bounded-work fallback
 };
+
+/// Contacts against a scene's exact ground truth (the pairs it lists, not every pair tested).
+struct TruthScore {
+  std::size_t true_contacts = 0;    ///< listed pairs that do touch
+  std::size_t false_negatives = 0;  ///< of those, not among the contacts
+  std::size_t false_positives = 0;  ///< listed pairs that do not touch but are among the contacts
+};
+
+/// Scores `contacts` (sorted, as every backend returns them) against `truth`.
+template <class T>
+TruthScore score_against_truth(const GroundTruth& truth, const NarrowPhaseResult<T>& contacts) {
+  TruthScore score;
+  auto count = [&](const std::vector<std::pair<index_t, index_t>>& pairs, const std::vector<bool>& collides,
+                   const std::vector<FeatureHit<T>>& hits) {
+    for (std::size_t i = 0; i < pairs.size(); ++i) {
+      const bool hit = std::binary_search(hits.begin(), hits.end(), FeatureHit<T>{pairs[i].first, pairs[i].second, T(0)});
+      score.true_contacts += collides[i];
+      score.false_negatives += collides[i] && !hit;
+      score.false_positives += !collides[i] && hit;
+    }
+  };
+  count(truth.vf, truth.vf_collides, contacts.vf);
+  count(truth.ee, truth.ee_collides, contacts.ee);
+  return score;
+}
 
 namespace cpu {
 
