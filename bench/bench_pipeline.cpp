@@ -9,6 +9,8 @@
 //   schedulers  every GPU scheduler x BV x precision (filtered inclusion): data scenes, horse,
 //               built-in 100K
 //   methods     every narrow-phase method x precision (lazy, AABB): the scenes with ground truth
+//   modes       the certified method in each query mode (contacts, earliest, set) x precision, and
+//               filtered inclusion (the method before it) in mode contacts: scenes, built-in 100K
 //   scaling     the default policies on the built-in scene at --sizes (default 1K..10M)
 //   default     the default policies on every scene (for the CPU backend: a short sweep)
 //   all         schedulers, methods and scaling
@@ -33,6 +35,7 @@ struct Row {
   std::string sweep, scene, step;  // step: first | steady
   lwsccd::index_t triangles = 0;
   ccd_app::PolicyChoice policies;
+  lwsccd::CcdMode mode = lwsccd::CcdMode::contacts;
   int steps_measured = 0;
   double total = 0, refit = 0, traverse = 0, features = 0, narrow = 0;
   double mean_total = 0;  // mean over the measured steps
@@ -52,9 +55,14 @@ struct Scenario {
 };
 
 // The first step, then `reps` steady steps (the sequence's next steps, or the same step again).
+const char* mode_name(lwsccd::CcdMode m) {
+  return m == lwsccd::CcdMode::earliest ? "earliest" : m == lwsccd::CcdMode::set ? "set" : "contacts";
+}
+
 void measure(const Scenario& sc, const std::string& sweep, const ccd_app::PolicyChoice& policies, const std::string& device,
-             int reps, std::vector<Row>& rows) {
+             int reps, std::vector<Row>& rows, lwsccd::CcdMode mode = lwsccd::CcdMode::contacts) {
   lwsccd::PipelineParams params;
+  params.mode = mode;
   auto pipeline = device == "gpu" ? ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies)
                                   : ccd_app::make_cpu_pipeline(sc.mesh, sc.layout, params, policies);
   // A sequence runs all its steps (its steady state is the median over them); other scenes
@@ -72,6 +80,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     r.step = which;
     r.triangles = sc.mesh->num_faces();
     r.policies = policies;
+    r.mode = mode;
     r.steps_measured = static_cast<int>(to - from);
     auto med = [&](double lwsccd::StepStats::*field) {
       std::vector<double> v;
@@ -86,7 +95,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     r.narrow = med(&lwsccd::StepStats::narrow_ms);
     r.last = outcomes[to - 1].stats;
     for (std::size_t i = from; i < to; ++i) r.earliest_toi = std::min(r.earliest_toi, outcomes[i].contacts.earliest_toi);
-    if (sc.truth) {
+    if (sc.truth && mode != lwsccd::CcdMode::earliest) {  // (earliest: no pairs to score)
       r.has_truth = true;
       r.truth = lwsccd::score_against_truth(*sc.truth, outcomes[to - 1].contacts);
     }
@@ -98,7 +107,8 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     const Row& r = rows[k];
     std::printf("%-10s %-24s %9d %-4s %-10s %-18s %-6s %-6s %9.2f %8.3f %8.3f %8.3f %9.2f %10zu %9zu %8zu %9.3g %8.1f", r.sweep.c_str(),
                 r.scene.c_str(), r.triangles, r.policies.bv.c_str(), device == "gpu" ? r.policies.scheduler.c_str() : "cpu",
-                r.policies.method.c_str(), r.policies.precision.c_str(), r.step.c_str(), r.total, r.refit, r.traverse,
+                (r.policies.method + (r.mode == lwsccd::CcdMode::contacts ? "" : std::string("/") + mode_name(r.mode))).c_str(),
+                r.policies.precision.c_str(), r.step.c_str(), r.total, r.refit, r.traverse,
                 r.features, r.narrow, r.last.triangle_pairs, r.last.feature_pairs_vf + r.last.feature_pairs_ee,
                 r.last.hits_vf + r.last.hits_ee, r.earliest_toi, double(r.last.peak_device_bytes) / (1 << 20));
     if (r.has_truth) std::printf("  FN %zu FP %zu", r.truth.false_negatives, r.truth.false_positives);
@@ -121,12 +131,13 @@ std::vector<std::size_t> parse_sizes(const std::string& text) {
 int main(int argc, char** argv) {
   const auto args = lwsccd_bench::parse_bench_args(
       argc, argv, 5, {"--sweep=", "--device=", "--sizes="},
-      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|scaling|default] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
+      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
       "                             [--data DIR] [--reps N] [--json FILE]");
   try {
     const std::string sweep = args.value("--sweep", "all");
-    if (sweep != "all" && sweep != "schedulers" && sweep != "methods" && sweep != "scaling" && sweep != "default")
-      throw lwsccd::InputError("command line", "--sweep", "expected all, schedulers, methods, scaling or default, got '" + sweep + "'");
+    if (sweep != "all" && sweep != "schedulers" && sweep != "methods" && sweep != "modes" && sweep != "scaling" && sweep != "default")
+      throw lwsccd::InputError("command line", "--sweep",
+                               "expected all, schedulers, methods, modes, scaling or default, got '" + sweep + "'");
     const std::string gpu = ccd_app::gpu_name();
     const std::string device = args.value("--device", gpu.empty() ? "cpu" : "gpu");
     if (device == "gpu" && gpu.empty()) {
@@ -189,13 +200,29 @@ int main(int argc, char** argv) {
     }
     if ((sweep == "all" || sweep == "methods") && have_data) {
       for (const auto& name : truth_scenes)
-        for (const char* method : {"filtered-inclusion", "inclusion", "cubic"})
+        for (const char* method : {"certified", "filtered-inclusion", "inclusion", "cubic"})
           for (const char* precision : {"double", "float"}) {
             ccd_app::PolicyChoice p;
             p.method = method;
             p.precision = precision;
             measure(data_scenario(name), "methods", p, device, args.reps, rows);
           }
+    }
+    if (sweep == "all" || sweep == "modes") {
+      auto sweep_modes = [&](const std::function<Scenario()>& make) {
+        for (const char* precision : {"double", "float"}) {
+          ccd_app::PolicyChoice p;
+          p.precision = precision;
+          for (lwsccd::CcdMode mode : {lwsccd::CcdMode::contacts, lwsccd::CcdMode::earliest, lwsccd::CcdMode::set})
+            measure(make(), "modes", p, device, args.reps, rows, mode);
+          p.method = "filtered-inclusion";
+          measure(make(), "modes", p, device, args.reps, rows);
+        }
+      };
+      if (have_data)
+        for (const auto& name : truth_scenes) sweep_modes([&] { return data_scenario(name); });
+      std::shared_ptr<lwsccd::ClothBallSimulation> sim;
+      sweep_modes([&] { return builtin_scenario(100000, sim); });
     }
     if (sweep == "default") {
       if (have_data) {
@@ -216,19 +243,23 @@ int main(int argc, char** argv) {
       const Row& r = rows[i];
       std::fprintf(f,
                    "{\"device\": \"%s\", \"sweep\": \"%s\", \"scene\": \"%s\", \"triangles\": %d, \"bv\": \"%s\", "
-                   "\"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"step\": \"%s\", \"steps_measured\": %d, "
+                   "\"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"mode\": \"%s\", \"step\": \"%s\", \"steps_measured\": %d, "
                    "\"total_ms\": %.4f, \"mean_total_ms\": %.4f, \"refit_ms\": %.4f, \"traverse_ms\": %.4f, \"features_ms\": %.4f, \"narrow_ms\": %.4f, "
                    "\"bvtt_nodes\": %zu, \"front\": %zu, \"triangle_pairs\": %zu, \"feature_pairs\": %zu, \"contacts\": %zu, "
                    "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
                    "\"peak_device_bytes\": %zu",
                    device == "gpu" ? gpu.c_str() : "CPU", r.sweep.c_str(), r.scene.c_str(), r.triangles, r.policies.bv.c_str(),
                    device == "gpu" ? r.policies.scheduler.c_str() : "cpu-work-stealing", r.policies.method.c_str(),
-                   r.policies.precision.c_str(), r.step.c_str(), r.steps_measured, r.total, r.mean_total, r.refit, r.traverse, r.features,
+                   r.policies.precision.c_str(), mode_name(r.mode), r.step.c_str(), r.steps_measured, r.total, r.mean_total, r.refit, r.traverse, r.features,
                    r.narrow, r.last.bvtt_nodes, r.last.front_size, r.last.triangle_pairs,
                    r.last.feature_pairs_vf + r.last.feature_pairs_ee, r.last.hits_vf + r.last.hits_ee, r.last.gave_up,
                    r.last.narrow_survivors, r.last.narrow_warp_searches, r.earliest_toi, r.last.peak_device_bytes);
       if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.truth.false_negatives,
                                   r.truth.false_positives);
+      const lwsccd::NarrowPhaseCounts& v = r.last.narrow_vf;
+      const lwsccd::NarrowPhaseCounts& e = r.last.narrow_ee;
+      std::fprintf(f, ", \"certified_hits\": %zu, \"certified_misses\": %zu, \"fallbacks\": %zu",
+                   v.certified_hits + e.certified_hits, v.certified_misses + e.certified_misses, v.fallbacks + e.fallbacks);
       std::fprintf(f, "}");
     });
   } catch (const std::exception& e) {

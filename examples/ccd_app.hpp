@@ -18,7 +18,7 @@ namespace ccd_app {
 struct PolicyChoice {
   std::string bv = "aabb";                   ///< aabb | obb (float volumes, rounded outward)
   std::string scheduler = "lazy";            ///< GPU: static | gproximity | lazy
-  std::string method = "filtered-inclusion";  ///< filtered-inclusion | inclusion | cubic
+  std::string method = "certified";          ///< certified | filtered-inclusion | inclusion | cubic
   std::string precision = "double";          ///< narrow-phase scalar: float | double
 };
 
@@ -45,6 +45,8 @@ lwsccd::NarrowPhaseResult<double> to_double(lwsccd::NarrowPhaseResult<T>&& r) {
     for (const auto& h : r.ee) out.ee.push_back({h.first, h.second, double(h.toi)});
     out.earliest_toi = double(r.earliest_toi);
     out.gave_up = r.gave_up;
+    out.vf_counts = r.vf_counts;
+    out.ee_counts = r.ee_counts;
     return out;
   }
 }
@@ -79,7 +81,8 @@ auto dispatch_policies(const PolicyChoice& c, F&& f) {
   auto with_method = [&](auto scalar) {
     if (c.method == "inclusion") return with_bv(Tag<lwsccd::InclusionCcd>{}, scalar);
     if (c.method == "cubic") return with_bv(Tag<lwsccd::CubicCcd>{}, scalar);
-    return with_bv(Tag<lwsccd::Filtered<lwsccd::InclusionCcd>>{}, scalar);
+    if (c.method == "filtered-inclusion") return with_bv(Tag<lwsccd::Filtered<lwsccd::InclusionCcd>>{}, scalar);
+    return with_bv(Tag<lwsccd::CertifiedCcd>{}, scalar);
   };
   if (c.precision == "float") return with_method(Tag<float>{});
   return with_method(Tag<double>{});

@@ -55,8 +55,11 @@ void print_usage(std::FILE* out) {
                "  --bv B           bounding volume of the swept triangles: aabb (default), obb\n"
                "  --scheduler S    GPU traversal load balancer: lazy (default, lazy work stealing),\n"
                "                   gproximity, static\n"
-               "  --method M       narrow phase: filtered-inclusion (default; conservative: never misses\n"
-               "                   a contact), inclusion (conservative), cubic (fast, can miss contacts)\n"
+               "  --method M       narrow phase: certified (default; a certified floating-point test,\n"
+               "                   the inclusion search where it cannot decide; never misses a contact),\n"
+               "                   filtered-inclusion, inclusion (conservative), cubic (can miss contacts)\n"
+               "  --mode M         contacts (default: every colliding pair with its TOI), earliest (only\n"
+               "                   the earliest TOI of the step), set (colliding pairs, TOIs unrefined)\n"
                "  --precision P    narrow-phase precision: double (default), float\n"
                "  --separation D   minimum separation: report features that come closer than D (default 0)\n"
                "  --tolerance T    time resolution of the times of impact (default 1e-6)\n"
@@ -121,7 +124,10 @@ Options parse(int argc, char** argv) {
     } else if (a == "--scheduler") {
       o.policies.scheduler = parse_choice(a, value(), {"lazy", "gproximity", "static"});
     } else if (a == "--method") {
-      o.policies.method = parse_choice(a, value(), {"filtered-inclusion", "inclusion", "cubic"});
+      o.policies.method = parse_choice(a, value(), {"certified", "filtered-inclusion", "inclusion", "cubic"});
+    } else if (a == "--mode") {
+      const std::string m = parse_choice(a, value(), {"contacts", "earliest", "set"});
+      o.params.mode = m == "earliest" ? lwsccd::CcdMode::earliest : m == "set" ? lwsccd::CcdMode::set : lwsccd::CcdMode::contacts;
     } else if (a == "--precision") {
       o.policies.precision = parse_choice(a, value(), {"double", "float"});
     } else if (a == "--separation") {
@@ -229,6 +235,7 @@ std::size_t oracle_differences(const lwsccd::Step& step, const lwsccd::BodyLayou
     ccd.min_separation = static_cast<T>(o.params.min_separation);
     ccd.tolerance = static_cast<T>(o.params.tolerance);
     ccd.max_iterations = o.params.max_iterations;
+    ccd.mode = o.params.mode;
     const auto expected = ccd_app::to_double(lwsccd::cpu::test_feature_pairs<Method, T>(
         mesh, step.x0, step.x1, lwsccd::culled_feature_pairs(mesh, candidates, orphans), ccd));
     auto differences = [](const auto& a, const auto& b) {
@@ -240,8 +247,13 @@ std::size_t oracle_differences(const lwsccd::Step& step, const lwsccd::BodyLayou
       }
       return d;
     };
-    return differences(contacts.vf, expected.vf) + differences(contacts.ee, expected.ee);
+    return differences(contacts.vf, expected.vf) + differences(contacts.ee, expected.ee) +
+           (contacts.earliest_toi != expected.earliest_toi ? 1 : 0);
   });
+}
+
+const char* mode_name(lwsccd::CcdMode m) {
+  return m == lwsccd::CcdMode::earliest ? "earliest" : m == lwsccd::CcdMode::set ? "set" : "contacts";
 }
 
 void print_progress(std::size_t done, std::size_t total) {
@@ -255,10 +267,11 @@ void print_progress(std::size_t done, std::size_t total) {
 
 void print_table(const StepSource& src, const std::string& backend, const Options& o, const std::vector<StepReport>& reports) {
   std::printf("lwsccd-ccd: %s\n", src.description.c_str());
-  std::printf("  %d vertices, %d triangles; %s | BV %s | %s%s | %s, %s | front tracking %s\n", src.mesh->num_vertices(),
+  std::printf("  %d vertices, %d triangles; %s | BV %s | %s%s | %s, %s, mode %s | front tracking %s\n", src.mesh->num_vertices(),
               src.mesh->num_faces(), backend.c_str(), o.policies.bv.c_str(),
               backend == "CPU" ? "" : "scheduler ", backend == "CPU" ? "work stealing" : o.policies.scheduler.c_str(),
-              o.policies.method.c_str(), o.policies.precision.c_str(), o.params.front_tracking ? "on" : "off");
+              o.policies.method.c_str(), o.policies.precision.c_str(), mode_name(o.params.mode),
+              o.params.front_tracking ? "on" : "off");
   std::printf("\n%-40s | %8s %7s %8s %8s %8s | %10s %9s %9s %9s %9s | %7s %7s %12s\n", "step", "total ms", "refit",
               "traverse", "features", "narrow", "BVTT nodes", "front", "tri pairs", "VF pairs", "EE pairs", "VF hits",
               "EE hits", "earliest TOI");
@@ -268,6 +281,10 @@ void print_table(const StepSource& src, const std::string& backend, const Option
                 s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.bvtt_nodes, s.front_size,
                 s.triangle_pairs, s.feature_pairs_vf, s.feature_pairs_ee, s.hits_vf, s.hits_ee,
                 r.outcome.contacts.earliest_toi);
+    if (o.policies.method == "certified")
+      std::printf("  narrow phase: certified hits %zu + %zu, certified misses %zu + %zu, fallbacks %zu + %zu (VF + EE)\n",
+                  s.narrow_vf.certified_hits, s.narrow_ee.certified_hits, s.narrow_vf.certified_misses,
+                  s.narrow_ee.certified_misses, s.narrow_vf.fallbacks, s.narrow_ee.fallbacks);
     if (s.narrow_survivors)
       std::printf("  narrow phase: %zu pairs past the first pass, %zu of them searched by a warp\n", s.narrow_survivors,
                   s.narrow_warp_searches);
@@ -291,9 +308,10 @@ void print_json(const StepSource& src, const std::string& backend, const Options
   std::printf("{\n  \"input\": \"%s\", \"vertices\": %d, \"triangles\": %d,\n", src.description.c_str(),
               src.mesh->num_vertices(), src.mesh->num_faces());
   std::printf("  \"backend\": \"%s\", \"bv\": \"%s\", \"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", "
-              "\"front_tracking\": %s,\n  \"steps\": [\n",
+              "\"mode\": \"%s\", \"front_tracking\": %s,\n  \"steps\": [\n",
               backend.c_str(), o.policies.bv.c_str(), backend == "CPU" ? "work-stealing" : o.policies.scheduler.c_str(),
-              o.policies.method.c_str(), o.policies.precision.c_str(), o.params.front_tracking ? "true" : "false");
+              o.policies.method.c_str(), o.policies.precision.c_str(), mode_name(o.params.mode),
+              o.params.front_tracking ? "true" : "false");
   for (std::size_t i = 0; i < reports.size(); ++i) {
     const StepReport& r = reports[i];
     const lwsccd::StepStats& s = r.outcome.stats;
@@ -301,11 +319,12 @@ void print_json(const StepSource& src, const std::string& backend, const Options
                 "\"narrow\": %.4f}, \"rebuilt\": %s, \"restarted_from_root\": %s, \"bvtt_nodes\": %zu, \"front\": %zu, "
                 "\"triangle_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, \"vf_hits\": %zu, \"ee_hits\": %zu, "
                 "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
-                "\"peak_device_bytes\": %zu",
+                "\"peak_device_bytes\": %zu, \"certified\": {\"vf\": [%zu, %zu, %zu], \"ee\": [%zu, %zu, %zu]}",
                 r.name.c_str(), s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.rebuilt ? "true" : "false",
                 s.restarted_from_root ? "true" : "false", s.bvtt_nodes, s.front_size, s.triangle_pairs, s.feature_pairs_vf,
                 s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, s.narrow_survivors, s.narrow_warp_searches,
-                r.outcome.contacts.earliest_toi, s.peak_device_bytes);
+                r.outcome.contacts.earliest_toi, s.peak_device_bytes, s.narrow_vf.certified_hits, s.narrow_vf.certified_misses,
+                s.narrow_vf.fallbacks, s.narrow_ee.certified_hits, s.narrow_ee.certified_misses, s.narrow_ee.fallbacks);
     if (r.has_truth)
       std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.truth.true_contacts,
                   r.truth.false_negatives, r.truth.false_positives);
@@ -336,7 +355,7 @@ int main(int argc, char** argv) {
       StepReport r;
       r.name = step.name;
       r.outcome = pipeline->step(step.x0, step.x1);
-      if (src.truth) {
+      if (src.truth && o.params.mode != lwsccd::CcdMode::earliest) {  // (earliest: no pairs to score)
         r.has_truth = true;
         r.truth = lwsccd::score_against_truth(*src.truth, r.outcome.contacts);
       }

@@ -3,6 +3,7 @@
 
 #include <cstring>
 
+#include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/cubic_ccd.hpp"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/inclusion_ccd.hpp"
@@ -17,20 +18,29 @@ namespace {
 
 template <class Method, class T>
 void compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
-                      const FeaturePairs& pairs, std::size_t chunk, std::size_t capacity) {
+                      const FeaturePairs& pairs, std::size_t chunk, std::size_t capacity, CcdMode mode = CcdMode::contacts) {
   gpu::DeviceMeshFeatures features(mesh);
   gpu::DeviceStep<double> step(mesh, x0, x1);
   gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
   vf.upload(pairs.vf);
   ee.upload(pairs.ee);
   gpu::NarrowPhase<Method, T> narrow(chunk, capacity);
-  const CcdParams<T> params;
+  CcdParams<T> params;
+  params.mode = mode;
   narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
   const auto cpu_result = cpu::test_feature_pairs<Method, T>(mesh, x0, x1, pairs, params);
-  lwsccd_test::require_same_contacts(narrow.download(), cpu_result);
-  std::printf("  %s/%s: %zu vf + %zu ee pairs -> %zu + %zu hits, earliest TOI %.9g\n", Method::name,
-              sizeof(T) == 4 ? "float" : "double", pairs.vf.size(), pairs.ee.size(), cpu_result.vf.size(),
-              cpu_result.ee.size(), double(cpu_result.earliest_toi));
+  const auto gpu_result = narrow.download();
+  lwsccd_test::require_same_contacts(gpu_result, cpu_result);
+  if (lwsccd::detail::certified_of<Method>::value) {
+    lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
+    lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
+  }
+  const char* mode_name = mode == CcdMode::earliest ? "earliest" : mode == CcdMode::set ? "set" : "contacts";
+  std::printf("  %s/%s/%s: %zu vf + %zu ee pairs -> %zu + %zu hits, earliest TOI %.9g; certified hits %zu + %zu, "
+              "fallbacks %zu + %zu\n", Method::name, sizeof(T) == 4 ? "float" : "double", mode_name, pairs.vf.size(),
+              pairs.ee.size(), cpu_result.vf.size(), cpu_result.ee.size(), double(cpu_result.earliest_toi),
+              cpu_result.vf_counts.certified_hits, cpu_result.ee_counts.certified_hits, cpu_result.vf_counts.fallbacks,
+              cpu_result.ee_counts.fallbacks);
 }
 
 }  // namespace
@@ -44,6 +54,10 @@ TEST_CASE("GPU narrow phase equals the CPU backend on a folded cloth, with a gro
   compare_backends<Filtered<InclusionCcd>, float>(m.mesh, m.x0, m.x1, fp, 4096, 3);
   compare_backends<CubicCcd, double>(m.mesh, m.x0, m.x1, fp, 1 << 20, 1 << 16);
   compare_backends<CubicCcd, float>(m.mesh, m.x0, m.x1, fp, 1 << 20, 1 << 16);
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set}) {
+    compare_backends<CertifiedCcd, double>(m.mesh, m.x0, m.x1, fp, 997, 1, mode);
+    compare_backends<CertifiedCcd, float>(m.mesh, m.x0, m.x1, fp, 4096, 3, mode);
+  }
 }
 
 TEST_CASE("GPU narrow phase equals the CPU backend on the real scenes' candidate pairs", "[gpu][narrow][data]") {
@@ -59,5 +73,9 @@ TEST_CASE("GPU narrow phase equals the CPU backend on the real scenes' candidate
     compare_backends<Filtered<InclusionCcd>, double>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10);
     compare_backends<Filtered<InclusionCcd>, float>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10);
     compare_backends<CubicCcd, double>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10);
+    for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set}) {
+      compare_backends<CertifiedCcd, double>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10, mode);
+      compare_backends<CertifiedCcd, float>(*scene.step.mesh, scene.step.x0, scene.step.x1, fp, 1 << 20, 1 << 10, mode);
+    }
   }
 }

@@ -65,6 +65,28 @@ TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth
     const auto g2 = gpu_pipeline.step(scene.step.x0, scene.step.x1);
     CHECK_FALSE(g2.stats.restarted_from_root);
     require_same_contacts(g2, c);
+    // The other query modes: the same on both backends; earliest never later than the contacts'
+    // minimum, set misses no ground-truth contact.
+    for (CcdMode mode : {CcdMode::earliest, CcdMode::set}) {
+      PipelineParams params;
+      params.mode = mode;
+      gpu::CcdPipeline<> gm(scene.step.mesh, params);
+      cpu::CcdPipeline<> cm(scene.step.mesh, params);
+      const auto gr = gm.step(scene.step.x0, scene.step.x1);
+      const auto cr = cm.step(scene.step.x0, scene.step.x1);
+      require_same_contacts(gr, cr);
+      lwsccd_test::require_same_counts(gr.stats.narrow_vf, cr.stats.narrow_vf);
+      lwsccd_test::require_same_counts(gr.stats.narrow_ee, cr.stats.narrow_ee);
+      std::printf("  mode %s: GPU narrow %.3f ms, earliest TOI %.9g, %zu + %zu pairs\n",
+                  mode == CcdMode::earliest ? "earliest" : "set", gr.stats.narrow_ms, gr.contacts.earliest_toi,
+                  gr.contacts.vf.size(), gr.contacts.ee.size());
+      if (mode == CcdMode::earliest) {
+        CHECK(gr.contacts.vf.empty());
+        CHECK(gr.contacts.earliest_toi <= c.contacts.earliest_toi);
+      } else {
+        CHECK(score_against_truth(scene.truth, gr.contacts).false_negatives == 0);
+      }
+    }
   }
 }
 

@@ -24,7 +24,7 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
     for (const auto& p : brute_force_pairs(*mesh, swept_triangle_bvs<Aabbf>(*mesh, m.x0, m.x1)))
       if (!p.adjacent) non_adjacent.push_back(p);
     const FeaturePairs features = culled_feature_pairs(*mesh, non_adjacent, orphans);
-    const auto expected = cpu::test_feature_pairs<Filtered<InclusionCcd>, double>(*mesh, m.x0, m.x1, features);
+    const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(*mesh, m.x0, m.x1, features);
     REQUIRE(r.stats.triangle_pairs == non_adjacent.size());
     REQUIRE(r.stats.feature_pairs_vf == features.vf.size());
     REQUIRE(r.stats.feature_pairs_ee == features.ee.size());
@@ -48,7 +48,7 @@ NarrowPhaseResult<double> oracle_contacts(const MultiBodyStep& scene) {
     if (!p.adjacent) non_adjacent.push_back(p);
   const OrphanSets orphans = orphans_for_layout(mesh, find_orphan_sets(mesh), scene.layout);
   const FeaturePairs features = culled_feature_pairs(mesh, non_adjacent, orphans);
-  return cpu::test_feature_pairs<Filtered<InclusionCcd>, double>(mesh, scene.step.x0, scene.step.x1, features);
+  return cpu::test_feature_pairs<CertifiedCcd, double>(mesh, scene.step.x0, scene.step.x1, features);
 }
 
 }  // namespace

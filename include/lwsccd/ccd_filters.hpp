@@ -87,23 +87,29 @@ LWSCCD_HD auto coordinate_magnitude(const Q& q) {
 namespace detail {
 
 /// The Bernstein coefficients b[0..3] of the coplanarity cubic on [0, 1] and a rigorous bound on
-/// their error (rounding, and a relative perturbation u_T of every input coordinate).
+/// their error: rounding in T, and a relative perturbation `perturbation` (default u_T) of every
+/// input coordinate (the certified path computes a float query in double with u_float here).
+/// `rounding_only`, when given, receives the bound without the perturbation (the error of the
+/// coefficients for the query exactly as given).
 template <class Q, class T>
-LWSCCD_HD T coplanarity_bernstein(const Q& q, T b[4]) {
+LWSCCD_HD T coplanarity_bernstein(const Q& q, T b[4], T perturbation = unit_roundoff<T>(), T* rounding_only = nullptr) {
   const Coplanarity<T> c = coplanarity_of(q);
   T k[4], mag[4], mag_perturbed[4];
   bernstein_controls(c, k);
   bernstein_majorants(abs_plus(c, Vec3<T>{0, 0, 0}), mag);
   // A difference of two coordinates moves by at most 2 u m under the input perturbation.
   const T u = unit_roundoff<T>();
-  const Vec3<T> e = vscale(coordinate_magnitude(q), T(2) * u);
+  const Vec3<T> e = vscale(coordinate_magnitude(q), T(2) * perturbation);
   bernstein_majorants(abs_plus(c, e), mag_perturbed);
-  T bound = T(0);
+  T bound = T(0), rounding = T(0);
   for (int i = 0; i < 4; ++i) {
     // Perturbation effect (majorant difference) plus rounding (depth ~8 -> 16u of the majorant).
     const T bi = fadd(fmul(fsub(mag_perturbed[i], mag[i]), T(1) + T(8) * u), fmul(T(16) * u, mag_perturbed[i]));
     bound = bi > bound ? bi : bound;
+    const T ri = fmul(T(16) * u, mag[i]);
+    rounding = ri > rounding ? ri : rounding;
   }
+  if (rounding_only) *rounding_only = fadd(rounding, std::numeric_limits<T>::denorm_min());
   // k[1], k[2] are three times the middle Bernstein coefficients; dividing keeps the bound valid.
   b[0] = k[0];
   b[1] = k[1] / T(3);

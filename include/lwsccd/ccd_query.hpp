@@ -41,12 +41,22 @@ struct EdgeEdgeQuery {
   }
 };
 
+/// What a narrow phase is asked for.
+///  - contacts: every colliding pair with its time of impact (a lower bound within `tolerance`);
+///  - earliest: only the earliest time of impact over all pairs (what a line search needs);
+///  - set:      which pairs collide, each with some lower bound of its time of impact, unrefined.
+enum class CcdMode : unsigned char { contacts, earliest, set };
+
 /// Run-time parameters of the elemental tests.
 template <class T>
 struct CcdParams {
   T min_separation = T(0);  ///< report pairs that come closer than this (InclusionCcd; 0 = contact)
   T tolerance = T(1e-6);    ///< time resolution of the reported time of impact
   int max_iterations = 16384;  ///< InclusionCcd: boxes examined before answering "collision" (bounded time)
+  CcdMode mode = CcdMode::contacts;  ///< per query, only `set` changes anything: the TOI need not be refined
+  /// Contacts at or after this time may be ignored (reported as "no collision"); earlier ones
+  /// never are. Batches in mode `earliest` lower it to the best time already found.
+  T time_limit = T(1);
 };
 
 /// The answer to one query. `toi` is in [0, 1] when `hit`; conservative methods guarantee that

@@ -140,6 +140,7 @@ struct InclusionSetup {
   T d = T(0);         ///< minimum separation
   T delta = T(0);     ///< distance that counts as contact (motion in `tolerance` of time)
   T eta = T(0);       ///< widening of a box's time range for the time filter
+  T time_limit = T(1);  ///< boxes starting at or after this time are dropped (CcdParams::time_limit)
   T bern[4] = {0, 0, 0, 0}, bern_bound = T(0);
   int max_level = 1;  ///< finest level per dimension
   bool vf = false, time_filter = false;
@@ -151,6 +152,7 @@ LWSCCD_HD InclusionSetup<T> inclusion_setup(const Q& q, const CcdParams<T>& para
   InclusionSetup<T> s;
   const T unit = unit_roundoff<T>();
   s.d = params.min_separation;
+  s.time_limit = params.time_limit;
   // Rounding bound per axis, and the length scale for the tolerance test.
   const Vec3<T>* pts = q.points();
   Vec3<T> m{0, 0, 0};
@@ -202,6 +204,9 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
     dims[k][1] = dyadic<T>(box.idx[k] + 1, box.level[k]);
   }
   if (box_time_key(box) < floor_key) t[0] = t_floor;
+  // Later than the caller wants: every box after it in the search's order starts as late, so the
+  // answer (the first accepted box with only excluded boxes before it) is unchanged before then.
+  if (t[0] >= s.time_limit) return BoxVerdict::excluded;
   if (s.time_filter && (box.level[0] > 0 || floor_key > 0)) {
     T sub[4];
     const T t_lo = t[0] > s.eta ? fsub(t[0], s.eta) : T(0);

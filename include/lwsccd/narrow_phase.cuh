@@ -10,6 +10,7 @@
 
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/ccd_filters.hpp"
+#include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/device_buffer.cuh"
 #include "lwsccd/narrow_phase.hpp"
 
@@ -38,11 +39,13 @@ struct NarrowPhasePolicy {
   static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~12 KiB of shared memory each)
 };
 
-/// Runs a CCD method over device lists of candidate pairs. Methods with a quick_reject (the
-/// conservative inclusion method, filtered methods) run in two passes: the cheap first step on
-/// every pair, then the full test on the compacted survivors; the answers are the same. The
-/// inclusion method's full test runs a warp per query (its rounds of boxes on the lanes). Owns its scratch and output buffers
-/// (reused across calls; they only grow).
+/// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as
+/// cpu::test_feature_pairs, with the same answers). CertifiedCcd classifies every pair in the
+/// first pass, a thread per pair (its hits are stored at once), and runs its fallback only on the
+/// undecided ones. Other methods with a quick_reject (the conservative inclusion method, filtered
+/// methods) run their cheap first step on every pair, then the full test on the compacted
+/// survivors. The inclusion method's full test runs a thread per query for a few rounds, then a
+/// warp per query still open. Owns its scratch and output buffers (reused; they only grow).
 template <class Method, class T, class Policy = NarrowPhasePolicy>
 class NarrowPhase {
  public:
@@ -72,6 +75,11 @@ class NarrowPhase {
     if (start_) cudaEventDestroy(start_);
   }
 
+  /// The method that runs on the first pass's survivors: CertifiedCcd's fallback, or Method.
+  using FullTest = typename lwsccd::detail::full_test_of<Method>::type;
+  static constexpr bool kCertified = lwsccd::detail::certified_of<Method>::value;
+  static constexpr bool kTwoPass = kCertified || lwsccd::detail::has_quick_reject<Method>::value;
+
   std::size_t num_vf_hits() const { return lists_[0].count; }
   /// Pairs of the last run left for the full test by the first pass (all pairs for one-pass methods).
   std::size_t survivors() const { return lists_[0].num_survivors + lists_[1].num_survivors; }
@@ -80,12 +88,15 @@ class NarrowPhase {
   std::size_t num_ee_hits() const { return lists_[1].count; }
   T earliest_toi() const { return earliest_; }
   std::size_t gave_up() const { return gave_up_; }
+  /// How the last run answered each list's pairs (vertex-face, edge-edge).
+  NarrowPhaseCounts counts(int list) const { return lists_[list].counts; }
   /// Copies the hits to the host, sorted like the CPU backend's.
   NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
   std::size_t device_bytes() const {
     std::size_t bytes = toi_.capacity_bytes() + reduce_scratch_.capacity_bytes();
     for (const auto& l : lists_)
       bytes += l.hits.capacity_bytes() + l.staged.capacity_bytes() + l.flags.capacity_bytes() + l.scratch.capacity_bytes() +
+               l.hit_flags.capacity_bytes() +
                l.survivors.capacity_bytes() + l.counters.capacity_bytes() + l.pending.capacity_bytes() +
                l.pending_index.capacity_bytes();
     return bytes;
@@ -98,6 +109,8 @@ class NarrowPhase {
     DeviceBuffer<unsigned char> flags, scratch;
     DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
     DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up, [2]: left to warp searches
+    DeviceBuffer<unsigned char> hit_flags;       ///< CertifiedCcd's first pass: certified hits
+    NarrowPhaseCounts counts;
     DeviceBuffer<unsigned char> pending;         ///< per query: left open by the one-thread attempt
     DeviceBuffer<unsigned> pending_index;
     std::size_t count = 0, num_survivors = 0, tested = 0, warp_searches = 0;
@@ -113,6 +126,8 @@ class NarrowPhase {
   template <class P, bool kVertexFace>
   void launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params, List& list,
                     std::size_t begin, std::size_t m);
+  void grow_hits(List& list, std::size_t room);
+  T list_minimum(const List& list, cudaStream_t stream);
 
   std::size_t chunk_, initial_capacity_;
   List lists_[2];  ///< vertex-face, edge-edge
@@ -121,6 +136,7 @@ class NarrowPhase {
   DeviceBuffer<unsigned char> reduce_scratch_;
   std::size_t gave_up_ = 0;
   T earliest_ = T(1);
+  bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
 };
 
 }  // namespace lwsccd::gpu

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lwsccd/ccd_query.hpp"
+#include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/detail/oracle_impl.hpp"
 #include "lwsccd/oracle.hpp"
@@ -26,11 +27,18 @@ struct FeatureHit {
   }
 };
 
+/// How one list's pairs were answered. For CertifiedCcd: certified hits and misses, and the
+/// pairs left to the fallback; for other methods every pair counts as a fallback.
+struct NarrowPhaseCounts {
+  std::size_t pairs = 0, certified_hits = 0, certified_misses = 0, fallbacks = 0;
+};
+
 template <class T>
 struct NarrowPhaseResult {
-  std::vector<FeatureHit<T>> vf, ee;  ///< sorted by (first, second)
+  std::vector<FeatureHit<T>> vf, ee;  ///< sorted by (first, second); empty in mode `earliest`
   T earliest_toi = T(1);              ///< 1 when nothing collides
   std::size_t gave_up = 0;            ///< hits answered by a method's bounded-work fallback
+  NarrowPhaseCounts vf_counts, ee_counts;
 };
 
 /// Contacts against a scene's exact ground truth (the pairs it lists, not every pair tested).
@@ -58,41 +66,106 @@ TruthScore score_against_truth(const GroundTruth& truth, const NarrowPhaseResult
   return score;
 }
 
+namespace detail {
+/// One list on all cores: certified methods classify every pair first and run the fallback on
+/// the undecided ones with `time_limit` (mode earliest: the best certified time of both lists,
+/// so that the answer does not depend on the order of work); other methods run as they are.
+/// Item i of the list is the pair `pair_of(i)` and the query `gather(i)`; `undecided` (first pass
+/// of a certified method) receives the items left to the fallback.
+template <class Method, class T, class Gather, class PairOf>
+void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, const CcdParams<T>& params,
+               std::vector<std::size_t>* undecided, std::vector<FeatureHit<T>>& hits, NarrowPhaseCounts& counts,
+               std::size_t& gave_up) {
+  const unsigned workers = std::max(1u, std::thread::hardware_concurrency());
+  struct Part {
+    std::vector<FeatureHit<T>> hits;
+    std::vector<std::size_t> open;
+    NarrowPhaseCounts counts;
+    std::size_t gave_up = 0;
+  };
+  std::vector<Part> parts(workers);
+  run_on_all_cores([&](unsigned w, unsigned nw) {
+    Part& out = parts[w];
+    for (std::size_t i = w; i < n; i += nw) {
+      const auto q = gather(i);
+      if constexpr (lwsccd::detail::certified_of<Method>::value) {
+        if (undecided) {  // first pass
+          const CertifiedAnswer<T> a = Method::classify(q, params);
+          if (a.certainty == Certainty::hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, a.lo}), ++out.counts.certified_hits;
+          else if (a.certainty == Certainty::miss) ++out.counts.certified_misses;
+          else out.open.push_back(i);
+          continue;
+        }
+      }
+      CcdResult<T> r;
+      if constexpr (std::is_same_v<std::decay_t<decltype(q)>, VertexFaceQuery<T>>) {
+        if constexpr (lwsccd::detail::certified_of<Method>::value) r = lwsccd::detail::certified_of<Method>::fallback::vertex_face(q, params);
+        else r = Method::vertex_face(q, params);
+      } else {
+        if constexpr (lwsccd::detail::certified_of<Method>::value) r = lwsccd::detail::certified_of<Method>::fallback::edge_edge(q, params);
+        else r = Method::edge_edge(q, params);
+      }
+      ++out.counts.fallbacks;
+      if (r.hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, r.toi}), out.gave_up += r.gave_up;
+    }
+  });
+  for (auto& part : parts) {
+    hits.insert(hits.end(), part.hits.begin(), part.hits.end());
+    if (undecided) undecided->insert(undecided->end(), part.open.begin(), part.open.end());
+    counts.certified_hits += part.counts.certified_hits;
+    counts.certified_misses += part.counts.certified_misses;
+    counts.fallbacks += part.counts.fallbacks;
+    gave_up += part.gave_up;
+  }
+}
+}  // namespace detail
+
 namespace cpu {
 
-/// Runs Method on every pair (vf and ee lists in the dataset's id convention) on all cores.
+
+/// Runs Method on every pair (vf and ee lists in the dataset's id convention) on all cores, in
+/// the mode params.mode. CertifiedCcd runs in two passes (certified classification, then the
+/// fallback on the undecided pairs); the GPU batch does the same, so both give the same answers.
 template <class Method, class T, class P>
 NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0,
                                         const std::vector<Vec3<P>>& x1, const FeaturePairs& pairs,
                                         const CcdParams<T>& params = {}) {
   static_assert(require_ccd_method<Method>::value, "");
   const MeshFeatures features = mesh_features(mesh);
-  const unsigned workers = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<NarrowPhaseResult<T>> parts(workers);
-  detail::run_on_all_cores([&](unsigned w, unsigned n) {
-    NarrowPhaseResult<T>& out = parts[w];
-    for (std::size_t i = w; i < pairs.vf.size(); i += n) {
-      const auto& p = pairs.vf[i];
-      const CcdResult<T> r =
-          Method::vertex_face(gather_vertex_face<T>(features, x0.data(), x1.data(), p.first, p.second), params);
-      if (r.hit) out.vf.push_back({p.first, p.second, r.toi}), out.gave_up += r.gave_up;
-    }
-    for (std::size_t i = w; i < pairs.ee.size(); i += n) {
-      const auto& p = pairs.ee[i];
-      const CcdResult<T> r = Method::edge_edge(gather_edge_edge<T>(features, x0.data(), x1.data(), p.first, p.second), params);
-      if (r.hit) out.ee.push_back({p.first, p.second, r.toi}), out.gave_up += r.gave_up;
-    }
-  });
+  auto vf_query = [&](std::size_t i) {
+    return gather_vertex_face<T>(features, x0.data(), x1.data(), pairs.vf[i].first, pairs.vf[i].second);
+  };
+  auto ee_query = [&](std::size_t i) {
+    return gather_edge_edge<T>(features, x0.data(), x1.data(), pairs.ee[i].first, pairs.ee[i].second);
+  };
   NarrowPhaseResult<T> result;
-  for (auto& part : parts) {
-    result.vf.insert(result.vf.end(), part.vf.begin(), part.vf.end());
-    result.ee.insert(result.ee.end(), part.ee.begin(), part.ee.end());
-    result.gave_up += part.gave_up;
+  result.vf_counts.pairs = pairs.vf.size();
+  result.ee_counts.pairs = pairs.ee.size();
+  auto vf_pair = [&](std::size_t i) { return pairs.vf[i]; };
+  auto ee_pair = [&](std::size_t i) { return pairs.ee[i]; };
+  if constexpr (lwsccd::detail::certified_of<Method>::value) {
+    std::vector<std::size_t> open_vf, open_ee;
+    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, params, &open_vf, result.vf, result.vf_counts, result.gave_up);
+    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, params, &open_ee, result.ee, result.ee_counts, result.gave_up);
+    CcdParams<T> fallback_params = params;
+    if (params.mode == CcdMode::earliest)
+      for (const auto* list : {&result.vf, &result.ee})
+        for (const auto& h : *list) fallback_params.time_limit = std::min(fallback_params.time_limit, h.toi);
+    lwsccd::detail::test_list<Method>(
+        open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k]); }, [&](std::size_t k) { return pairs.vf[open_vf[k]]; },
+        fallback_params, nullptr, result.vf, result.vf_counts, result.gave_up);
+    lwsccd::detail::test_list<Method>(
+        open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k]); }, [&](std::size_t k) { return pairs.ee[open_ee[k]]; },
+        fallback_params, nullptr, result.ee, result.ee_counts, result.gave_up);
+  } else {
+    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, params, nullptr, result.vf, result.vf_counts, result.gave_up);
+    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, params, nullptr, result.ee, result.ee_counts, result.gave_up);
   }
   std::sort(result.vf.begin(), result.vf.end());
   std::sort(result.ee.begin(), result.ee.end());
   for (const auto* list : {&result.vf, &result.ee})
     for (const auto& h : *list) result.earliest_toi = std::min(result.earliest_toi, h.toi);
+  if (params.mode == CcdMode::earliest) result.vf.clear(), result.ee.clear();
   return result;
 }
 

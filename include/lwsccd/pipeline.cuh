@@ -74,7 +74,7 @@ __global__ void node_body_kernel(BvhView<BV> bvh, const index_t* changes, const 
 
 }  // namespace detail
 
-template <class BV = Aabbf, class Scheduler = LazyStealScheduler<>, class Method = Filtered<InclusionCcd>, class T = double>
+template <class BV = Aabbf, class Scheduler = LazyStealScheduler<>, class Method = CertifiedCcd, class T = double>
 class CcdPipeline {
  public:
   using Task = SelfCollisionTask<BV>;
@@ -156,6 +156,7 @@ class CcdPipeline {
       ccd.min_separation = static_cast<T>(params_.min_separation);
       ccd.tolerance = static_cast<T>(params_.tolerance);
       ccd.max_iterations = params_.max_iterations;
+      ccd.mode = params_.mode;
       narrow_.run(features_, step_->x0.data(), step_->x1.data(), reinterpret_cast<const std::pair<index_t, index_t>*>(vf_pairs_.data()),
                   r.stats.feature_pairs_vf, reinterpret_cast<const std::pair<index_t, index_t>*>(ee_pairs_.data()),
                   r.stats.feature_pairs_ee, ccd);
@@ -166,6 +167,8 @@ class CcdPipeline {
     r.stats.gave_up = r.contacts.gave_up;
     r.stats.narrow_survivors = narrow_.survivors();
     r.stats.narrow_warp_searches = narrow_.warp_searches();
+    r.stats.narrow_vf = narrow_.counts(0);
+    r.stats.narrow_ee = narrow_.counts(1);
     r.stats.peak_device_bytes = memory_stats().peak;
     r.stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return r;

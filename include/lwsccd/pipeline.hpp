@@ -16,6 +16,7 @@
 
 #include "lwsccd/bvh.hpp"
 #include "lwsccd/bvtt.hpp"
+#include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase.hpp"
 #include "lwsccd/orphans.hpp"
@@ -32,6 +33,7 @@ struct PipelineParams {
   double rebuild_factor = 1.5;   ///< rebuild the BVH when its cost exceeds this times the cost at build
   double front_growth_limit = 1.5;  ///< restart from the root once the front grew this much
   std::size_t device_memory_budget = 0;  ///< GPU backend: device bytes the library may hold (0: no limit)
+  CcdMode mode = CcdMode::contacts;      ///< contacts, only the earliest TOI, or the colliding set (ccd_query.hpp)
 
   /// Throws InputError naming the first parameter out of range.
   void validate() const;
@@ -74,6 +76,7 @@ struct StepStats {
   std::size_t hits_vf = 0, hits_ee = 0, gave_up = 0;
   std::size_t narrow_survivors = 0;      ///< GPU: pairs the narrow phase's first pass left for the full test
   std::size_t narrow_warp_searches = 0;  ///< GPU: of those, searched by a warp (still open after the thread's rounds)
+  NarrowPhaseCounts narrow_vf, narrow_ee;  ///< certified hits / misses and fallbacks per list (CertifiedCcd)
   std::size_t peak_device_bytes = 0;
   bool rebuilt = false, restarted_from_root = false;
 };
@@ -87,7 +90,7 @@ struct StepResult {
 namespace cpu {
 
 /// The pipeline on the CPU backend (all cores).
-template <class BV = Aabbf, class Method = Filtered<InclusionCcd>, class T = double>
+template <class BV = Aabbf, class Method = CertifiedCcd, class T = double>
 class CcdPipeline {
  public:
   /// One self-colliding body.
@@ -142,7 +145,10 @@ class CcdPipeline {
     ccd.min_separation = static_cast<T>(params_.min_separation);
     ccd.tolerance = static_cast<T>(params_.tolerance);
     ccd.max_iterations = params_.max_iterations;
+    ccd.mode = params_.mode;
     r.contacts = test_feature_pairs<Method, T>(*mesh_, x0, x1, features, ccd);
+    r.stats.narrow_vf = r.contacts.vf_counts;
+    r.stats.narrow_ee = r.contacts.ee_counts;
     r.stats.narrow_ms = ms(t);
     r.stats.hits_vf = r.contacts.vf.size();
     r.stats.hits_ee = r.contacts.ee.size();

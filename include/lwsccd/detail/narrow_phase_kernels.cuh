@@ -46,6 +46,26 @@ __global__ void quick_reject_kernel(MeshFeatures mesh, const Vec3<P>* x0, const 
   keep[i] = rejected ? 0 : 1;
 }
 
+// CertifiedCcd's first pass: every pair classified; certified hits staged (flag in `hit`), the
+// undecided flagged in `keep` for the fallback.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void certified_pass_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                      const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
+                                      FeatureHit<T>* staged, unsigned char* hit, unsigned char* keep) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const std::pair<index_t, index_t> p = pairs[i];
+  CertifiedAnswer<T> a;
+  if constexpr (kVertexFace) {
+    a = Method::classify(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
+  } else {
+    a = Method::classify(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
+  }
+  staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
+  hit[i] = a.certainty == Certainty::hit ? 1 : 0;
+  keep[i] = a.certainty == Certainty::undecided ? 1 : 0;
+}
+
 // Second pass, first attempt: the same search in one thread per query, for a few rounds and
 // little memory. Most queries end there; the others are flagged `pending` for the warp search
 // (which starts over and gives the answer the whole search gives).
@@ -230,27 +250,38 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
   LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
   for (auto& l : lists_) {
     l.count = l.tested = l.warp_searches = 0;
+    l.counts = {};
     l.counters.resize_discard(3);
     LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 3 * sizeof(unsigned long long), l.stream));
   }
+  lists_[0].counts.pairs = num_vf;
+  lists_[1].counts.pairs = num_ee;
   first_pass<P, true>(view, x0, x1, vf, num_vf, params, lists_[0]);
   first_pass<P, false>(view, x0, x1, ee, num_ee, params, lists_[1]);
+  // Mode earliest: the fallback need not look past the best certified time (as the CPU does).
+  CcdParams<T> full = params;
+  if (kCertified && params.mode == CcdMode::earliest)
+    for (auto& l : lists_) {
+      const T m = list_minimum(l, l.stream);
+      full.time_limit = m < full.time_limit ? m : full.time_limit;
+    }
+  for (auto& l : lists_) {
+    l.counts.fallbacks = l.num_survivors;
+    l.counts.certified_misses = l.counts.pairs - l.counts.certified_hits - l.num_survivors;
+    // Two-pass methods: room for every survivor at once; one-pass methods grow chunk by chunk.
+    grow_hits(l, std::max(initial_capacity_, l.count + (kTwoPass ? l.num_survivors : 0)));
+  }
   // The full test, a chunk of each list at a time on its stream: the lists overlap, and a list's
   // long searches hold up only its own chunk.
-  // Two-pass methods: room for every survivor at once; one-pass methods grow chunk by chunk.
-  for (auto& l : lists_) {
-    const std::size_t room = lwsccd::detail::has_quick_reject<Method>::value ? l.num_survivors : 0;
-    if (l.hits.size() < std::max(initial_capacity_, room)) l.hits.resize_discard(std::max(initial_capacity_, room));
-  }
   while (lists_[0].tested < lists_[0].num_survivors || lists_[1].tested < lists_[1].num_survivors) {
     std::size_t launched[2] = {0, 0};
     for (int k = 0; k < 2; ++k) {
       List& l = lists_[k];
       const std::size_t m = std::min(chunk_, l.num_survivors - l.tested);
       if (m == 0) continue;
-      if (k == 0) launch_chunk<P, true>(view, x0, x1, params, l, l.tested, m);
-      else launch_chunk<P, false>(view, x0, x1, params, l, l.tested, m);
+      if (k == 0) launch_chunk<P, true>(view, x0, x1, full, l, l.tested, m);
+      else launch_chunk<P, false>(view, x0, x1, full, l, l.tested, m);
       launched[k] = m;
     }
     for (int k = 0; k < 2; ++k) {
@@ -264,42 +295,68 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
     }
   }
   // Earliest TOI over both lists, and the bounded-work count.
-  toi_.resize_discard(1);
   for (auto& l : lists_) {
     unsigned long long gave = 0;
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&gave, l.counters.data() + 1, sizeof gave, cudaMemcpyDeviceToHost, l.stream));
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
     gave_up_ += static_cast<std::size_t>(gave);
-    if (l.count == 0) continue;
-    const auto tois = thrust::make_transform_iterator(l.hits.data(), detail::HitToi<T>{});
-    std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, tois, toi_.data(), static_cast<std::int64_t>(l.count),
-                                                detail::MinOp<T>{}, T(1), stream));
-    reduce_scratch_.resize_discard(std::max(bytes, reduce_scratch_.size()));
-    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(reduce_scratch_.data(), bytes, tois, toi_.data(),
-                                                static_cast<std::int64_t>(l.count), detail::MinOp<T>{}, T(1), stream));
-    T list_min = T(1);
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&list_min, toi_.data(), sizeof(T), cudaMemcpyDeviceToHost, stream));
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    const T list_min = list_minimum(l, stream);
     earliest_ = list_min < earliest_ ? list_min : earliest_;
   }
+  earliest_only_ = params.mode == CcdMode::earliest;
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-// Pass 1 of two-pass methods, on the list's stream: the cheap first step for every pair, chunk
-// by chunk, and the survivors compacted into one list (so that the full test runs on all of them
-// at once). One-pass methods test the input pairs directly.
+// The hits' buffer with room for `room`, keeping the first `count`.
+template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::grow_hits(List& list, std::size_t room) {
+  if (list.hits.size() >= room) return;
+  DeviceBuffer<FeatureHit<T>> bigger(std::max(room, 2 * list.hits.size()));
+  if (list.count)
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.hits.data(), list.count * sizeof(FeatureHit<T>),
+                                      cudaMemcpyDeviceToDevice, list.stream));
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+  list.hits = std::move(bigger);
+}
+
+// The smallest TOI among a list's hits so far (1 when none), ordered after `stream`'s work.
+template <class Method, class T, class Policy>
+T NarrowPhase<Method, T, Policy>::list_minimum(const List& l, cudaStream_t stream) {
+  if (l.count == 0) return T(1);
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
+  toi_.resize_discard(1);
+  const auto tois = thrust::make_transform_iterator(l.hits.data(), detail::HitToi<T>{});
+  std::size_t bytes = 0;
+  LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, tois, toi_.data(), static_cast<std::int64_t>(l.count),
+                                              detail::MinOp<T>{}, T(1), stream));
+  reduce_scratch_.resize_discard(std::max(bytes, reduce_scratch_.size()));
+  LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(reduce_scratch_.data(), bytes, tois, toi_.data(),
+                                              static_cast<std::int64_t>(l.count), detail::MinOp<T>{}, T(1), stream));
+  T list_min = T(1);
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&list_min, toi_.data(), sizeof(T), cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  return list_min;
+}
+
+// Pass 1 of two-pass methods, on the list's stream: the cheap first step (CertifiedCcd: the
+// certified classification, whose hits are stored at once) for every pair, chunk by chunk, and the
+// survivors compacted into one list (so that the full test runs on all of them at once).
+// One-pass methods test the input pairs directly.
 template <class Method, class T, class Policy>
 template <class P, bool kVertexFace>
 void NarrowPhase<Method, T, Policy>::first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                                 const Pair* pairs, std::size_t n, const CcdParams<T>& params, List& list) {
   list.num_survivors = n;
   list.to_test = pairs;
-  if constexpr (lwsccd::detail::has_quick_reject<Method>::value) {
+  if constexpr (kTwoPass) {
     list.num_survivors = 0;
     if (n == 0) return;
     const std::size_t chunk = std::min(chunk_, n);
     list.flags.resize_discard(std::max(list.flags.size(), chunk));
+    if constexpr (kCertified) {
+      list.staged.resize_discard(std::max(list.staged.size(), chunk));
+      list.hit_flags.resize_discard(std::max(list.hit_flags.size(), chunk));
+    }
     // Compacted as 64-bit words: std::pair's assignment is host-only (a pair of 32-bit ids is
     // 8 bytes, and device allocations and chunk offsets are 8-byte aligned).
     static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
@@ -307,8 +364,13 @@ void NarrowPhase<Method, T, Policy>::first_pass(const MeshFeatures& mesh, const 
     for (std::size_t begin = 0; begin < n; begin += chunk) {
       const std::size_t m = std::min(chunk, n - begin);
       const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-      detail::quick_reject_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-          mesh, x0, x1, pairs + begin, m, params, list.flags.data());
+      if constexpr (kCertified) {
+        detail::certified_pass_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+            mesh, x0, x1, pairs + begin, m, params, list.staged.data(), list.hit_flags.data(), list.flags.data());
+      } else {
+        detail::quick_reject_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+            mesh, x0, x1, pairs + begin, m, params, list.flags.data());
+      }
       LWSCCD_CUDA_CHECK_LAUNCH();
       // Room for every pair of this chunk after those kept so far (grown keeping them).
       if (list.survivors.size() < list.num_survivors + m) {
@@ -331,6 +393,21 @@ void NarrowPhase<Method, T, Policy>::first_pass(const MeshFeatures& mesh, const 
       LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&kept, list.counters.data(), sizeof kept, cudaMemcpyDeviceToHost, list.stream));
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
       list.num_survivors += static_cast<std::size_t>(kept);
+      if constexpr (kCertified) {  // the certified hits, after the list's earlier ones
+        grow_hits(list, list.count + m);
+        LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, list.staged.data(), list.hit_flags.data(),
+                                                     list.hits.data() + list.count, list.counters.data(),
+                                                     static_cast<std::int64_t>(m), list.stream));
+        list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
+        LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, list.staged.data(), list.hit_flags.data(),
+                                                     list.hits.data() + list.count, list.counters.data(),
+                                                     static_cast<std::int64_t>(m), list.stream));
+        unsigned long long certified = 0;
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&certified, list.counters.data(), sizeof certified, cudaMemcpyDeviceToHost, list.stream));
+        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+        list.count += static_cast<std::size_t>(certified);
+        list.counts.certified_hits += static_cast<std::size_t>(certified);
+      }
     }
     list.to_test = reinterpret_cast<const Pair*>(list.survivors.data());
   }
@@ -345,12 +422,12 @@ void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, cons
   list.staged.resize_discard(std::max(list.staged.size(), m));
   list.flags.resize_discard(std::max(list.flags.size(), m));
   const Pair* pairs = list.to_test + begin;
-  if constexpr (lwsccd::detail::inclusion_search_of<Method>::value) {
+  if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
     // A thread per query for a few rounds, then a warp per query still open.
     list.pending.resize_discard(std::max(list.pending.size(), m));
     list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
     const unsigned thread_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-    detail::inclusion_thread_kernel<Method, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
+    detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
         <<<thread_blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, pairs, m, params, list.staged.data(),
                                                             list.flags.data(), list.pending.data(), list.counters.data() + 1);
     LWSCCD_CUDA_CHECK_LAUNCH();
@@ -369,24 +446,17 @@ void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, cons
     if (open) {
       constexpr int kWarps = Policy::kSearchWarpsPerBlock;
       const unsigned blocks = static_cast<unsigned>((open + kWarps - 1) / kWarps);
-      detail::inclusion_warp_kernel<Method, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
+      detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
           mesh, x0, x1, pairs, list.pending_index.data(), static_cast<std::size_t>(open), params, list.staged.data(),
           list.flags.data(), list.counters.data() + 1);
     }
   } else {
     const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-    detail::ccd_pairs_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+    detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
         mesh, x0, x1, pairs, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
   }
   LWSCCD_CUDA_CHECK_LAUNCH();
-  if (list.hits.size() < list.count + m) {  // (one-pass methods: grown keeping the hits)
-    DeviceBuffer<FeatureHit<T>> bigger(std::max(list.count + m, 2 * list.hits.size()));
-    if (list.count)
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.hits.data(), list.count * sizeof(FeatureHit<T>),
-                                        cudaMemcpyDeviceToDevice, list.stream));
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-    list.hits = std::move(bigger);
-  }
+  grow_hits(list, list.count + m);  // (one-pass methods: grown keeping the hits)
   std::size_t bytes = 0;
   LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, list.staged.data(), list.flags.data(),
                                                list.hits.data() + list.count, list.counters.data(),
@@ -405,13 +475,15 @@ NarrowPhaseResult<T> NarrowPhase<Method, T, Policy>::download(cudaStream_t strea
     if (count)
       LWSCCD_CUDA_CHECK(cudaMemcpyAsync(dst.data(), buffer.data(), count * sizeof(FeatureHit<T>), cudaMemcpyDeviceToHost, stream));
   };
-  fetch(lists_[0].hits, lists_[0].count, r.vf);
-  fetch(lists_[1].hits, lists_[1].count, r.ee);
+  fetch(lists_[0].hits, earliest_only_ ? 0 : lists_[0].count, r.vf);
+  fetch(lists_[1].hits, earliest_only_ ? 0 : lists_[1].count, r.ee);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
   std::sort(r.vf.begin(), r.vf.end());
   std::sort(r.ee.begin(), r.ee.end());
   r.earliest_toi = earliest_;
   r.gave_up = gave_up_;
+  r.vf_counts = lists_[0].counts;
+  r.ee_counts = lists_[1].counts;
   return r;
 }
 

@@ -1,0 +1,438 @@
+// lwsccd — a certified floating-point fast path for the elemental CCD tests, and the method
+// that puts it in front of a conservative fallback (CertifiedCcd).
+//
+// Exact predicates with a floating-point filter (in the spirit of Shewchuk): every decision is a
+// sign of a computed value beyond a rigorous bound on that value's error, so the answer holds for
+// the query as given and for every relative perturbation of u (unit roundoff) of its coordinates.
+// Three outcomes:
+//   miss       the features certainly never touch in [0, 1];
+//   hit        they certainly touch, and their earliest contact time lies in [lo, hi] with
+//              hi - lo <= tolerance (so lo is a lower bound of the time of impact);
+//   undecided  anything the bounds cannot settle (motion that stays coplanar, parallel edges,
+//              degenerate triangles, a root at a grid point, a minimum separation > 0, overflow):
+//              the caller runs the conservative search instead.
+//
+// How. A contact happens only at a root of the coplanarity cubic f(t) = P(t) . (A(t) x B(t))
+// (ccd_filters.hpp). Its Bernstein coefficients on [0, 1] come with a bound E on their error, so
+// the exact f lies within E of the polynomial they define. The step is cut, earliest part first,
+// into dyadic intervals (de Casteljau halves, whose rounding adds to the bound): an interval whose
+// coefficients share a sign beyond the bound holds no root; the others are halved down to the time
+// tolerance. On such a root interval the inside test (barycentric signs for vertex-face, segment
+// parameters for edge-edge, all as sign tests of degree-4 polynomials) is bounded over the whole
+// interval: certainly outside means no contact there, so the search goes on; certainly inside
+// with a certain sign change of f across the interval is the contact. docs/NARROW_PHASE.md derives
+// the bounds.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "lwsccd/ccd_filters.hpp"
+#include "lwsccd/ccd_query.hpp"
+#include "lwsccd/detail/fp.hpp"
+#include "lwsccd/detail/rounding.hpp"
+#include "lwsccd/inclusion_ccd.hpp"
+
+namespace lwsccd {
+
+/// Tuning knobs of the certified fast path.
+struct CertifiedPolicy {
+  static constexpr int kMaxSplits = 96;  ///< interval halvings before a query is left undecided
+  static constexpr int kMaxLeaves = 6;   ///< root intervals (at the time tolerance) examined, at most
+  /// Multipliers of the three error bounds (1 = as derived). Only the mutation tests change them:
+  /// any value below 1 is unsound, and those tests show it.
+  static constexpr double kCoefficientBound = 1.0;  ///< the cubic's Bernstein coefficients on [0, 1]
+  static constexpr double kSplitBound = 1.0;        ///< rounding added by each de Casteljau halving
+  static constexpr double kInsideBound = 1.0;       ///< the inside test's sign tests over an interval
+};
+
+/// What the certified fast path decided about one query.
+enum class Certainty : std::uint8_t { miss, hit, undecided };
+
+template <class T>
+struct CertifiedAnswer {
+  Certainty certainty = Certainty::undecided;
+  T lo = T(0), hi = T(1);  ///< hit: the earliest contact time lies in [lo, hi]
+};
+
+namespace detail {
+
+/// Bound on what underflow can add to a degree-`d` product expression of values up to `mag`:
+/// each operation loses at most a denormal, later multiplied by at most d - 1 factors.
+template <class T>
+LWSCCD_HD T underflow_slack(T mag, int degree) {
+  T s = T(64) * std::numeric_limits<T>::denorm_min();
+  const T f = fadd(T(1), mag);
+  for (int i = 1; i < degree; ++i) s = fmul(s, f);
+  return s;
+}
+
+template <class T>
+LWSCCD_HD bool finite_value(T x) {
+  return x - x == T(0);  // false for NaN and infinities
+}
+
+/// The four Bernstein coefficients of the cubic on a dyadic interval and two bounds on their
+/// error: `bound` covers rounding and the inputs' perturbation (what may be excluded), `exact`
+/// rounding alone (what the query as given certainly does).
+template <class T>
+struct BernsteinPiece {
+  T c[4];
+  T bound, exact;
+};
+
+/// Halves a piece by de Casteljau at 1/2. Each average rounds once (|error| <= u max|c|, halving
+/// is exact but for underflow); the innermost value goes through three: 3 u max|c| per halving.
+template <class Policy, class T>
+LWSCCD_HD void bernstein_halves(const BernsteinPiece<T>& p, BernsteinPiece<T>& left, BernsteinPiece<T>& right) {
+  const T h = T(0.5);
+  const T m01 = fmul(fadd(p.c[0], p.c[1]), h), m12 = fmul(fadd(p.c[1], p.c[2]), h), m23 = fmul(fadd(p.c[2], p.c[3]), h);
+  const T m012 = fmul(fadd(m01, m12), h), m123 = fmul(fadd(m12, m23), h);
+  const T mid = fmul(fadd(m012, m123), h);
+  T big = T(0);
+  for (int i = 0; i < 4; ++i) big = std::fabs(p.c[i]) > big ? std::fabs(p.c[i]) : big;
+  const T added = fmul(T(Policy::kSplitBound),
+                       fadd(fmul(T(4) * unit_roundoff<T>(), big), T(4) * std::numeric_limits<T>::denorm_min()));
+  const T bound = fadd(p.bound, added), exact = fadd(p.exact, added);
+  left = {{p.c[0], m01, m012, mid}, bound, exact};
+  right = {{mid, m123, m23, p.c[3]}, bound, exact};
+}
+
+template <class T>
+LWSCCD_HD bool all_within(const T c[4], T bound) {
+  return std::fabs(c[0]) <= bound && std::fabs(c[1]) <= bound && std::fabs(c[2]) <= bound && std::fabs(c[3]) <= bound;
+}
+
+/// A difference of two moving points over a time interval: its value at the interval's middle
+/// and, per axis, bounds on how far the exact difference can be from it anywhere in the interval:
+/// `error` for the query as given (rounding, motion within half the interval), `perturbed` also
+/// for its inputs' perturbation.
+template <class T>
+struct MovingDifference {
+  Vec3<T> value, error, perturbed;
+};
+
+template <class T>
+LWSCCD_HD Vec3<T> lerp_point(const Vec3<T>& x0, const Vec3<T>& x1, T t) {
+  return vadd_scaled(x0, vsub(x1, x0), t);
+}
+
+// y - x at time `mid`, within `half` of which the difference is wanted; m: the query's per-axis
+// coordinate magnitude. Rounding: each point at `mid` is off by at most 9 u m (a difference, a
+// product, a sum, of magnitudes at most 2 m, m and 3 m), the difference by 2 * 9 u m + u 2 m =
+// 20 u m, taken as 32 u m; a relative perturbation p of the inputs adds 2 p m. Motion:
+// |d/dt (y - x)| <= |dy| + |dx|, over at most `half`.
+template <class T>
+LWSCCD_HD MovingDifference<T> moving_difference(const Vec3<T>& x0, const Vec3<T>& x1, const Vec3<T>& y0, const Vec3<T>& y1,
+                                                T mid, T half, const Vec3<T>& m, T perturbation) {
+  const Vec3<T> x = lerp_point(x0, x1, mid), y = lerp_point(y0, y1, mid);
+  const Vec3<T> motion = vadd(abs(vsub(x1, x0)), abs(vsub(y1, y0)));
+  const T u = unit_roundoff<T>();
+  const Vec3<T> error = vadd(vscale(m, T(32) * u), vscale(motion, fmul(half, T(1) + T(8) * u)));
+  return {vsub(y, x), error, vadd(error, vscale(m, T(2) * perturbation))};
+}
+
+/// outside: no contact in the interval, even perturbed; outside_as_given: none for the query as
+/// given, but a perturbed one may touch; inside: a root in the interval is a contact of the query
+/// as given; unknown: none of these.
+enum class InsideVerdict : std::uint8_t { outside, outside_as_given, inside, unknown };
+
+/// sigma = (X x Y) . (A x B) and bounds on |exact - computed| when the exact vectors are within
+/// the given per-axis errors: the majorant difference M(|X| + eX, ...) - M(|X|, ...) bounds the
+/// errors' effect (a degree-4 polynomial whose monomials have coefficients +-1), and
+/// 32 u M(|X| + eX, ...) the rounding of sigma and of both majorants (depth 5: 3 gamma_5 < 16 u),
+/// with room. The normal A x B is expanded rather than rounded first, so its error is counted.
+template <class Policy, class T>
+struct SignTest {
+  T sigma, bound, exact;
+  LWSCCD_HD SignTest(const MovingDifference<T>& X, const MovingDifference<T>& Y, const MovingDifference<T>& A,
+                     const MovingDifference<T>& B, T slack) {
+    sigma = vdot(vcross(X.value, Y.value), vcross(A.value, B.value));
+    const Vec3<T> ax = abs(X.value), ay = abs(Y.value), aa = abs(A.value), ab = abs(B.value);
+    const T m0 = vdot(abs_cross(ax, ay), abs_cross(aa, ab));
+    auto majorant = [&](const Vec3<T>& ex, const Vec3<T>& ey, const Vec3<T>& ea, const Vec3<T>& eb) {
+      return vdot(abs_cross(vadd(ax, ex), vadd(ay, ey)), abs_cross(vadd(aa, ea), vadd(ab, eb)));
+    };
+    const T k = T(Policy::kInsideBound), r = T(32) * unit_roundoff<T>();
+    const T me = majorant(X.error, Y.error, A.error, B.error);
+    const T mp = majorant(X.perturbed, Y.perturbed, A.perturbed, B.perturbed);
+    exact = fadd(fmul(k, fadd(fsub(me, m0), fmul(r, me))), slack);
+    bound = fadd(fmul(k, fadd(fsub(mp, m0), fmul(r, mp))), slack);
+  }
+};
+
+/// Combines the sign tests that must all be >= 0 at a contact: outside when one is certainly
+/// negative even under perturbation, inside when all are certainly positive for the query as given.
+template <class T>
+struct InsideVote {
+  bool all_positive = true, some_negative = false, some_negative_as_given = false, finite = true;
+  template <class Test>
+  LWSCCD_HD void add(const Test& t) {
+    finite = finite && finite_value(t.sigma) && finite_value(t.bound);
+    all_positive = all_positive && t.sigma > t.exact;
+    some_negative = some_negative || t.sigma < -t.bound;
+    some_negative_as_given = some_negative_as_given || t.sigma < -t.exact;
+  }
+  LWSCCD_HD InsideVerdict verdict() const {
+    if (!finite) return InsideVerdict::unknown;
+    if (some_negative) return InsideVerdict::outside;
+    if (some_negative_as_given) return InsideVerdict::outside_as_given;
+    return all_positive ? InsideVerdict::inside : InsideVerdict::unknown;
+  }
+};
+
+/// Vertex-face inside test over [mid - half, mid + half]: at a time when p is in the triangle's
+/// plane, p = a + u (b - a) + v (c - a) and the signs of u, v, 1 - u - v are those of
+/// (P x B) . n, (A x P) . n and ((b - p) x (c - p)) . n, with n = A x B.
+template <class Policy, class T>
+LWSCCD_HD InsideVerdict inside_over(const VertexFaceQuery<T>& q, T mid, T half, const Vec3<T>& m, T perturbation,
+                                    T slack) {
+  const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.p0, q.p1, mid, half, m, perturbation);
+  const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation);
+  const MovingDifference<T> B = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation);
+  const MovingDifference<T> PB = moving_difference(q.p0, q.p1, q.b0, q.b1, mid, half, m, perturbation);
+  const MovingDifference<T> PC = moving_difference(q.p0, q.p1, q.c0, q.c1, mid, half, m, perturbation);
+  InsideVote<T> vote;
+  vote.add(SignTest<Policy, T>(P, B, A, B, slack));
+  vote.add(SignTest<Policy, T>(A, P, A, B, slack));
+  vote.add(SignTest<Policy, T>(PB, PC, A, B, slack));
+  return vote.verdict();
+}
+
+/// Edge-edge inside test: with P = c - a, A = b - a, B = d - c and n = A x B, coplanar lines meet
+/// at a + u A = c + v B where u n = P x B and v n = P x A; 0 <= u, v <= 1 are the signs of
+/// (P x B) . n, ((b - c) x B) . n, (P x A) . n and (A x (d - a)) . n.
+template <class Policy, class T>
+LWSCCD_HD InsideVerdict inside_over(const EdgeEdgeQuery<T>& q, T mid, T half, const Vec3<T>& m, T perturbation,
+                                    T slack) {
+  const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation);
+  const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation);
+  const MovingDifference<T> B = moving_difference(q.c0, q.c1, q.d0, q.d1, mid, half, m, perturbation);
+  const MovingDifference<T> CB = moving_difference(q.c0, q.c1, q.b0, q.b1, mid, half, m, perturbation);
+  const MovingDifference<T> AD = moving_difference(q.a0, q.a1, q.d0, q.d1, mid, half, m, perturbation);
+  InsideVote<T> vote;
+  vote.add(SignTest<Policy, T>(P, B, A, B, slack));
+  vote.add(SignTest<Policy, T>(CB, B, A, B, slack));
+  vote.add(SignTest<Policy, T>(P, A, A, B, slack));
+  vote.add(SignTest<Policy, T>(A, AD, A, B, slack));
+  return vote.verdict();
+}
+
+/// The finest level of the time intervals: width 2^-level <= tolerance / 2, so that a root
+/// interval may span two of them.
+template <class T>
+LWSCCD_HD int certified_max_level(T tolerance) {
+  int level = static_cast<int>(std::ceil(-std::log2(static_cast<double>(tolerance)))) + 1;
+  level = level < 1 ? 1 : level;
+  const int mantissa = std::numeric_limits<T>::digits - 2;
+  level = level > mantissa ? mantissa : level;
+  return level > 30 ? 30 : level;
+}
+
+/// True when the features' swept boxes (each point at t = 0 and t = 1; a point's path and a
+/// feature at any time lie in the hull of those) are apart by more than `pad` per axis: then they
+/// never touch, even with every coordinate perturbed by pad / 4 (the pad is 4 p m; 2 p m is needed).
+template <class W>
+LWSCCD_HD bool boxes_apart(const Vec3<W>* a, int na, const Vec3<W>* b, int nb, const Vec3<W>& pad) {
+  Vec3<W> alo = a[0], ahi = a[0], blo = b[0], bhi = b[0];
+  for (int i = 1; i < na; ++i) alo = min(alo, a[i]), ahi = max(ahi, a[i]);
+  for (int i = 1; i < nb; ++i) blo = min(blo, b[i]), bhi = max(bhi, b[i]);
+  for (int k = 0; k < 3; ++k)
+    if (fadd(ahi[k], pad[k]) < blo[k] || fadd(bhi[k], pad[k]) < alo[k]) return true;
+  return false;
+}
+template <class W>
+LWSCCD_HD bool swept_boxes_apart(const VertexFaceQuery<W>& q, const Vec3<W>& pad) {
+  const Vec3<W> vertex[2] = {q.p0, q.p1}, face[6] = {q.a0, q.b0, q.c0, q.a1, q.b1, q.c1};
+  return boxes_apart(vertex, 2, face, 6, pad);
+}
+template <class W>
+LWSCCD_HD bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& pad) {
+  const Vec3<W> first[4] = {q.a0, q.b0, q.a1, q.b1}, second[4] = {q.c0, q.d0, q.c1, q.d1};
+  return boxes_apart(first, 4, second, 4, pad);
+}
+
+/// Where the certified path computes: float queries in double (the cubic's coefficients carry
+/// about 16 u of error, which in float is the size of a 1e-6 step's change), others as given.
+template <class T>
+struct certified_compute {
+  using type = T;
+};
+template <>
+struct certified_compute<float> {
+  using type = double;
+};
+
+/// The certified classification of one query (see the file comment), computed in W with the
+/// inputs' perturbation of T's unit roundoff.
+template <class Policy, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q_in, const CcdParams<T>& params) {
+  using W = typename certified_compute<T>::type;
+  const auto q = q_in.template cast<W>();
+  const W perturbation = unit_roundoff<T>();
+  CertifiedAnswer<T> undecided;
+  if (params.min_separation > T(0)) return undecided;  // the cubic only speaks of contact
+  const Vec3<W> m = coordinate_magnitude(q);
+  // Swept boxes apart: no arithmetic but the pad, so it goes first.
+  if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return {Certainty::miss, T(0), T(1)};
+  // The cubic and its coefficient bound (ccd_filters.hpp), plus underflow's share.
+  const W mag = fmul(W(4), max_component(m));  // bounds every difference and its motion
+  BernsteinPiece<W> root;
+  W rounding_bound = W(0);
+  const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound);
+  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
+  root.bound = fadd(fmul(k, coefficient_bound), slack);
+  root.exact = fadd(fmul(k, rounding_bound), slack);
+  bool finite = finite_value(root.bound);
+  for (int i = 0; i < 4; ++i) finite = finite && finite_value(root.c[i]);
+  if (!finite) return undecided;
+  if (same_sign_beyond(root.c, root.bound)) return {Certainty::miss, T(0), T(1)};
+  const W inside_slack = underflow_slack(mag, 4);
+  if (!finite_value(inside_slack)) return undecided;
+  const int max_level = certified_max_level(params.tolerance);
+  const bool set_mode = params.mode == CcdMode::set;
+
+  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
+  // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
+  // the query as given does (only that proves a contact). Between them lies rounding's share of
+  // the inputs: in double about u of the geometry; in float it can move a contact by more than
+  // the tolerance, and the reported lower bound is then that much earlier.
+  struct Entry {
+    BernsteinPiece<W> piece;
+    std::uint32_t index;
+    int level;
+  };
+  constexpr int kStack = 34;  // one pending right half per level, levels <= 30
+  Entry stack[kStack];
+  int top = 0, splits = 0, leaves = 0;
+  T lower = T(0), open_from = T(0);  // earliest time not excluded for a perturbed query / as given
+  bool has_lower = false, has_open = false, open_inside = true;
+  int open_sign = 0;  // sign of f (as given) at open_from, 0 when uncertain
+  auto note_lower = [&](T t) {
+    if (!has_lower) lower = t, has_lower = true;  // intervals come in time order
+  };
+  stack[top++] = {root, 0u, 0};
+  while (top > 0) {
+    const Entry e = stack[--top];
+    // Dyadic with at most certified_max_level(T) bits: exact in T and W.
+    const T lo = std::ldexp(static_cast<T>(e.index), -e.level), hi = std::ldexp(static_cast<T>(e.index + 1u), -e.level);
+    if (lo >= params.time_limit) continue;  // later than what the caller still wants
+    const W* c = e.piece.c;
+    const W bound = e.piece.bound, exact = e.piece.exact;
+    if (same_sign_beyond(c, bound)) continue;  // no root here, even perturbed
+    if (same_sign_beyond(c, exact)) {          // none as given; a perturbed query's may be here
+      note_lower(lo);
+      continue;
+    }
+    // f(lo) = c[0], f(hi) = c[3]: a certain sign change proves a root of the query as given.
+    const bool crossing = (c[0] < -exact && c[3] > exact) || (c[0] > exact && c[3] < -exact);
+    const bool leaf = e.level >= max_level;
+    // Set mode needs no tight time: a crossing interval is tried every fourth level on the way.
+    if (leaf || (set_mode && crossing && (e.level & 3) == 0)) {
+      const W half = std::ldexp(W(1), -e.level - 1);
+      const InsideVerdict inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
+      if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
+        if (inside == InsideVerdict::outside_as_given) note_lower(lo);
+        if (leaf && ++leaves > Policy::kMaxLeaves) return {Certainty::undecided, has_lower ? lower : lo, T(1)};
+        continue;
+      }
+      note_lower(lo);
+      // A root is certain across this leaf, or from the start of the unresolved leaves before it
+      // (a root on the grid point between two leaves makes neither a crossing alone); those
+      // leaves join the interval, which must stay within the tolerance.
+      const int sign_lo = c[0] < -exact ? -1 : (c[0] > exact ? 1 : 0), sign_hi = c[3] < -exact ? -1 : (c[3] > exact ? 1 : 0);
+      const bool is_inside = inside == InsideVerdict::inside;
+      const bool joined = has_open && open_inside && is_inside && open_sign != 0 && sign_hi == -open_sign;
+      const T from = has_open ? open_from : lo;
+      if (((is_inside && crossing) || joined) && (set_mode || hi - from <= params.tolerance)) return {Certainty::hit, lower, hi};
+      if (leaf) {
+        if (!has_open) open_from = lo, has_open = true, open_sign = sign_lo, open_inside = true;
+        open_inside = open_inside && is_inside;
+        if (++leaves > Policy::kMaxLeaves || (!set_mode && hi + (hi - lo) - open_from > params.tolerance))
+          return {Certainty::undecided, lower, T(1)};
+        continue;  // touching, tangent or on a boundary: look further
+      }
+    }
+    const T open = has_lower ? lower : lo;
+    if (all_within(c, exact)) {
+      // f is zero within its error here (motion that stays coplanar): only the inside test can
+      // still exclude the interval, when the features are apart within the plane all along.
+      const W half = std::ldexp(W(1), -e.level - 1);
+      const InsideVerdict inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
+      if (inside == InsideVerdict::outside) continue;
+      if (inside == InsideVerdict::outside_as_given) {
+        note_lower(lo);
+        continue;
+      }
+      return {Certainty::undecided, open, T(1)};  // no sign left to resolve
+    }
+    if (++splits > Policy::kMaxSplits || top + 2 > kStack) return {Certainty::undecided, open, T(1)};
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(e.piece, left, right);
+    stack[top++] = {right, 2u * e.index + 1u, e.level + 1};
+    stack[top++] = {left, 2u * e.index, e.level + 1};
+  }
+  // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
+  if (has_lower) return {Certainty::undecided, lower, T(1)};
+  return {Certainty::miss, T(0), T(1)};
+}
+
+}  // namespace detail
+
+/// The certified fast path in front of a conservative method: queries it decides cost a few
+/// hundred operations; the others run `Fallback` unchanged. Conservative when Fallback is.
+template <class Fallback = Filtered<InclusionCcd>, class Policy = CertifiedPolicy>
+struct CertifiedCcdT {
+  static_assert(require_ccd_method<Fallback>::value, "");
+  static constexpr const char* name = "certified";
+  static constexpr bool conservative = Fallback::conservative;
+  using fallback_type = Fallback;
+  using policy_type = Policy;
+
+  template <class Q, class T>
+  LWSCCD_HD static CertifiedAnswer<T> classify(const Q& q, const CcdParams<T>& params) {
+    return detail::certified_classify<Policy>(q, params);
+  }
+  template <class T>
+  LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
+    return solve(q, params, [&] { return Fallback::vertex_face(q, params); });
+  }
+  template <class T>
+  LWSCCD_HD static CcdResult<T> edge_edge(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
+    return solve(q, params, [&] { return Fallback::edge_edge(q, params); });
+  }
+
+ private:
+  template <class Q, class T, class F>
+  LWSCCD_HD static CcdResult<T> solve(const Q& q, const CcdParams<T>& params, F&& fallback) {
+    const CertifiedAnswer<T> a = classify(q, params);
+    if (a.certainty == Certainty::miss) return {};
+    if (a.certainty == Certainty::hit) return {true, a.lo, false};
+    return fallback();
+  }
+};
+using CertifiedCcd = CertifiedCcdT<>;
+
+namespace detail {
+/// Methods with a certified first pass: batches classify every pair first and run the fallback
+/// only on the undecided ones.
+template <class Method>
+struct certified_of : std::false_type {};
+template <class Fallback, class Policy>
+struct certified_of<CertifiedCcdT<Fallback, Policy>> : std::true_type {
+  using fallback = Fallback;
+};
+/// The method a batch runs on the pairs its first pass leaves: the fallback of a certified
+/// method, any other method itself.
+template <class Method>
+struct full_test_of {
+  using type = Method;
+};
+template <class Fallback, class Policy>
+struct full_test_of<CertifiedCcdT<Fallback, Policy>> {
+  using type = Fallback;
+};
+}  // namespace detail
+
+}  // namespace lwsccd

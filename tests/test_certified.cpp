@@ -1,0 +1,246 @@
+// The certified fast path (certified_ccd.hpp) on generated hard cases with exactly known answers,
+// and mutation checks: each of its error bounds, removed, lets a wrong answer through.
+#include <catch2/catch.hpp>
+
+#include <cstdio>
+#include <map>
+#include <random>
+#include <string>
+
+#include "lwsccd/certified_ccd.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+// A contact scenario in exact dyadic coordinates (multiples of 1/8, small): the eight points and
+// the exact earliest contact time (as a ratio of small dyadics, exact in long double), or -1.
+struct Case {
+  std::string kind;
+  bool vertex_face;
+  Vec3<long double> p[8];
+  long double toi;
+};
+
+long double eighth(std::mt19937& rng, int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng) / 8.0L; }
+
+// Builds the generators' cases: every kind the certified path finds hard.
+std::vector<Case> hard_cases(std::mt19937& rng, int per_kind) {
+  std::vector<Case> out;
+  using V = Vec3<long double>;
+  for (int n = 0; n < per_kind; ++n) {
+    const long double h0 = eighth(rng, 1, 64), h1 = eighth(rng, 1, 64), tc = h0 / (h0 + h1);
+    const long double x = eighth(rng, 1, 24), y = eighth(rng, 1, 64 - 8 * 3 - 8) / 2;  // inside (0,0)-(8,0)-(0,8)
+    const V a{0, 0, 0}, b{8, 0, 0}, c{0, 8, 0};
+    // Vertex through the interior of a static triangle.
+    out.push_back({"vf interior", true, {V{x, y, -h0}, a, b, c, V{x, y, h1}, a, b, c}, tc});
+    // Through an edge (y = 0) while moving across the edge's line: on the edge exactly at tc.
+    out.push_back({"vf on a moving edge crossing", true, {V{x, -h0 / 4, -h0}, a, b, c, V{x, h1 / 4, h1}, a, b, c}, tc});
+    // Through a triangle vertex.
+    out.push_back({"vf through a vertex", true, {V{0, 0, -h0}, a, b, c, V{0, 0, h1}, a, b, c}, tc});
+    // Contact exactly at t = 0 and at t = 1.
+    out.push_back({"vf at t = 0", true, {V{x, y, 0}, a, b, c, V{x, y, h1}, a, b, c}, 0});
+    out.push_back({"vf at t = 1", true, {V{x, y, -h0}, a, b, c, V{x, y, 0}, a, b, c}, 1});
+    // Coplanar motion: the vertex slides in the plane into the triangle (enters at x = 0).
+    const long double s0 = eighth(rng, 8, 64), s1 = eighth(rng, 1, 16);
+    out.push_back({"vf coplanar sliding in", true, {V{-s0, y, 0}, a, b, c, V{s1, y, 0}, a, b, c}, s0 / (s0 + s1)});
+    // A sliver triangle, the vertex through its middle.
+    const V sb{8, 0, 0}, sc{4, 1.0L / 64, 0};
+    out.push_back({"vf sliver triangle", true, {V{4, 1.0L / 128, -h0}, a, sb, sc, V{4, 1.0L / 128, h1}, a, sb, sc}, tc});
+    // A zero-area triangle (collinear corners); the vertex through the segment it is.
+    const V zc{4, 0, 0};
+    out.push_back({"vf zero-area triangle", true, {V{x, 0, -h0}, a, sb, zc, V{x, 0, h1}, a, sb, zc}, tc});
+    // Edge-edge: crossing edges, the first coming down through the second.
+    const V ea0{-8, y, 0}, ea1{8, y, 0}, eb0{x, -8, 0}, eb1{x, 8, 0};
+    out.push_back({"ee crossing", false,
+                   {ea0 + V{0, 0, -h0}, ea1 + V{0, 0, -h0}, eb0, eb1, ea0 + V{0, 0, h1}, ea1 + V{0, 0, h1}, eb0, eb1}, tc});
+    // Parallel edges overlapping, one coming down onto the other.
+    const V pb0{-4, y, 0}, pb1{4, y, 0};
+    out.push_back({"ee parallel", false,
+                   {ea0 + V{0, 0, -h0}, ea1 + V{0, 0, -h0}, pb0, pb1, ea0 + V{0, 0, h1}, ea1 + V{0, 0, h1}, pb0, pb1}, tc});
+    // Collinear edges closing end to end.
+    const V ca0{-16, 0, 0}, cb0{4, 0, 0}, cb1{12, 0, 0};
+    out.push_back({"ee collinear end to end", false,
+                   {ca0, V{4 - h0, 0, 0}, cb0, cb1, ca0, V{4 + h1, 0, 0}, cb0, cb1}, tc});
+    // Touching at t = 0.
+    out.push_back({"ee at t = 0", false, {ea0, ea1, eb0, eb1, ea0 + V{0, 0, h1}, ea1 + V{0, 0, h1}, eb0, eb1}, 0});
+  }
+  return out;
+}
+
+// Exact transforms of a case: axis permutation and signs, scaling by 2^k, translation by 2^20.
+Case transformed(const Case& c, int permutation, int signs, int scale, bool translate) {
+  Case t = c;
+  const int axes[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+  for (auto& q : t.p) {
+    const Vec3<long double> o = q;
+    for (int k = 0; k < 3; ++k) q[k] = o[axes[permutation][k]] * (((signs >> k) & 1) ? -1 : 1);
+    q = q * std::ldexp(1.0L, scale);
+    if (translate) q = q + Vec3<long double>{std::ldexp(1.0L, 20 + scale), -std::ldexp(1.0L, 20 + scale), 0};
+  }
+  return t;
+}
+
+template <class T, class Q>
+Q as_query(const Case& c) {
+  return Q{c.p[0].cast<T>(), c.p[1].cast<T>(), c.p[2].cast<T>(), c.p[3].cast<T>(),
+           c.p[4].cast<T>(), c.p[5].cast<T>(), c.p[6].cast<T>(), c.p[7].cast<T>()};
+}
+
+struct Outcome {
+  std::size_t cases = 0, misses = 0, outside_interval = 0, undecided = 0, fallback_misses = 0;
+};
+
+// The policy's classification and the whole method on one case whose every coordinate is exact in T.
+template <class Policy, class T>
+void check_case(const Case& c, Outcome& o) {
+  const CcdParams<T> params;
+  CertifiedAnswer<T> a;
+  CcdResult<T> full;
+  if (c.vertex_face) {
+    const auto q = as_query<T, VertexFaceQuery<T>>(c);
+    a = detail::certified_classify<Policy>(q, params);
+    full = CertifiedCcdT<Filtered<InclusionCcd>, Policy>::vertex_face(q, params);
+  } else {
+    const auto q = as_query<T, EdgeEdgeQuery<T>>(c);
+    a = detail::certified_classify<Policy>(q, params);
+    full = CertifiedCcdT<Filtered<InclusionCcd>, Policy>::edge_edge(q, params);
+  }
+  // Rounding to T (float, translated) perturbs the case: then only the lower bound is exact.
+  bool exact = true;
+  for (const auto& x : c.p) exact = exact && x.cast<T>().template cast<long double>() == x;
+  ++o.cases;
+  o.misses += a.certainty == Certainty::miss;
+  o.undecided += a.certainty == Certainty::undecided;
+  if (a.certainty == Certainty::hit && (a.lo > c.toi || (exact && a.hi < c.toi))) ++o.outside_interval;
+  if (!full.hit || full.toi > c.toi) ++o.fallback_misses;
+}
+
+template <class Policy, class T>
+Outcome run_generators(int per_kind, bool print) {
+  std::mt19937 rng(20261122);
+  std::map<std::string, Outcome> by_kind;
+  Outcome all;
+  for (const Case& base : hard_cases(rng, per_kind)) {
+    for (int scale : {0, 60, -60})
+      for (bool translate : {false, true}) {
+        const Case c = transformed(base, int(rng() % 6), int(rng() % 8), scale, translate);
+        check_case<Policy, T>(c, by_kind[base.kind]);
+        check_case<Policy, T>(c, all);
+      }
+  }
+  if (print)
+    for (const auto& [kind, o] : by_kind)
+      std::printf("  %-6s %-30s %4zu cases: %zu undecided, %zu certified misses, %zu intervals without the TOI\n",
+                  sizeof(T) == 4 ? "float" : "double", kind.c_str(), o.cases, o.undecided, o.misses, o.outside_interval);
+  return all;
+}
+
+// The sound policy with the bounds scaled by the given percentages.
+template <int kCoefficient, int kSplit, int kInside>
+struct ShrunkPolicy : CertifiedPolicy {
+  static constexpr double kCoefficientBound = kCoefficient / 100.0;
+  static constexpr double kSplitBound = kSplit / 100.0;
+  static constexpr double kInsideBound = kInside / 100.0;
+};
+
+}  // namespace
+
+TEST_CASE("certified path: hard generated cases never missed, intervals contain the exact TOI", "[narrow][certified]") {
+  for (const Outcome& o : {run_generators<CertifiedPolicy, double>(12, true), run_generators<CertifiedPolicy, float>(12, true)}) {
+    CHECK(o.cases > 500);
+    CHECK(o.misses == 0);
+    CHECK(o.outside_interval == 0);
+    CHECK(o.fallback_misses == 0);  // the whole method (fallback included): a hit no later than the TOI
+  }
+}
+
+TEST_CASE("certified path: easy cases are decided without the fallback", "[narrow][certified]") {
+  // A vertex through a triangle's middle with plenty of motion, and one passing well beside it.
+  const VertexFaceQuery<double> through{{1, 1, -1}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}, {1, 1, 3}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}};
+  const auto hit = CertifiedCcd::classify(through, CcdParams<double>{});
+  REQUIRE(hit.certainty == Certainty::hit);
+  CHECK(hit.lo <= 0.25);
+  CHECK(hit.hi >= 0.25);
+  CHECK(hit.hi - hit.lo <= 1e-6);
+  VertexFaceQuery<double> beside = through;
+  beside.p0 = {9, 1, -1}, beside.p1 = {9, 1, 3};
+  CHECK(CertifiedCcd::classify(beside, CcdParams<double>{}).certainty == Certainty::miss);
+  VertexFaceQuery<double> outside_plane_crossing = through;  // crosses the plane, beside the triangle
+  outside_plane_crossing.p0 = {3, 3, -1}, outside_plane_crossing.p1 = {3, 3, 3};
+  CHECK(CertifiedCcd::classify(outside_plane_crossing, CcdParams<double>{}).certainty == Certainty::miss);
+  // A minimum separation is left to the fallback.
+  CcdParams<double> separated;
+  separated.min_separation = 1e-3;
+  CHECK(CertifiedCcd::classify(through, separated).certainty == Certainty::undecided);
+  // Time limit: a contact at 0.25 is ignored when only earlier ones are wanted.
+  CcdParams<double> limited;
+  limited.time_limit = 0.125;
+  CHECK(CertifiedCcd::classify(through, limited).certainty != Certainty::hit);
+}
+
+TEST_CASE("certified path: removing any error bound lets wrong answers through (mutation check)", "[narrow][certified]") {
+  // Coplanar motion in a tilted plane: the exact configuration (rotations by 3-4-5 and 5-12-13
+  // triangles) touches, its rounding leaves the cubic as noise. Without the coefficient bound the
+  // noise is taken for a sign: certified misses of true contacts.
+  std::mt19937 rng(7);
+  auto rotate = [](const Vec3<long double>& v) {
+    const Vec3<long double> r{(3 * v.x - 4 * v.y) / 5, (4 * v.x + 3 * v.y) / 5, v.z};
+    return Vec3<long double>{r.x, (5 * r.y - 12 * r.z) / 13, (12 * r.y + 5 * r.z) / 13};
+  };
+  std::size_t misses_sound = 0, misses_mutated = 0, tilted = 0;
+  for (int n = 0; n < 400; ++n) {
+    const long double y = eighth(rng, 1, 16), s0 = eighth(rng, 8, 64), s1 = eighth(rng, 1, 16);
+    const Vec3<long double> pts[8] = {{-s0, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}, {s1, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}};
+    VertexFaceQuery<double> q;
+    Vec3<double>* out = &q.p0;
+    for (int i = 0; i < 8; ++i) out[i] = rotate(pts[i]).cast<double>();
+    ++tilted;
+    misses_sound += detail::certified_classify<CertifiedPolicy>(q, CcdParams<double>{}).certainty == Certainty::miss;
+    misses_mutated += detail::certified_classify<ShrunkPolicy<0, 100, 100>>(q, CcdParams<double>{}).certainty == Certainty::miss;
+  }
+  std::printf("  tilted coplanar contacts: %zu; certified misses %zu (sound), %zu (coefficient bound removed)\n", tilted,
+              misses_sound, misses_mutated);
+  CHECK(misses_sound == 0);
+  CHECK(misses_mutated > 0);
+
+  // Without the inside test's bound (rounding and motion within the interval), a vertex that
+  // meets a triangle's edge while crossing the edge's line is judged outside at the interval's
+  // middle: certified misses, or intervals without the TOI.
+  const Outcome sound = run_generators<CertifiedPolicy, double>(8, false);
+  const Outcome no_inside = run_generators<ShrunkPolicy<100, 100, 0>, double>(8, false);
+  std::printf("  generated cases: %zu misses + %zu bad intervals (sound), %zu + %zu (inside bound removed)\n", sound.misses,
+              sound.outside_interval, no_inside.misses, no_inside.outside_interval);
+  CHECK(sound.misses + sound.outside_interval == 0);
+  CHECK(no_inside.misses + no_inside.outside_interval > 0);
+
+  // The halving bound, against long double: de Casteljau halves of random cubics, 24 levels
+  // down a random path, stay within the accumulated bound of the exact coefficients; without
+  // that bound they do not.
+  std::uniform_real_distribution<double> coef(-1, 1);
+  std::size_t violations_sound = 0, violations_mutated = 0;
+  for (int n = 0; n < 200; ++n) {
+    detail::BernsteinPiece<double> sound_piece{{coef(rng), coef(rng), coef(rng), coef(rng)}, 0, 0}, mutated_piece = sound_piece;
+    long double ref[4] = {sound_piece.c[0], sound_piece.c[1], sound_piece.c[2], sound_piece.c[3]};
+    for (int level = 0; level < 24; ++level) {
+      const bool right = rng() & 1;
+      detail::BernsteinPiece<double> l, r;
+      detail::bernstein_halves<CertifiedPolicy>(sound_piece, l, r);
+      sound_piece = right ? r : l;
+      detail::bernstein_halves<ShrunkPolicy<100, 0, 100>>(mutated_piece, l, r);
+      mutated_piece = right ? r : l;
+      const long double m01 = (ref[0] + ref[1]) / 2, m12 = (ref[1] + ref[2]) / 2, m23 = (ref[2] + ref[3]) / 2;
+      const long double m012 = (m01 + m12) / 2, m123 = (m12 + m23) / 2, mid = (m012 + m123) / 2;
+      const long double next[2][4] = {{ref[0], m01, m012, mid}, {mid, m123, m23, ref[3]}};
+      for (int i = 0; i < 4; ++i) ref[i] = next[right][i];
+      for (int i = 0; i < 4; ++i) {
+        violations_sound += std::fabs(static_cast<long double>(sound_piece.c[i]) - ref[i]) > sound_piece.bound;
+        violations_mutated += std::fabs(static_cast<long double>(mutated_piece.c[i]) - ref[i]) > mutated_piece.bound;
+      }
+    }
+  }
+  std::printf("  halving: %zu coefficients outside the bound (sound), %zu (bound removed)\n", violations_sound,
+              violations_mutated);
+  CHECK(violations_sound == 0);
+  CHECK(violations_mutated > 0);
+}
