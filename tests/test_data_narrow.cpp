@@ -178,7 +178,9 @@ void certify_one(const Q& q, int truth, CertifiedTally& c) {
     // Both are right: inclusion's TOI is a lower bound of the earliest contact, which lies in [lo, hi].
     c.hit_after_inclusion += !inc.hit || inc.toi > a.hi;
     if (inc.hit) c.worst_gap = std::max(c.worst_gap, double(a.lo) - double(inc.toi));
-    CHECK(a.hi - a.lo <= params.tolerance);
+    // In double the interval is within the tolerance; in float it may be wider by the time the
+    // inputs' rounding to float can move the contact (lo stays a lower bound for the exact data).
+    if constexpr (std::is_same_v<T, double>) CHECK(a.hi - a.lo <= params.tolerance);
   } else {
     ++c.undecided;
   }

@@ -19,7 +19,7 @@ int main() {
   const auto pairs = brute_force_pairs(*step.mesh, boxes);
   const FeaturePairs features = feature_pairs(*step.mesh, pairs);
   const auto contacts =
-      cpu::test_feature_pairs<Filtered<InclusionCcd>, double>(*step.mesh, step.x0, step.x1, features);
+      cpu::test_feature_pairs<CertifiedCcd, double>(*step.mesh, step.x0, step.x1, features);
   std::printf("%zu candidate triangle pair(s), %zu vertex-face and %zu edge-edge feature pairs, "
               "%zu + %zu in contact, earliest at t = %.6f\n",
               pairs.size(), features.vf.size(), features.ee.size(), contacts.vf.size(), contacts.ee.size(),

@@ -10,6 +10,7 @@
 #include "lwsccd/config.hpp"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/error.hpp"
+#include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/io.hpp"
 #include "lwsccd/mesh.hpp"
