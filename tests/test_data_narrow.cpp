@@ -22,11 +22,9 @@ struct Counts {
   std::size_t queries = 0, positives = 0, false_negatives = 0, false_positives = 0;
 };
 
-// Runs Method in precision T over every query file of every set; `transform` may alter the points.
-template <class Method, class T>
-Counts run_query_sets(const std::function<void(std::array<Vec3d, 8>&, bool vertex_face)>& transform = {}) {
-  Counts c;
-  const CcdParams<T> params;
+// Calls f(points, vertex_face, truth) for every query of every set, after `transform`.
+template <class F>
+void for_each_set_query(const std::function<void(std::array<Vec3d, 8>&, bool vertex_face)>& transform, F&& f) {
   for (const auto& set : fs::directory_iterator(lwsccd_test::data_dir() + "/queries")) {
     for (const bool vf : {true, false}) {
       const fs::path folder = set.path() / (vf ? "vertex-face" : "edge-edge");
@@ -36,16 +34,26 @@ Counts run_query_sets(const std::function<void(std::array<Vec3d, 8>&, bool verte
         for (std::size_t i = 0; i < qf.queries.size(); ++i) {
           auto pts = qf.queries[i];
           if (transform) transform(pts, vf);
-          const bool hit = vf ? Method::vertex_face(vertex_face_query<T>(pts), params).hit
-                              : Method::edge_edge(edge_edge_query<T>(pts), params).hit;
-          ++c.queries;
-          c.positives += qf.truth[i] == 1;
-          c.false_negatives += qf.truth[i] == 1 && !hit;
-          c.false_positives += qf.truth[i] == 0 && hit;
+          f(pts, vf, qf.truth[i]);
         }
       }
     }
   }
+}
+
+// Runs Method in precision T over every query file of every set; `transform` may alter the points.
+template <class Method, class T>
+Counts run_query_sets(const std::function<void(std::array<Vec3d, 8>&, bool vertex_face)>& transform = {}) {
+  Counts c;
+  const CcdParams<T> params;
+  for_each_set_query(transform, [&](const std::array<Vec3d, 8>& pts, bool vf, int truth) {
+    const bool hit = vf ? Method::vertex_face(vertex_face_query<T>(pts), params).hit
+                        : Method::edge_edge(edge_edge_query<T>(pts), params).hit;
+    ++c.queries;
+    c.positives += truth == 1;
+    c.false_negatives += truth == 1 && !hit;
+    c.false_positives += truth == 0 && hit;
+  });
   return c;
 }
 
@@ -189,21 +197,10 @@ void certify_one(const Q& q, int truth, CertifiedTally& c) {
 template <class T>
 CertifiedTally certify_query_sets(const std::function<void(std::array<Vec3d, 8>&, bool)>& transform = {}) {
   CertifiedTally c;
-  for (const auto& set : fs::directory_iterator(lwsccd_test::data_dir() + "/queries")) {
-    for (const bool vf : {true, false}) {
-      const fs::path folder = set.path() / (vf ? "vertex-face" : "edge-edge");
-      if (!fs::is_directory(folder)) continue;
-      for (const auto& file : fs::directory_iterator(folder)) {
-        const QueryFile qf = load_query_csv(file.path().string());
-        for (std::size_t i = 0; i < qf.queries.size(); ++i) {
-          auto pts = qf.queries[i];
-          if (transform) transform(pts, vf);
-          if (vf) certify_one<T>(vertex_face_query<T>(pts), qf.truth[i], c);
-          else certify_one<T>(edge_edge_query<T>(pts), qf.truth[i], c);
-        }
-      }
-    }
-  }
+  for_each_set_query(transform, [&](const std::array<Vec3d, 8>& pts, bool vf, int truth) {
+    if (vf) certify_one<T>(vertex_face_query<T>(pts), truth, c);
+    else certify_one<T>(edge_edge_query<T>(pts), truth, c);
+  });
   return c;
 }
 
@@ -235,10 +232,6 @@ void report(const std::string& what, const CertifiedTally& c) {
 
 TEST_CASE("certified fast path: never 'no' on a contact, intervals consistent with inclusion, float and double",
           "[data][narrow][certified]") {
-  if (!lwsccd_test::have_data()) {
-    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
-    return;
-  }
   const std::vector<std::pair<std::string, std::function<void(std::array<Vec3d, 8>&, bool)>>> transforms = {
       {"as given", {}},
       {"translated by (1e6, -1e6, 1e6)", [](std::array<Vec3d, 8>& p, bool) { for (auto& x : p) x = x + Vec3d{1e6, -1e6, 1e6}; }},
@@ -266,10 +259,6 @@ TEST_CASE("certified fast path: never 'no' on a contact, intervals consistent wi
 
 TEST_CASE("CertifiedCcd on the scenes: no false negative, no more false positives than inclusion, the earliest TOI",
           "[data][narrow][certified]") {
-  if (!lwsccd_test::have_data()) {
-    WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());
-    return;
-  }
   for (const char* name : {"cloth-funnel", "armadillo-rollers", "cloth-ball"}) {
     INFO(name);
     const Scene scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
