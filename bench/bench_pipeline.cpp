@@ -258,8 +258,9 @@ int main(int argc, char** argv) {
                                   r.truth.false_positives);
       const lwsccd::NarrowPhaseCounts& v = r.last.narrow_vf;
       const lwsccd::NarrowPhaseCounts& e = r.last.narrow_ee;
-      std::fprintf(f, ", \"certified_hits\": %zu, \"certified_misses\": %zu, \"fallbacks\": %zu",
-                   v.certified_hits + e.certified_hits, v.certified_misses + e.certified_misses, v.fallbacks + e.fallbacks);
+      std::fprintf(f, ", \"certified_hits\": %zu, \"certified_misses\": %zu, \"fallbacks\": %zu, \"screened\": %zu",
+                   v.certified_hits + e.certified_hits, v.certified_misses + e.certified_misses, v.fallbacks + e.fallbacks,
+                   v.screened + e.screened);
       std::fprintf(f, "}");
     });
   } catch (const std::exception& e) {

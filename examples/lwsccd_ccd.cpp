@@ -282,9 +282,10 @@ void print_table(const StepSource& src, const std::string& backend, const Option
                 s.triangle_pairs, s.feature_pairs_vf, s.feature_pairs_ee, s.hits_vf, s.hits_ee,
                 r.outcome.contacts.earliest_toi);
     if (o.policies.method == "certified")
-      std::printf("  narrow phase: certified hits %zu + %zu, certified misses %zu + %zu, fallbacks %zu + %zu (VF + EE)\n",
-                  s.narrow_vf.certified_hits, s.narrow_ee.certified_hits, s.narrow_vf.certified_misses,
-                  s.narrow_ee.certified_misses, s.narrow_vf.fallbacks, s.narrow_ee.fallbacks);
+      std::printf("  narrow phase: screened %zu + %zu, certified hits %zu + %zu, certified misses %zu + %zu, "
+                  "fallbacks %zu + %zu (VF + EE)\n",
+                  s.narrow_vf.screened, s.narrow_ee.screened, s.narrow_vf.certified_hits, s.narrow_ee.certified_hits,
+                  s.narrow_vf.certified_misses, s.narrow_ee.certified_misses, s.narrow_vf.fallbacks, s.narrow_ee.fallbacks);
     if (s.narrow_survivors)
       std::printf("  narrow phase: %zu pairs past the first pass, %zu of them searched by a warp\n", s.narrow_survivors,
                   s.narrow_warp_searches);
@@ -319,12 +320,13 @@ void print_json(const StepSource& src, const std::string& backend, const Options
                 "\"narrow\": %.4f}, \"rebuilt\": %s, \"restarted_from_root\": %s, \"bvtt_nodes\": %zu, \"front\": %zu, "
                 "\"triangle_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, \"vf_hits\": %zu, \"ee_hits\": %zu, "
                 "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
-                "\"peak_device_bytes\": %zu, \"certified\": {\"vf\": [%zu, %zu, %zu], \"ee\": [%zu, %zu, %zu]}",
+                "\"peak_device_bytes\": %zu, \"certified\": {\"vf\": [%zu, %zu, %zu, %zu], \"ee\": [%zu, %zu, %zu, %zu]}",
                 r.name.c_str(), s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.rebuilt ? "true" : "false",
                 s.restarted_from_root ? "true" : "false", s.bvtt_nodes, s.front_size, s.triangle_pairs, s.feature_pairs_vf,
                 s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, s.narrow_survivors, s.narrow_warp_searches,
                 r.outcome.contacts.earliest_toi, s.peak_device_bytes, s.narrow_vf.certified_hits, s.narrow_vf.certified_misses,
-                s.narrow_vf.fallbacks, s.narrow_ee.certified_hits, s.narrow_ee.certified_misses, s.narrow_ee.fallbacks);
+                s.narrow_vf.fallbacks, s.narrow_vf.screened, s.narrow_ee.certified_hits, s.narrow_ee.certified_misses,
+                s.narrow_ee.fallbacks, s.narrow_ee.screened);
     if (r.has_truth)
       std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.truth.true_contacts,
                   r.truth.false_negatives, r.truth.false_positives);

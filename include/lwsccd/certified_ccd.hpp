@@ -40,6 +40,11 @@ namespace lwsccd {
 struct CertifiedPolicy {
   static constexpr int kMaxSplits = 96;  ///< interval halvings before a query is left undecided
   static constexpr int kMaxLeaves = 6;   ///< root intervals (at the time tolerance) examined, at most
+  /// The inside test also runs on wider intervals that may hold a root, every this many levels
+  /// from [0, 1]: features apart in space are excluded there instead of after a descent to the
+  /// tolerance (0: at root intervals only).
+  static constexpr int kInsideEvery = 4;
+  static constexpr int kInsideFrom = 3;  ///< the first level of those tests
   /// Multipliers of the three error bounds (1 = as derived). Only the mutation tests change them:
   /// any value below 1 is unsound, and those tests show it.
   static constexpr double kCoefficientBound = 1.0;  ///< the cubic's Bernstein coefficients on [0, 1]
@@ -122,13 +127,17 @@ LWSCCD_HD Vec3<T> lerp_point(const Vec3<T>& x0, const Vec3<T>& x1, T t) {
 // coordinate magnitude. Rounding: each point at `mid` is off by at most 9 u m (a difference, a
 // product, a sum, of magnitudes at most 2 m, m and 3 m), the difference by 2 * 9 u m + u 2 m =
 // 20 u m, taken as 32 u m; a relative perturbation p of the inputs adds 2 p m. Motion:
-// |d/dt (y - x)| <= |dy| + |dx|, over at most `half`.
+// d/dt (y - x) = dy - dx exactly (dx = x1 - x0), computed as fl(fl(dy) - fl(dx)) with error at
+// most u (|dx| + |dy|) (1 + u) + u |dy - dx|, taken as 4 u (|dx| + |dy|) over |fl(...)| (1 + 2u);
+// features moving together (a sheet falling along its normal) thus keep tight bounds. Over at
+// most `half`, with the products' rounding in the (1 + 8 u).
 template <class T>
 LWSCCD_HD MovingDifference<T> moving_difference(const Vec3<T>& x0, const Vec3<T>& x1, const Vec3<T>& y0, const Vec3<T>& y1,
                                                 T mid, T half, const Vec3<T>& m, T perturbation) {
   const Vec3<T> x = lerp_point(x0, x1, mid), y = lerp_point(y0, y1, mid);
-  const Vec3<T> motion = vadd(abs(vsub(x1, x0)), abs(vsub(y1, y0)));
+  const Vec3<T> dx = vsub(x1, x0), dy = vsub(y1, y0);
   const T u = unit_roundoff<T>();
+  const Vec3<T> motion = vadd(vscale(abs(vsub(dy, dx)), T(1) + T(2) * u), vscale(vadd(abs(dx), abs(dy)), T(4) * u));
   const Vec3<T> error = vadd(vscale(m, T(32) * u), vscale(motion, fmul(half, T(1) + T(8) * u)));
   return {vsub(y, x), error, vadd(error, vscale(m, T(2) * perturbation))};
 }
@@ -138,45 +147,71 @@ LWSCCD_HD MovingDifference<T> moving_difference(const Vec3<T>& x0, const Vec3<T>
 /// as given; unknown: none of these.
 enum class InsideVerdict : std::uint8_t { outside, outside_as_given, inside, unknown };
 
+/// X x Y for two moving differences, with the majorants |X| x |Y| (abs_cross) at the computed
+/// values, at the values widened by their as-given errors, and by their perturbed errors. A sign
+/// test is the dot product of two of these, so terms shared by several tests are computed once.
+template <class T>
+struct CrossTerm {
+  Vec3<T> value, majorant, as_given, perturbed;
+  LWSCCD_HD CrossTerm(const MovingDifference<T>& X, const MovingDifference<T>& Y) {
+    value = vcross(X.value, Y.value);
+    const Vec3<T> ax = abs(X.value), ay = abs(Y.value);
+    majorant = abs_cross(ax, ay);
+    as_given = abs_cross(vadd(ax, X.error), vadd(ay, Y.error));
+    perturbed = abs_cross(vadd(ax, X.perturbed), vadd(ay, Y.perturbed));
+  }
+};
+
 /// sigma = (X x Y) . (A x B) and bounds on |exact - computed| when the exact vectors are within
 /// the given per-axis errors: the majorant difference M(|X| + eX, ...) - M(|X|, ...) bounds the
 /// errors' effect (a degree-4 polynomial whose monomials have coefficients +-1), and
 /// 32 u M(|X| + eX, ...) the rounding of sigma and of both majorants (depth 5: 3 gamma_5 < 16 u),
 /// with room. The normal A x B is expanded rather than rounded first, so its error is counted.
+/// `bound` (perturbed) first: a test certainly negative under it decides alone, and the as-given
+/// bound is then not needed.
 template <class Policy, class T>
 struct SignTest {
-  T sigma, bound, exact;
-  LWSCCD_HD SignTest(const MovingDifference<T>& X, const MovingDifference<T>& Y, const MovingDifference<T>& A,
-                     const MovingDifference<T>& B, T slack) {
-    sigma = vdot(vcross(X.value, Y.value), vcross(A.value, B.value));
-    const Vec3<T> ax = abs(X.value), ay = abs(Y.value), aa = abs(A.value), ab = abs(B.value);
-    const T m0 = vdot(abs_cross(ax, ay), abs_cross(aa, ab));
-    auto majorant = [&](const Vec3<T>& ex, const Vec3<T>& ey, const Vec3<T>& ea, const Vec3<T>& eb) {
-      return vdot(abs_cross(vadd(ax, ex), vadd(ay, ey)), abs_cross(vadd(aa, ea), vadd(ab, eb)));
-    };
+  T sigma, bound, exact = T(0);
+  bool finite;
+  LWSCCD_HD SignTest(const CrossTerm<T>& xy, const CrossTerm<T>& ab, T slack) {
+    sigma = vdot(xy.value, ab.value);
+    const T m0 = vdot(xy.majorant, ab.majorant), mp = vdot(xy.perturbed, ab.perturbed);
     const T k = T(Policy::kInsideBound), r = T(32) * unit_roundoff<T>();
-    const T me = majorant(X.error, Y.error, A.error, B.error);
-    const T mp = majorant(X.perturbed, Y.perturbed, A.perturbed, B.perturbed);
-    exact = fadd(fmul(k, fadd(fsub(me, m0), fmul(r, me))), slack);
     bound = fadd(fmul(k, fadd(fsub(mp, m0), fmul(r, mp))), slack);
+    finite = finite_value(sigma) && finite_value(bound);
+    if (excludes()) return;
+    const T me = vdot(xy.as_given, ab.as_given);
+    exact = fadd(fmul(k, fadd(fsub(me, m0), fmul(r, me))), slack);
   }
+  /// Certainly negative, even for a perturbed query (the values are finite, so nothing overflowed).
+  LWSCCD_HD bool excludes() const { return finite && sigma < -bound; }
 };
 
 /// Combines the sign tests that must all be >= 0 at a contact: outside when one is certainly
 /// negative even under perturbation, inside when all are certainly positive for the query as given.
+/// Tests are added one at a time and the caller stops at the first that excludes.
 template <class T>
 struct InsideVote {
-  bool all_positive = true, some_negative = false, some_negative_as_given = false, finite = true;
+  bool all_positive = true, some_negative_as_given = false, finite = true;
+  /// Adds a test that must be >= 0 at a contact; true when it alone excludes the contact.
   template <class Test>
-  LWSCCD_HD void add(const Test& t) {
-    finite = finite && finite_value(t.sigma) && finite_value(t.bound);
+  LWSCCD_HD bool add(const Test& t) {
+    if (t.excludes()) return true;
+    finite = finite && t.finite;
     all_positive = all_positive && t.sigma > t.exact;
-    some_negative = some_negative || t.sigma < -t.bound;
     some_negative_as_given = some_negative_as_given || t.sigma < -t.exact;
+    return false;
+  }
+  /// Adds a test that must be <= 0 at a contact, given negated: only its certain sign counts.
+  template <class Test>
+  LWSCCD_HD bool add_exclusion(const Test& t) {
+    if (t.excludes()) return true;
+    finite = finite && t.finite;
+    some_negative_as_given = some_negative_as_given || t.sigma < -t.exact;
+    return false;
   }
   LWSCCD_HD InsideVerdict verdict() const {
     if (!finite) return InsideVerdict::unknown;
-    if (some_negative) return InsideVerdict::outside;
     if (some_negative_as_given) return InsideVerdict::outside_as_given;
     return all_positive ? InsideVerdict::inside : InsideVerdict::unknown;
   }
@@ -191,18 +226,24 @@ LWSCCD_HD InsideVerdict inside_over(const VertexFaceQuery<T>& q, T mid, T half, 
   const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.p0, q.p1, mid, half, m, perturbation);
   const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation);
   const MovingDifference<T> B = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation);
+  const CrossTerm<T> n(A, B);
+  InsideVote<T> vote;
+  if (vote.add(SignTest<Policy, T>(CrossTerm<T>(P, B), n, slack))) return InsideVerdict::outside;
+  if (vote.add(SignTest<Policy, T>(CrossTerm<T>(A, P), n, slack))) return InsideVerdict::outside;
   const MovingDifference<T> PB = moving_difference(q.p0, q.p1, q.b0, q.b1, mid, half, m, perturbation);
   const MovingDifference<T> PC = moving_difference(q.p0, q.p1, q.c0, q.c1, mid, half, m, perturbation);
-  InsideVote<T> vote;
-  vote.add(SignTest<Policy, T>(P, B, A, B, slack));
-  vote.add(SignTest<Policy, T>(A, P, A, B, slack));
-  vote.add(SignTest<Policy, T>(PB, PC, A, B, slack));
+  if (vote.add(SignTest<Policy, T>(CrossTerm<T>(PB, PC), n, slack))) return InsideVerdict::outside;
   return vote.verdict();
 }
 
 /// Edge-edge inside test: with P = c - a, A = b - a, B = d - c and n = A x B, coplanar lines meet
 /// at a + u A = c + v B where u n = P x B and v n = P x A; 0 <= u, v <= 1 are the signs of
-/// (P x B) . n, ((b - c) x B) . n, (P x A) . n and (A x (d - a)) . n.
+/// (P x B) . n, ((b - c) x B) . n, (P x A) . n and (A x (d - a)) . n. These all vanish for
+/// parallel edges, so two more tests exclude without n: c and d strictly on one side of the line
+/// ab, (A x (c - a)) . (A x (d - a)) > 0, means segment cd never meets that line (the component
+/// of x - a normal to A moves along a segment between two vectors at an acute angle, never
+/// through zero); likewise a and b against the line cd, (B x (a - c)) . (B x (b - c)) > 0. Negated
+/// they reuse the other tests' terms: (P x A) . (A x (d - a)) and (P x B) . ((b - c) x B) < 0.
 template <class Policy, class T>
 LWSCCD_HD InsideVerdict inside_over(const EdgeEdgeQuery<T>& q, T mid, T half, const Vec3<T>& m, T perturbation,
                                     T slack) {
@@ -211,12 +252,43 @@ LWSCCD_HD InsideVerdict inside_over(const EdgeEdgeQuery<T>& q, T mid, T half, co
   const MovingDifference<T> B = moving_difference(q.c0, q.c1, q.d0, q.d1, mid, half, m, perturbation);
   const MovingDifference<T> CB = moving_difference(q.c0, q.c1, q.b0, q.b1, mid, half, m, perturbation);
   const MovingDifference<T> AD = moving_difference(q.a0, q.a1, q.d0, q.d1, mid, half, m, perturbation);
+  const CrossTerm<T> n(A, B), pb(P, B), cbb(CB, B), pa(P, A), aad(A, AD);
   InsideVote<T> vote;
-  vote.add(SignTest<Policy, T>(P, B, A, B, slack));
-  vote.add(SignTest<Policy, T>(CB, B, A, B, slack));
-  vote.add(SignTest<Policy, T>(P, A, A, B, slack));
-  vote.add(SignTest<Policy, T>(A, AD, A, B, slack));
+  if (vote.add(SignTest<Policy, T>(pb, n, slack))) return InsideVerdict::outside;
+  if (vote.add(SignTest<Policy, T>(cbb, n, slack))) return InsideVerdict::outside;
+  if (vote.add(SignTest<Policy, T>(pa, n, slack))) return InsideVerdict::outside;
+  if (vote.add(SignTest<Policy, T>(aad, n, slack))) return InsideVerdict::outside;
+  if (vote.add_exclusion(SignTest<Policy, T>(pa, aad, slack))) return InsideVerdict::outside;
+  if (vote.add_exclusion(SignTest<Policy, T>(pb, cbb, slack))) return InsideVerdict::outside;
   return vote.verdict();
+}
+
+/// The cubic's Bernstein coefficients on [0, 1] (in b) and a cheap, looser bound on their error:
+/// the majorant of every coefficient has at most 18 monomials |p_i| |a_j| |b_k| (k_1 and k_2 are
+/// three times the middle coefficients), each at most M_P M_A M_B with M the largest |coordinate|
+/// of the difference vectors at t = 0 and t = 1. So coplanarity_bernstein's bound, (majorant
+/// change under the perturbation e) (1 + 8 u) + 16 u (perturbed majorant), is at most 18 times
+/// that expression for the product M_P M_A M_B (a polynomial with positive coefficients grows most
+/// at the largest arguments); (1 + 16 u) covers rounding this bound. Most pairs that reach the
+/// cubic are rejected by it, for a third of the operations of the full bound.
+template <class Q, class W>
+LWSCCD_HD W screening_bernstein(const Q& q, W b[4], const Vec3<W>& m, W perturbation) {
+  const Coplanarity<W> c = coplanarity_of(q);
+  W k[4];
+  bernstein_controls(c, k);
+  b[0] = k[0];
+  b[1] = k[1] / W(3);
+  b[2] = k[2] / W(3);
+  b[3] = k[3];
+  const W mp = max_component(max(abs(c.p0), abs(c.p1))), ma = max_component(max(abs(c.a0), abs(c.a1)));
+  const W mb = max_component(max(abs(c.b0), abs(c.b1))), e = fmul(max_component(m), W(2) * perturbation);
+  const W u = unit_roundoff<W>();
+  const W pe = fadd(mp, e), ae = fadd(ma, e), be = fadd(mb, e);
+  const W grown = fmul(fmul(pe, ae), be);  // (M_P + e)(M_A + e)(M_B + e)
+  // (M_P + e)(M_A + e)(M_B + e) - M_P M_A M_B as a sum of positive terms (no cancellation).
+  const W change = fadd(fadd(fmul(e, fmul(ae, be)), fmul(mp, fmul(e, be))), fmul(mp, fmul(ma, e)));
+  const W bound = fadd(fmul(change, W(1) + W(8) * u), fmul(W(16) * u, grown));
+  return fadd(fmul(fmul(W(18), bound), W(1) + W(16) * u), std::numeric_limits<W>::denorm_min());
 }
 
 /// The finest level of the time intervals: width 2^-level <= tolerance / 2, so that a root
@@ -264,24 +336,47 @@ struct certified_compute<float> {
   using type = double;
 };
 
-/// The certified classification of one query (see the file comment), computed in W with the
-/// inputs' perturbation of T's unit roundoff.
+/// The certified path's cheap first step: true when the query is certainly a miss by its swept
+/// boxes or by the cubic's coefficients under the screening bound. Most pairs of a real step end
+/// here; a batch runs it on every pair and certified_refine on the others.
 template <class Policy, class Q, class T>
-LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q_in, const CcdParams<T>& params) {
+LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
+  using W = typename certified_compute<T>::type;
+  if (params.min_separation > T(0)) return false;  // the cubic only speaks of contact
+  const auto q = q_in.template cast<W>();
+  const W perturbation = unit_roundoff<T>();
+  const Vec3<W> m = coordinate_magnitude(q);
+  // Swept boxes apart: no arithmetic but the pad, so it goes first.
+  if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
+  W b[4];
+  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
+  const W screen = fadd(fmul(k, screening_bernstein(q, b, m, perturbation)), slack);
+  const bool finite = finite_value(screen) && finite_value(b[0]) && finite_value(b[1]) && finite_value(b[2]) && finite_value(b[3]);
+  return finite && same_sign_beyond(b, screen);
+}
+
+/// The certified classification of a query that certified_screen did not reject (see the file
+/// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
+/// query the screen would reject (it then finds the miss itself, at more cost).
+/// `defer_level`: when an interval that deep would have to be halved, the search stops, answers
+/// undecided and sets *deferred; a second call without the limit then gives the whole answer (the
+/// same as one call without it). A GPU batch uses this to keep the long searches (contacts,
+/// resolved at the tolerance) out of the warps that decide misses in a few levels.
+template <class Policy, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
+                                              bool* deferred = nullptr) {
   using W = typename certified_compute<T>::type;
   const auto q = q_in.template cast<W>();
   const W perturbation = unit_roundoff<T>();
   CertifiedAnswer<T> undecided;
   if (params.min_separation > T(0)) return undecided;  // the cubic only speaks of contact
   const Vec3<W> m = coordinate_magnitude(q);
-  // Swept boxes apart: no arithmetic but the pad, so it goes first.
-  if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return {Certainty::miss, T(0), T(1)};
   // The cubic and its coefficient bound (ccd_filters.hpp), plus underflow's share.
   const W mag = fmul(W(4), max_component(m));  // bounds every difference and its motion
+  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
   BernsteinPiece<W> root;
   W rounding_bound = W(0);
   const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound);
-  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
   root.bound = fadd(fmul(k, coefficient_bound), slack);
   root.exact = fadd(fmul(k, rounding_bound), slack);
   bool finite = finite_value(root.bound);
@@ -329,15 +424,21 @@ LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q_in, const CcdParams<T
     const bool crossing = (c[0] < -exact && c[3] > exact) || (c[0] > exact && c[3] < -exact);
     const bool leaf = e.level >= max_level;
     // Set mode needs no tight time: a crossing interval is tried every fourth level on the way.
-    if (leaf || (set_mode && crossing && (e.level & 3) == 0)) {
-      const W half = std::ldexp(W(1), -e.level - 1);
-      const InsideVerdict inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
+    const bool try_hit = leaf || (set_mode && crossing && (e.level & 3) == 0);
+    const bool coarse = Policy::kInsideEvery > 0 && e.level >= Policy::kInsideFrom &&
+                        (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
+    const bool coplanar = all_within(c, exact);
+    const W half = std::ldexp(W(1), -e.level - 1);
+    InsideVerdict inside = InsideVerdict::unknown;
+    if (try_hit || coarse || coplanar) {
+      inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
       if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
         if (inside == InsideVerdict::outside_as_given) note_lower(lo);
         if (leaf && ++leaves > Policy::kMaxLeaves) return {Certainty::undecided, has_lower ? lower : lo, T(1)};
         continue;
       }
-      note_lower(lo);
+    }
+    if (try_hit) {
       // A root is certain across this leaf, or from the start of the unresolved leaves before it
       // (a root on the grid point between two leaves makes neither a crossing alone); those
       // leaves join the interval, which must stay within the tolerance.
@@ -345,8 +446,12 @@ LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q_in, const CcdParams<T
       const bool is_inside = inside == InsideVerdict::inside;
       const bool joined = has_open && open_inside && is_inside && open_sign != 0 && sign_hi == -open_sign;
       const T from = has_open ? open_from : lo;
-      if (((is_inside && crossing) || joined) && (set_mode || hi - from <= params.tolerance)) return {Certainty::hit, lower, hi};
+      if (((is_inside && crossing) || joined) && (set_mode || hi - from <= params.tolerance)) {
+        note_lower(lo);
+        return {Certainty::hit, lower, hi};
+      }
       if (leaf) {
+        note_lower(lo);  // not excluded (a wider interval tried in set mode is split instead)
         if (!has_open) open_from = lo, has_open = true, open_sign = sign_lo, open_inside = true;
         open_inside = open_inside && is_inside;
         if (++leaves > Policy::kMaxLeaves || (!set_mode && hi + (hi - lo) - open_from > params.tolerance))
@@ -355,19 +460,16 @@ LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q_in, const CcdParams<T
       }
     }
     const T open = has_lower ? lower : lo;
-    if (all_within(c, exact)) {
-      // f is zero within its error here (motion that stays coplanar): only the inside test can
-      // still exclude the interval, when the features are apart within the plane all along.
-      const W half = std::ldexp(W(1), -e.level - 1);
-      const InsideVerdict inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
-      if (inside == InsideVerdict::outside) continue;
-      if (inside == InsideVerdict::outside_as_given) {
-        note_lower(lo);
-        continue;
-      }
-      return {Certainty::undecided, open, T(1)};  // no sign left to resolve
-    }
+    // f is zero within its error here (motion that stays coplanar): only the inside test can
+    // still exclude time, when the features are apart within the plane; it was not certain over
+    // this interval, so halves (with less motion each) are tried, unless they are certainly in
+    // contact in the plane (no sign of f left to resolve).
+    if (coplanar && inside == InsideVerdict::inside) return {Certainty::undecided, open, T(1)};
     if (++splits > Policy::kMaxSplits || top + 2 > kStack) return {Certainty::undecided, open, T(1)};
+    if (e.level >= defer_level) {
+      if (deferred) *deferred = true;
+      return undecided;
+    }
     BernsteinPiece<W> left, right;
     bernstein_halves<Policy>(e.piece, left, right);
     stack[top++] = {right, 2u * e.index + 1u, e.level + 1};
@@ -376,6 +478,13 @@ LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q_in, const CcdParams<T
   // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
   if (has_lower) return {Certainty::undecided, lower, T(1)};
   return {Certainty::miss, T(0), T(1)};
+}
+
+/// The whole certified classification of one query: the screen, then the refinement.
+template <class Policy, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q, const CcdParams<T>& params) {
+  if (certified_screen<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
+  return certified_refine<Policy>(q, params);
 }
 
 }  // namespace detail
@@ -393,6 +502,21 @@ struct CertifiedCcdT {
   template <class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> classify(const Q& q, const CcdParams<T>& params) {
     return detail::certified_classify<Policy>(q, params);
+  }
+  /// classify in two steps, for batches that run the cheap one on every pair first: screen is
+  /// true for a certain miss; refine classifies the others (classify = screen, then refine).
+  template <class Q, class T>
+  LWSCCD_HD static bool screen(const Q& q, const CcdParams<T>& params) {
+    return detail::certified_screen<Policy>(q, params);
+  }
+  template <class Q, class T>
+  LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
+    return detail::certified_refine<Policy>(q, params);
+  }
+  /// refine, stopped (*deferred set) where it would halve an interval at `defer_level` or deeper.
+  template <class Q, class T>
+  LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params, int defer_level, bool* deferred) {
+    return detail::certified_refine<Policy>(q, params, defer_level, deferred);
   }
   template <class T>
   LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {

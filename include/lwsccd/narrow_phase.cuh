@@ -37,6 +37,9 @@ struct NarrowPhasePolicy {
   static constexpr int kThreadRounds = 6;   ///< InclusionCcd: rounds of the one-thread attempt per query
   static constexpr int kThreadBoxes = 64;   ///< InclusionCcd: live boxes the one-thread attempt may keep
   static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~12 KiB of shared memory each)
+  /// CertifiedCcd: refinements that would halve intervals this deep (width 2^-level) go to a
+  /// second kernel, so that the long searches of contacts do not hold up warps of quick misses.
+  static constexpr int kRefineDeferLevel = 8;
 };
 
 /// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as
@@ -69,6 +72,7 @@ class NarrowPhase {
   NarrowPhase& operator=(const NarrowPhase&) = delete;
   ~NarrowPhase() {
     for (auto& l : lists_) {
+      if (l.host_counts) cudaFreeHost(l.host_counts);
       if (l.stream) cudaStreamDestroy(l.stream);
       if (l.done) cudaEventDestroy(l.done);
     }
@@ -97,7 +101,7 @@ class NarrowPhase {
     for (const auto& l : lists_)
       bytes += l.hits.capacity_bytes() + l.staged.capacity_bytes() + l.flags.capacity_bytes() + l.scratch.capacity_bytes() +
                l.hit_flags.capacity_bytes() +
-               l.survivors.capacity_bytes() + l.counters.capacity_bytes() + l.pending.capacity_bytes() +
+               l.survivors.capacity_bytes() + l.undecided.capacity_bytes() + l.counters.capacity_bytes() + l.pending.capacity_bytes() +
                l.pending_index.capacity_bytes();
     return bytes;
   }
@@ -108,12 +112,15 @@ class NarrowPhase {
     DeviceBuffer<FeatureHit<T>> hits, staged;
     DeviceBuffer<unsigned char> flags, scratch;
     DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
-    DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up, [2]: left to warp searches
+    DeviceBuffer<unsigned long long> undecided;  ///< CertifiedCcd: pairs its refinement left to the fallback
+    DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up, [2]: left to warp searches, [3]: certified hits
     DeviceBuffer<unsigned char> hit_flags;       ///< CertifiedCcd's first pass: certified hits
     NarrowPhaseCounts counts;
-    DeviceBuffer<unsigned char> pending;         ///< per query: left open by the one-thread attempt
+    DeviceBuffer<unsigned char> pending;         ///< per query: left open by the one-thread attempt (or refinement deferred)
     DeviceBuffer<unsigned> pending_index;
     std::size_t count = 0, num_survivors = 0, tested = 0, warp_searches = 0;
+    std::size_t refined = 0, num_undecided = 0;  ///< CertifiedCcd: screened pairs refined, left undecided
+    unsigned long long* host_counts = nullptr;   ///< pinned copies of counters
     const Pair* to_test = nullptr;  ///< survivors, or the input pairs for one-pass methods
     cudaStream_t stream = nullptr;
     cudaEvent_t done = nullptr;
@@ -121,8 +128,15 @@ class NarrowPhase {
 
   void ensure_streams();
   template <class P, bool kVertexFace>
-  void first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs, std::size_t n,
-                  const CcdParams<T>& params, List& list);
+  void screen(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs, std::size_t n,
+              const CcdParams<T>& params, List& list);
+  void compact_screened(List& list);
+  template <class P, bool kVertexFace>
+  std::size_t refine_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params,
+                           List& list);
+  void collect_refined(List& list, std::size_t m);
+  template <class In, class Out>
+  void select_flagged(List& list, In in, const unsigned char* flags, Out out, unsigned long long* count, std::size_t n);
   template <class P, bool kVertexFace>
   void launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params, List& list,
                     std::size_t begin, std::size_t m);
@@ -136,6 +150,7 @@ class NarrowPhase {
   DeviceBuffer<unsigned char> reduce_scratch_;
   std::size_t gave_up_ = 0;
   T earliest_ = T(1);
+  int deferred_grid_ = 1;        ///< blocks of the deferred refinement kernel (a grid-stride loop)
   bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
 };
 

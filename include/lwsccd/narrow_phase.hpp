@@ -31,6 +31,7 @@ struct FeatureHit {
 /// pairs left to the fallback; for other methods every pair counts as a fallback.
 struct NarrowPhaseCounts {
   std::size_t pairs = 0, certified_hits = 0, certified_misses = 0, fallbacks = 0;
+  std::size_t screened = 0;  ///< CertifiedCcd: pairs its screen passed on to the refinement
 };
 
 template <class T>
@@ -89,8 +90,13 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, const CcdParams
     for (std::size_t i = w; i < n; i += nw) {
       const auto q = gather(i);
       if constexpr (lwsccd::detail::certified_of<Method>::value) {
-        if (undecided) {  // first pass
-          const CertifiedAnswer<T> a = Method::classify(q, params);
+        if (undecided) {  // first pass: the screen, then the refinement of what it passes
+          if (Method::screen(q, params)) {
+            ++out.counts.certified_misses;
+            continue;
+          }
+          ++out.counts.screened;
+          const CertifiedAnswer<T> a = Method::refine(q, params);
           if (a.certainty == Certainty::hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, a.lo}), ++out.counts.certified_hits;
           else if (a.certainty == Certainty::miss) ++out.counts.certified_misses;
           else out.open.push_back(i);
@@ -115,6 +121,7 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, const CcdParams
     counts.certified_hits += part.counts.certified_hits;
     counts.certified_misses += part.counts.certified_misses;
     counts.fallbacks += part.counts.fallbacks;
+    counts.screened += part.counts.screened;
     gave_up += part.gave_up;
   }
 }

@@ -29,42 +29,82 @@ __global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec
   if (r.gave_up) atomicAdd(gave_up, 1ull);
 }
 
-// First pass: flags the pairs that the method's first step does not already reject.
+// The first step of a two-pass method on one query: true when it certainly rejects the pair
+// (CertifiedCcd: its screen; other methods: their quick_reject).
+template <class Method, class Q, class T>
+__device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
+  if constexpr (lwsccd::detail::certified_of<Method>::value) return Method::screen(q, params);
+  else return Method::quick_reject(q, params);
+}
+
+// Pass 1: flags the pairs that the method's cheap first step does not reject, a thread per pair.
 template <class Method, bool kVertexFace, class T, class P>
-__global__ void quick_reject_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                    const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
-                                    unsigned char* keep) {
+__global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                              const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
+                              unsigned char* keep) {
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
   const std::pair<index_t, index_t> p = pairs[i];
   bool rejected;
   if constexpr (kVertexFace) {
-    rejected = Method::quick_reject(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
+    rejected = first_step_rejects<Method>(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
   } else {
-    rejected = Method::quick_reject(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
+    rejected = first_step_rejects<Method>(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
   }
   keep[i] = rejected ? 0 : 1;
 }
 
-// CertifiedCcd's first pass: every pair classified; certified hits staged (flag in `hit`), the
-// undecided flagged in `keep` for the fallback.
+// CertifiedCcd's refinement of the screened pairs, first part: searches that would halve
+// intervals at kDeferLevel or deeper stop and are flagged in `deferred` (they are the contacts,
+// resolved at the time tolerance, and would hold up whole warps of quick misses); the others
+// store their answer: certified hits staged (flag in `hit`), the undecided flagged in `keep`.
 template <class Method, bool kVertexFace, class T, class P>
-__global__ void certified_pass_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                      const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
-                                      FeatureHit<T>* staged, unsigned char* hit, unsigned char* keep) {
+__global__ void refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                              const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params, int defer_level,
+                              FeatureHit<T>* staged, unsigned char* hit, unsigned char* keep, unsigned char* deferred) {
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
   const std::pair<index_t, index_t> p = pairs[i];
   CertifiedAnswer<T> a;
+  bool later = false;
   if constexpr (kVertexFace) {
-    a = Method::classify(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
+    a = Method::refine(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params, defer_level, &later);
   } else {
-    a = Method::classify(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
+    a = Method::refine(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params, defer_level, &later);
   }
   staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
   hit[i] = a.certainty == Certainty::hit ? 1 : 0;
-  keep[i] = a.certainty == Certainty::undecided ? 1 : 0;
+  keep[i] = !later && a.certainty == Certainty::undecided ? 1 : 0;
+  deferred[i] = later ? 1 : 0;
 }
+
+// Second part: the deferred searches, whole, on a compacted list of their indices (its length
+// read on the device: no host sync), answers stored where the first part would have put them.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                       const std::pair<index_t, index_t>* pairs, const unsigned* which,
+                                       const unsigned long long* count, CcdParams<T> params, FeatureHit<T>* staged,
+                                       unsigned char* hit, unsigned char* keep) {
+  const std::size_t n = static_cast<std::size_t>(*count);
+  for (std::size_t w = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x; w < n;
+       w += static_cast<std::size_t>(gridDim.x) * blockDim.x) {
+    const std::size_t i = which[w];
+    const std::pair<index_t, index_t> p = pairs[i];
+    CertifiedAnswer<T> a;
+    if constexpr (kVertexFace) {
+      a = Method::refine(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
+    } else {
+      a = Method::refine(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
+    }
+    staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
+    hit[i] = a.certainty == Certainty::hit ? 1 : 0;
+    keep[i] = a.certainty == Certainty::undecided ? 1 : 0;
+  }
+}
+
+struct FlagToCount {
+  LWSCCD_HD unsigned long long operator()(unsigned char f) const { return f; }
+};
 
 // Second pass, first attempt: the same search in one thread per query, for a few rounds and
 // little memory. Most queries end there; the others are flagged `pending` for the warp search
@@ -231,7 +271,15 @@ template <class Method, class T, class Policy>
 void NarrowPhase<Method, T, Policy>::ensure_streams() {
   if (start_) return;
   LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&start_, cudaEventDisableTiming));
+  // The deferred searches run in a grid that fills the device a few times over.
+  int device = 0, sms = 0;
+  LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
+  LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+  deferred_grid_ = std::max(1, sms) * 8;
   for (auto& l : lists_) {
+    void* pinned = nullptr;  // pinned, so that copies of counts are asynchronous
+    LWSCCD_CUDA_CHECK(cudaMallocHost(&pinned, 4 * sizeof(unsigned long long)));
+    l.host_counts = static_cast<unsigned long long*>(pinned);
     LWSCCD_CUDA_CHECK(cudaStreamCreateWithFlags(&l.stream, cudaStreamNonBlocking));
     LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&l.done, cudaEventDisableTiming));
   }
@@ -251,14 +299,35 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
   for (auto& l : lists_) {
     l.count = l.tested = l.warp_searches = 0;
     l.counts = {};
-    l.counters.resize_discard(3);
+    l.counters.resize_discard(4);
     LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 3 * sizeof(unsigned long long), l.stream));
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 4 * sizeof(unsigned long long), l.stream));
   }
   lists_[0].counts.pairs = num_vf;
   lists_[1].counts.pairs = num_ee;
-  first_pass<P, true>(view, x0, x1, vf, num_vf, params, lists_[0]);
-  first_pass<P, false>(view, x0, x1, ee, num_ee, params, lists_[1]);
+  // Pass 1, both lists at once: the screen, then the survivors compacted.
+  screen<P, true>(view, x0, x1, vf, num_vf, params, lists_[0]);
+  screen<P, false>(view, x0, x1, ee, num_ee, params, lists_[1]);
+  for (auto& l : lists_) {
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
+    compact_screened(l);
+  }
+  // CertifiedCcd: the refinement of the screened pairs, a chunk of each list at a time.
+  if constexpr (kCertified) {
+    while (lists_[0].refined < lists_[0].num_survivors || lists_[1].refined < lists_[1].num_survivors) {
+      const std::size_t launched[2] = {refine_chunk<P, true>(view, x0, x1, params, lists_[0]),
+                                       refine_chunk<P, false>(view, x0, x1, params, lists_[1])};
+      for (int k = 0; k < 2; ++k) {
+        if (!launched[k]) continue;
+        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(lists_[k].stream));
+        collect_refined(lists_[k], launched[k]);
+      }
+    }
+    for (auto& l : lists_) {
+      l.num_survivors = l.num_undecided;
+      l.to_test = reinterpret_cast<const Pair*>(l.undecided.data());
+    }
+  }
   // Mode earliest: the fallback need not look past the best certified time (as the CPU does).
   CcdParams<T> full = params;
   if (kCertified && params.mode == CcdMode::earliest)
@@ -282,24 +351,25 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
       if (m == 0) continue;
       if (k == 0) launch_chunk<P, true>(view, x0, x1, full, l, l.tested, m);
       else launch_chunk<P, false>(view, x0, x1, full, l, l.tested, m);
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts, l.counters.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+                                        l.stream));
       launched[k] = m;
     }
     for (int k = 0; k < 2; ++k) {
       if (!launched[k]) continue;
       List& l = lists_[k];
-      unsigned long long selected = 0;
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&selected, l.counters.data(), sizeof selected, cudaMemcpyDeviceToHost, l.stream));
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-      l.count += static_cast<std::size_t>(selected);
+      l.count += static_cast<std::size_t>(l.host_counts[0]);
       l.tested += launched[k];
     }
   }
   // Earliest TOI over both lists, and the bounded-work count.
+  for (auto& l : lists_)
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts + 1, l.counters.data() + 1, sizeof(unsigned long long),
+                                      cudaMemcpyDeviceToHost, l.stream));
   for (auto& l : lists_) {
-    unsigned long long gave = 0;
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&gave, l.counters.data() + 1, sizeof gave, cudaMemcpyDeviceToHost, l.stream));
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-    gave_up_ += static_cast<std::size_t>(gave);
+    gave_up_ += static_cast<std::size_t>(l.host_counts[1]);
     const T list_min = list_minimum(l, stream);
     earliest_ = list_min < earliest_ ? list_min : earliest_;
   }
@@ -338,79 +408,116 @@ T NarrowPhase<Method, T, Policy>::list_minimum(const List& l, cudaStream_t strea
   return list_min;
 }
 
-// Pass 1 of two-pass methods, on the list's stream: the cheap first step (CertifiedCcd: the
-// certified classification, whose hits are stored at once) for every pair, chunk by chunk, and the
-// survivors compacted into one list (so that the full test runs on all of them at once).
+// Selects the flagged items of in[0, n) into out (appended: the count lands in *count).
+template <class Method, class T, class Policy>
+template <class In, class Out>
+void NarrowPhase<Method, T, Policy>::select_flagged(List& list, In in, const unsigned char* flags, Out out,
+                                                    unsigned long long* count, std::size_t n) {
+  std::size_t bytes = 0;
+  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, in, flags, out, count, static_cast<std::int64_t>(n), list.stream));
+  list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
+  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, in, flags, out, count, static_cast<std::int64_t>(n),
+                                               list.stream));
+}
+
+// Pass 1 of two-pass methods, on the list's stream: the cheap first step (CertifiedCcd: its
+// screen; others: quick_reject) on every pair at once, a thread per pair with a byte of output
+// each, and the survivors counted into host_counts[0] (read after a sync, by compact_screened).
 // One-pass methods test the input pairs directly.
 template <class Method, class T, class Policy>
 template <class P, bool kVertexFace>
-void NarrowPhase<Method, T, Policy>::first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                                const Pair* pairs, std::size_t n, const CcdParams<T>& params, List& list) {
+void NarrowPhase<Method, T, Policy>::screen(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs,
+                                            std::size_t n, const CcdParams<T>& params, List& list) {
   list.num_survivors = n;
   list.to_test = pairs;
   if constexpr (kTwoPass) {
-    list.num_survivors = 0;
     if (n == 0) return;
-    const std::size_t chunk = std::min(chunk_, n);
-    list.flags.resize_discard(std::max(list.flags.size(), chunk));
-    if constexpr (kCertified) {
-      list.staged.resize_discard(std::max(list.staged.size(), chunk));
-      list.hit_flags.resize_discard(std::max(list.hit_flags.size(), chunk));
-    }
-    // Compacted as 64-bit words: std::pair's assignment is host-only (a pair of 32-bit ids is
-    // 8 bytes, and device allocations and chunk offsets are 8-byte aligned).
-    static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
-    const auto* words = reinterpret_cast<const unsigned long long*>(pairs);
-    for (std::size_t begin = 0; begin < n; begin += chunk) {
-      const std::size_t m = std::min(chunk, n - begin);
-      const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-      if constexpr (kCertified) {
-        detail::certified_pass_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-            mesh, x0, x1, pairs + begin, m, params, list.staged.data(), list.hit_flags.data(), list.flags.data());
-      } else {
-        detail::quick_reject_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-            mesh, x0, x1, pairs + begin, m, params, list.flags.data());
-      }
-      LWSCCD_CUDA_CHECK_LAUNCH();
-      // Room for every pair of this chunk after those kept so far (grown keeping them).
-      if (list.survivors.size() < list.num_survivors + m) {
-        DeviceBuffer<unsigned long long> bigger(std::max(list.num_survivors + m, 2 * list.survivors.size()));
-        if (list.num_survivors)
-          LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.survivors.data(), list.num_survivors * sizeof(unsigned long long),
-                                            cudaMemcpyDeviceToDevice, list.stream));
-        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-        list.survivors = std::move(bigger);
-      }
-      std::size_t bytes = 0;
-      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, words + begin, list.flags.data(),
-                                                   list.survivors.data() + list.num_survivors, list.counters.data(),
-                                                   static_cast<std::int64_t>(m), list.stream));
-      list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
-      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, words + begin, list.flags.data(),
-                                                   list.survivors.data() + list.num_survivors, list.counters.data(),
-                                                   static_cast<std::int64_t>(m), list.stream));
-      unsigned long long kept = 0;
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&kept, list.counters.data(), sizeof kept, cudaMemcpyDeviceToHost, list.stream));
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-      list.num_survivors += static_cast<std::size_t>(kept);
-      if constexpr (kCertified) {  // the certified hits, after the list's earlier ones
-        grow_hits(list, list.count + m);
-        LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, list.staged.data(), list.hit_flags.data(),
-                                                     list.hits.data() + list.count, list.counters.data(),
-                                                     static_cast<std::int64_t>(m), list.stream));
-        list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
-        LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, list.staged.data(), list.hit_flags.data(),
-                                                     list.hits.data() + list.count, list.counters.data(),
-                                                     static_cast<std::int64_t>(m), list.stream));
-        unsigned long long certified = 0;
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&certified, list.counters.data(), sizeof certified, cudaMemcpyDeviceToHost, list.stream));
-        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-        list.count += static_cast<std::size_t>(certified);
-        list.counts.certified_hits += static_cast<std::size_t>(certified);
-      }
-    }
-    list.to_test = reinterpret_cast<const Pair*>(list.survivors.data());
+    list.flags.resize_discard(std::max(list.flags.size(), n));
+    const unsigned blocks = static_cast<unsigned>((n + Policy::kBlock - 1) / Policy::kBlock);
+    detail::screen_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, pairs, n, params,
+                                                                                               list.flags.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto ones = thrust::make_transform_iterator(list.flags.data(), detail::FlagToCount{});
+    std::size_t bytes = 0;
+    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Sum(nullptr, bytes, ones, list.counters.data(), static_cast<std::int64_t>(n), list.stream));
+    list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
+    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Sum(list.scratch.data(), bytes, ones, list.counters.data(),
+                                             static_cast<std::int64_t>(n), list.stream));
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts, list.counters.data(), sizeof(unsigned long long),
+                                      cudaMemcpyDeviceToHost, list.stream));
   }
+}
+
+// After screen and a sync of the list's stream: the survivors compacted into a list of exactly
+// their number (as 64-bit words: std::pair's assignment is host-only, and a pair of 32-bit ids
+// is 8 bytes, 8-byte aligned), which the refinement or the full test then reads.
+template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::compact_screened(List& list) {
+  static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
+  if (!kTwoPass || list.counts.pairs == 0) return;
+  const std::size_t n = list.counts.pairs, screened = static_cast<std::size_t>(list.host_counts[0]);
+  list.survivors.resize_discard(std::max(list.survivors.size(), screened));
+  select_flagged(list, reinterpret_cast<const unsigned long long*>(list.to_test), list.flags.data(), list.survivors.data(),
+                 list.counters.data(), n);
+  list.num_survivors = screened;
+  list.to_test = reinterpret_cast<const Pair*>(list.survivors.data());
+  list.counts.screened = kCertified ? screened : 0;
+  list.refined = 0;
+  list.num_undecided = 0;
+}
+
+// CertifiedCcd: refines the next chunk of the screened pairs on the list's stream: hits appended
+// to the list's hits, undecided pairs to `undecided` (the full test's input); their counts land in
+// host_counts[0] and [3] (read by collect_refined after a sync).
+template <class Method, class T, class Policy>
+template <class P, bool kVertexFace>
+std::size_t NarrowPhase<Method, T, Policy>::refine_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                         const CcdParams<T>& params, List& list) {
+  const std::size_t m = std::min(chunk_, list.num_survivors - list.refined);
+  if (m == 0) return 0;
+  const Pair* pairs = list.to_test + list.refined;
+  list.staged.resize_discard(std::max(list.staged.size(), m));
+  list.hit_flags.resize_discard(std::max(list.hit_flags.size(), m));
+  list.flags.resize_discard(std::max(list.flags.size(), m));
+  list.pending.resize_discard(std::max(list.pending.size(), m));
+  list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
+  const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+  detail::refine_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+      mesh, x0, x1, pairs, m, params, Policy::kRefineDeferLevel, list.staged.data(), list.hit_flags.data(), list.flags.data(),
+      list.pending.data());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
+                 list.counters.data() + 2, m);
+  const unsigned deferred_blocks = static_cast<unsigned>(
+      std::min<std::size_t>((m + Policy::kBlock - 1) / Policy::kBlock, static_cast<std::size_t>(deferred_grid_)));
+  detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<deferred_blocks, Policy::kBlock, 0, list.stream>>>(
+      mesh, x0, x1, pairs, list.pending_index.data(), list.counters.data() + 2, params, list.staged.data(), list.hit_flags.data(),
+      list.flags.data());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  // Room for every pair of this chunk after those kept so far (grown keeping them).
+  if (list.undecided.size() < list.num_undecided + m) {
+    DeviceBuffer<unsigned long long> bigger(std::max(list.num_undecided + m, 2 * list.undecided.size()));
+    if (list.num_undecided)
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.undecided.data(), list.num_undecided * sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToDevice, list.stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+    list.undecided = std::move(bigger);
+  }
+  grow_hits(list, list.count + m);
+  select_flagged(list, reinterpret_cast<const unsigned long long*>(pairs), list.flags.data(),
+                 list.undecided.data() + list.num_undecided, list.counters.data(), m);
+  select_flagged(list, list.staged.data(), list.hit_flags.data(), list.hits.data() + list.count, list.counters.data() + 3, m);
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts, list.counters.data(), 4 * sizeof(unsigned long long),
+                                    cudaMemcpyDeviceToHost, list.stream));
+  return m;
+}
+
+template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::collect_refined(List& list, std::size_t m) {
+  list.refined += m;
+  list.num_undecided += static_cast<std::size_t>(list.host_counts[0]);
+  list.count += static_cast<std::size_t>(list.host_counts[3]);
+  list.counts.certified_hits += static_cast<std::size_t>(list.host_counts[3]);
 }
 
 // The full test of to_test[begin, begin + m) on the list's stream, hits compacted after the
@@ -431,17 +538,12 @@ void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, cons
         <<<thread_blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, pairs, m, params, list.staged.data(),
                                                             list.flags.data(), list.pending.data(), list.counters.data() + 1);
     LWSCCD_CUDA_CHECK_LAUNCH();
-    const thrust::counting_iterator<unsigned> indices(0);
-    std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, indices, list.pending.data(), list.pending_index.data(),
-                                                 list.counters.data() + 2, static_cast<std::int64_t>(m), list.stream));
-    list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
-    LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, indices, list.pending.data(),
-                                                 list.pending_index.data(), list.counters.data() + 2,
-                                                 static_cast<std::int64_t>(m), list.stream));
-    unsigned long long open = 0;
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&open, list.counters.data() + 2, sizeof open, cudaMemcpyDeviceToHost, list.stream));
+    select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
+                   list.counters.data() + 2, m);
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts + 2, list.counters.data() + 2, sizeof(unsigned long long),
+                                      cudaMemcpyDeviceToHost, list.stream));
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+    const unsigned long long open = list.host_counts[2];
     list.warp_searches += static_cast<std::size_t>(open);
     if (open) {
       constexpr int kWarps = Policy::kSearchWarpsPerBlock;
@@ -457,14 +559,7 @@ void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, cons
   }
   LWSCCD_CUDA_CHECK_LAUNCH();
   grow_hits(list, list.count + m);  // (one-pass methods: grown keeping the hits)
-  std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, list.staged.data(), list.flags.data(),
-                                               list.hits.data() + list.count, list.counters.data(),
-                                               static_cast<std::int64_t>(m), list.stream));
-  list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
-  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, list.staged.data(), list.flags.data(),
-                                               list.hits.data() + list.count, list.counters.data(),
-                                               static_cast<std::int64_t>(m), list.stream));
+  select_flagged(list, list.staged.data(), list.flags.data(), list.hits.data() + list.count, list.counters.data(), m);
 }
 
 template <class Method, class T, class Policy>
