@@ -92,17 +92,22 @@ def schedulers_chart(rows, out):
 
 
 def accuracy_chart(rows, out):
-    sel = [r for r in rows if r["sweep"] == "methods" and r["step"] == "steady" and "false_negatives" in r]
+    # Every method in mode contacts (sweep methods), and the other modes that report pairs (set;
+    # earliest reports only a time) from the modes sweep.
+    sel = [r for r in rows if r["step"] == "steady" and "false_negatives" in r and
+           (r["sweep"] == "methods" or (r["sweep"] == "modes" and r.get("mode", "contacts") != "contacts"))]
+    for r in sel:
+        r["label"] = r["method"] if r.get("mode", "contacts") == "contacts" else f'{r["method"]}/{r["mode"]}'
     scenes = sorted({r["scene"] for r in sel})
     if not scenes:
         return
     fig, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4.2), squeeze=False)
-    markers = {"filtered-inclusion": "o", "inclusion": "s", "cubic": "^"}
+    markers = {"certified": "D", "certified/set": "P", "filtered-inclusion": "o", "inclusion": "s", "cubic": "^"}
     colors = {"double": "tab:blue", "float": "tab:orange"}
     for ax, scene in zip(axes[0], scenes):
         for r in (r for r in sel if r["scene"] == scene):
             for value, fill in ((r["false_negatives"], True), (r["false_positives"], False)):
-                ax.scatter(r["total_ms"], value, marker=markers.get(r["method"], "x"),
+                ax.scatter(r["total_ms"], value, marker=markers.get(r["label"], "x"),
                            facecolors=colors[r["precision"]] if fill else "none", edgecolors=colors[r["precision"]], s=60)
         ax.set_xscale("log")
         ax.set_yscale("symlog", linthresh=1)

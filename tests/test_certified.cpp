@@ -244,3 +244,66 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
   CHECK(violations_sound == 0);
   CHECK(violations_mutated > 0);
 }
+
+TEST_CASE("certified path: a refinement stopped at a level, then run whole, gives the whole answer", "[narrow][certified]") {
+  std::mt19937 rng(7);
+  const std::vector<Case> cases = hard_cases(rng, 6);
+  std::size_t deferred_at_3 = 0, finished_at_3 = 0;
+  auto check = [&](const auto& q) {
+    using T = std::decay_t<decltype(q.points()[0].x)>;
+    const CcdParams<T> params;
+    const CertifiedAnswer<T> whole = CertifiedCcd::refine(q, params);
+    auto compare = [&](const CertifiedAnswer<T>& part, bool deferred) {
+      if (deferred) {  // stopped: undecided, nothing claimed
+        CHECK(part.certainty == Certainty::undecided);
+        CHECK(part.lo == T(0));
+      } else {
+        CHECK(part.certainty == whole.certainty);
+        CHECK(part.lo == whole.lo);
+        CHECK(part.hi == whole.hi);
+      }
+    };
+    bool d1 = false, d3 = false, d8 = false;
+    const CertifiedAnswer<T> a1 = CertifiedCcd::refine_until<1>(q, params, &d1);
+    const CertifiedAnswer<T> a3 = CertifiedCcd::refine_until<3>(q, params, &d3);
+    const CertifiedAnswer<T> a8 = CertifiedCcd::refine_until<8>(q, params, &d8);
+    compare(a1, d1);
+    compare(a3, d3);
+    compare(a8, d8);
+    deferred_at_3 += d3;
+    finished_at_3 += !d3;
+    CHECK((!d8 || d3));  // deeper limits stop no more searches
+  };
+  std::vector<Case> with_misses = cases;
+  for (const Case& c : cases)  // the vertex moved beside the triangle: it crosses the plane only
+    if (c.vertex_face) {
+      Case beside = c;
+      beside.p[0] = beside.p[0] + Vec3<long double>{24, 0, 0};
+      beside.p[4] = beside.p[4] + Vec3<long double>{24, 0, 0};
+      with_misses.push_back(beside);
+    }
+  for (const Case& c : with_misses)
+    for (int scale : {0, 60}) {
+      const Case t = transformed(c, 0, 0, scale, false);
+      if (t.vertex_face) check(as_query<double, VertexFaceQuery<double>>(t)), check(as_query<float, VertexFaceQuery<float>>(t));
+      else check(as_query<double, EdgeEdgeQuery<double>>(t)), check(as_query<float, EdgeEdgeQuery<float>>(t));
+    }
+  CHECK(deferred_at_3 > 0);  // both outcomes were exercised
+  CHECK(finished_at_3 > 0);
+}
+
+TEST_CASE("inclusion search: time_from drops the time a caller proved free of contact", "[narrow][certified]") {
+  // A vertex through a triangle's middle at t = 0.25.
+  const VertexFaceQuery<double> through{{1, 1, -1}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}, {1, 1, 3}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}};
+  CcdParams<double> params;
+  const CcdResult<double> plain = InclusionCcd::vertex_face(through, params);
+  REQUIRE(plain.hit);
+  params.time_from = 0.2;  // still before the contact: the same contact, no earlier than 0.2 - tolerance
+  const CcdResult<double> from = InclusionCcd::vertex_face(through, params);
+  REQUIRE(from.hit);
+  CHECK(from.toi <= 0.25);
+  CHECK(from.toi >= 0.2 - params.tolerance);
+  CHECK(from.toi >= plain.toi);
+  params.time_from = 0.5;  // a (false) claim past the only contact: nothing left to find
+  CHECK_FALSE(InclusionCcd::vertex_face(through, params).hit);
+}

@@ -57,6 +57,9 @@ struct CcdParams {
   /// Contacts at or after this time may be ignored (reported as "no collision"); earlier ones
   /// never are. Batches in mode `earliest` lower it to the best time already found.
   T time_limit = T(1);
+  /// No contact happens before this time (a caller's proof, e.g. CertifiedCcd's exclusions):
+  /// the inclusion search drops boxes that end before it. The reported TOI stays a lower bound.
+  T time_from = T(0);
 };
 
 /// The answer to one query. `toi` is in [0, 1] when `hit`; conservative methods guarantee that

@@ -362,7 +362,9 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
 /// undecided and sets *deferred; a second call without the limit then gives the whole answer (the
 /// same as one call without it). A GPU batch uses this to keep the long searches (contacts,
 /// resolved at the tolerance) out of the warps that decide misses in a few levels.
-template <class Policy, class Q, class T>
+/// `kStack`: pending intervals held at most (one per level; defer_level + 2 suffice): a GPU
+/// thread keeps them in local memory, so a short search holds a short stack.
+template <class Policy, int kStack = 34, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
                                               bool* deferred = nullptr) {
   using W = typename certified_compute<T>::type;
@@ -398,8 +400,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     std::uint32_t index;
     int level;
   };
-  constexpr int kStack = 34;  // one pending right half per level, levels <= 30
-  Entry stack[kStack];
+  static_assert(kStack >= 3 && kStack <= 34, "lwsccd: certified_refine holds 3 to 34 pending intervals");
+  Entry stack[kStack];  // one pending right half per level, levels <= 30
   int top = 0, splits = 0, leaves = 0;
   T lower = T(0), open_from = T(0);  // earliest time not excluded for a perturbed query / as given
   bool has_lower = false, has_open = false, open_inside = true;
@@ -513,18 +515,20 @@ struct CertifiedCcdT {
   LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
     return detail::certified_refine<Policy>(q, params);
   }
-  /// refine, stopped (*deferred set) where it would halve an interval at `defer_level` or deeper.
-  template <class Q, class T>
-  LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params, int defer_level, bool* deferred) {
-    return detail::certified_refine<Policy>(q, params, defer_level, deferred);
+  /// refine, stopped (*deferred set) where it would halve an interval at `kDeferLevel` or deeper
+  /// (with a stack only that deep).
+  template <int kDeferLevel, class Q, class T>
+  LWSCCD_HD static CertifiedAnswer<T> refine_until(const Q& q, const CcdParams<T>& params, bool* deferred) {
+    static_assert(kDeferLevel >= 1 && kDeferLevel <= 30, "lwsccd: the defer level must be in [1, 30]");
+    return detail::certified_refine<Policy, kDeferLevel + 2>(q, params, kDeferLevel, deferred);
   }
   template <class T>
   LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
-    return solve(q, params, [&] { return Fallback::vertex_face(q, params); });
+    return solve(q, params, [&](const CcdParams<T>& p) { return Fallback::vertex_face(q, p); });
   }
   template <class T>
   LWSCCD_HD static CcdResult<T> edge_edge(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
-    return solve(q, params, [&] { return Fallback::edge_edge(q, params); });
+    return solve(q, params, [&](const CcdParams<T>& p) { return Fallback::edge_edge(q, p); });
   }
 
  private:
@@ -533,7 +537,10 @@ struct CertifiedCcdT {
     const CertifiedAnswer<T> a = classify(q, params);
     if (a.certainty == Certainty::miss) return {};
     if (a.certainty == Certainty::hit) return {true, a.lo, false};
-    return fallback();
+    // The fallback need not search before the time the certified pass excluded contact.
+    CcdParams<T> rest = params;
+    rest.time_from = a.lo > rest.time_from ? a.lo : rest.time_from;
+    return fallback(rest);
   }
 };
 using CertifiedCcd = CertifiedCcdT<>;

@@ -141,6 +141,7 @@ struct InclusionSetup {
   T delta = T(0);     ///< distance that counts as contact (motion in `tolerance` of time)
   T eta = T(0);       ///< widening of a box's time range for the time filter
   T time_limit = T(1);  ///< boxes starting at or after this time are dropped (CcdParams::time_limit)
+  T time_from = T(0);   ///< boxes ending at or before this time are dropped (CcdParams::time_from)
   T bern[4] = {0, 0, 0, 0}, bern_bound = T(0);
   int max_level = 1;  ///< finest level per dimension
   bool vf = false, time_filter = false;
@@ -153,6 +154,7 @@ LWSCCD_HD InclusionSetup<T> inclusion_setup(const Q& q, const CcdParams<T>& para
   const T unit = unit_roundoff<T>();
   s.d = params.min_separation;
   s.time_limit = params.time_limit;
+  s.time_from = params.time_from;
   // Rounding bound per axis, and the length scale for the tolerance test.
   const Vec3<T>* pts = q.points();
   Vec3<T> m{0, 0, 0};
@@ -207,6 +209,7 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
   // Later than the caller wants: every box after it in the search's order starts as late, so the
   // answer (the first accepted box with only excluded boxes before it) is unchanged before then.
   if (t[0] >= s.time_limit) return BoxVerdict::excluded;
+  if (t[1] <= s.time_from) return BoxVerdict::excluded;  // before a time the caller proved free
   if (s.time_filter && (box.level[0] > 0 || floor_key > 0)) {
     T sub[4];
     const T t_lo = t[0] > s.eta ? fsub(t[0], s.eta) : T(0);
@@ -232,6 +235,11 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
   }
   const bool finest = box.level[0] >= s.max_level && box.level[1] >= s.max_level && box.level[2] >= s.max_level;
   if (within_tolerance || finest) return BoxVerdict::accepted;
+  // A box across time_limit is split in time first: its later half is then dropped at once,
+  // instead of after splits of u and v over time the caller does not want (mode earliest: most
+  // fallback searches end in a few rounds). Not across time_from: there the box would be split
+  // as often, and on cloth-funnel's boundary contacts the GPU's longest searches got slower.
+  if (t[0] < s.time_limit && t[1] > s.time_limit && box.level[0] < s.max_level) return BoxVerdict::split_t;
   // Split the dimension along which F varies most (time first on ties).
   int split = -1;
   T best = T(-1);

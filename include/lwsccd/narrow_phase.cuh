@@ -112,7 +112,7 @@ class NarrowPhase {
     DeviceBuffer<FeatureHit<T>> hits, staged;
     DeviceBuffer<unsigned char> flags, scratch;
     DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
-    DeviceBuffer<unsigned long long> undecided;  ///< CertifiedCcd: pairs its refinement left to the fallback
+    DeviceBuffer<FeatureHit<T>> undecided;  ///< CertifiedCcd: pairs left to the fallback, with the time excluded before
     DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up, [2]: left to warp searches, [3]: certified hits
     DeviceBuffer<unsigned char> hit_flags;       ///< CertifiedCcd's first pass: certified hits
     NarrowPhaseCounts counts;

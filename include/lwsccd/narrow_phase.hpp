@@ -71,16 +71,18 @@ namespace detail {
 /// One list on all cores: certified methods classify every pair first and run the fallback on
 /// the undecided ones with `time_limit` (mode earliest: the best certified time of both lists,
 /// so that the answer does not depend on the order of work); other methods run as they are.
-/// Item i of the list is the pair `pair_of(i)` and the query `gather(i)`; `undecided` (first pass
-/// of a certified method) receives the items left to the fallback.
-template <class Method, class T, class Gather, class PairOf>
-void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, const CcdParams<T>& params,
-               std::vector<std::size_t>* undecided, std::vector<FeatureHit<T>>& hits, NarrowPhaseCounts& counts,
-               std::size_t& gave_up) {
+/// Item i of the list is the pair `pair_of(i)` and the query `gather(i)`, with no contact before
+/// `from_of(i)`; `undecided` (first pass of a certified method) receives the items left to the
+/// fallback, each with the time before which the certified pass excluded contact.
+template <class Method, class T, class Gather, class PairOf, class FromOf>
+void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_of, const CcdParams<T>& params,
+               std::enable_if_t<true, std::vector<std::pair<std::size_t, T>>>* undecided,  // (not deduced: may be nullptr)
+               std::vector<FeatureHit<T>>& hits,
+               NarrowPhaseCounts& counts, std::size_t& gave_up) {
   const unsigned workers = std::max(1u, std::thread::hardware_concurrency());
   struct Part {
     std::vector<FeatureHit<T>> hits;
-    std::vector<std::size_t> open;
+    std::vector<std::pair<std::size_t, T>> open;
     NarrowPhaseCounts counts;
     std::size_t gave_up = 0;
   };
@@ -99,17 +101,19 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, const CcdParams
           const CertifiedAnswer<T> a = Method::refine(q, params);
           if (a.certainty == Certainty::hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, a.lo}), ++out.counts.certified_hits;
           else if (a.certainty == Certainty::miss) ++out.counts.certified_misses;
-          else out.open.push_back(i);
+          else out.open.push_back({i, a.lo});
           continue;
         }
       }
       CcdResult<T> r;
+      CcdParams<T> item_params = params;
+      item_params.time_from = std::max(params.time_from, static_cast<T>(from_of(i)));
       if constexpr (std::is_same_v<std::decay_t<decltype(q)>, VertexFaceQuery<T>>) {
-        if constexpr (lwsccd::detail::certified_of<Method>::value) r = lwsccd::detail::certified_of<Method>::fallback::vertex_face(q, params);
-        else r = Method::vertex_face(q, params);
+        if constexpr (lwsccd::detail::certified_of<Method>::value) r = lwsccd::detail::certified_of<Method>::fallback::vertex_face(q, item_params);
+        else r = Method::vertex_face(q, item_params);
       } else {
-        if constexpr (lwsccd::detail::certified_of<Method>::value) r = lwsccd::detail::certified_of<Method>::fallback::edge_edge(q, params);
-        else r = Method::edge_edge(q, params);
+        if constexpr (lwsccd::detail::certified_of<Method>::value) r = lwsccd::detail::certified_of<Method>::fallback::edge_edge(q, item_params);
+        else r = Method::edge_edge(q, item_params);
       }
       ++out.counts.fallbacks;
       if (r.hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, r.toi}), out.gave_up += r.gave_up;
@@ -150,23 +154,30 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
   result.ee_counts.pairs = pairs.ee.size();
   auto vf_pair = [&](std::size_t i) { return pairs.vf[i]; };
   auto ee_pair = [&](std::size_t i) { return pairs.ee[i]; };
+  auto from_zero = [](std::size_t) { return T(0); };
   if constexpr (lwsccd::detail::certified_of<Method>::value) {
-    std::vector<std::size_t> open_vf, open_ee;
-    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, params, &open_vf, result.vf, result.vf_counts, result.gave_up);
-    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, params, &open_ee, result.ee, result.ee_counts, result.gave_up);
+    std::vector<std::pair<std::size_t, T>> open_vf, open_ee;
+    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, params, &open_vf, result.vf,
+                                      result.vf_counts, result.gave_up);
+    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, from_zero, params, &open_ee, result.ee,
+                                      result.ee_counts, result.gave_up);
     CcdParams<T> fallback_params = params;
     if (params.mode == CcdMode::earliest)
       for (const auto* list : {&result.vf, &result.ee})
         for (const auto& h : *list) fallback_params.time_limit = std::min(fallback_params.time_limit, h.toi);
     lwsccd::detail::test_list<Method>(
-        open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k]); }, [&](std::size_t k) { return pairs.vf[open_vf[k]]; },
+        open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k].first); },
+        [&](std::size_t k) { return pairs.vf[open_vf[k].first]; }, [&](std::size_t k) { return open_vf[k].second; },
         fallback_params, nullptr, result.vf, result.vf_counts, result.gave_up);
     lwsccd::detail::test_list<Method>(
-        open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k]); }, [&](std::size_t k) { return pairs.ee[open_ee[k]]; },
+        open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k].first); },
+        [&](std::size_t k) { return pairs.ee[open_ee[k].first]; }, [&](std::size_t k) { return open_ee[k].second; },
         fallback_params, nullptr, result.ee, result.ee_counts, result.gave_up);
   } else {
-    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, params, nullptr, result.vf, result.vf_counts, result.gave_up);
-    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, params, nullptr, result.ee, result.ee_counts, result.gave_up);
+    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, params, nullptr, result.vf,
+                                      result.vf_counts, result.gave_up);
+    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, from_zero, params, nullptr, result.ee,
+                                      result.ee_counts, result.gave_up);
   }
   std::sort(result.vf.begin(), result.vf.end());
   std::sort(result.ee.begin(), result.ee.end());

@@ -11,18 +11,37 @@ namespace lwsccd::gpu {
 
 namespace detail {
 
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                 const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
-                                 FeatureHit<T>* staged, unsigned char* flags, unsigned long long* gave_up) {
+// The items of a full test: id pairs, or (CertifiedCcd's undecided queries) FeatureHit records
+// whose toi is the time before which the certified pass excluded any contact.
+LWSCCD_HD inline std::pair<index_t, index_t> item_pair(const std::pair<index_t, index_t>& p) { return p; }
+template <class T>
+LWSCCD_HD std::pair<index_t, index_t> item_pair(const FeatureHit<T>& h) {
+  return {h.first, h.second};
+}
+template <class T>
+LWSCCD_HD CcdParams<T> item_params(const std::pair<index_t, index_t>&, const CcdParams<T>& params) {
+  return params;
+}
+template <class T>
+LWSCCD_HD CcdParams<T> item_params(const FeatureHit<T>& h, const CcdParams<T>& params) {
+  CcdParams<T> p = params;
+  p.time_from = h.toi > p.time_from ? h.toi : p.time_from;
+  return p;
+}
+
+template <class Method, bool kVertexFace, class T, class P, class Item>
+__global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, std::size_t n,
+                                 CcdParams<T> params, FeatureHit<T>* staged, unsigned char* flags,
+                                 unsigned long long* gave_up) {
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  const std::pair<index_t, index_t> p = pairs[i];
+  const std::pair<index_t, index_t> p = item_pair(items[i]);
+  const CcdParams<T> qp = item_params(items[i], params);
   CcdResult<T> r;
   if constexpr (kVertexFace) {
-    r = Method::vertex_face(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
+    r = Method::vertex_face(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), qp);
   } else {
-    r = Method::edge_edge(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
+    r = Method::edge_edge(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), qp);
   }
   staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
   flags[i] = r.hit ? 1 : 0;
@@ -55,12 +74,12 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
 }
 
 // CertifiedCcd's refinement of the screened pairs, first part: searches that would halve
-// intervals at kDeferLevel or deeper stop and are flagged in `deferred` (they are the contacts,
+// intervals at kDeferLevel or deeper stop (with a stack only that deep) and are flagged in `deferred` (they are the contacts,
 // resolved at the time tolerance, and would hold up whole warps of quick misses); the others
 // store their answer: certified hits staged (flag in `hit`), the undecided flagged in `keep`.
-template <class Method, bool kVertexFace, class T, class P>
+template <class Method, bool kVertexFace, int kDeferLevel, class T, class P>
 __global__ void refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                              const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params, int defer_level,
+                              const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
                               FeatureHit<T>* staged, unsigned char* hit, unsigned char* keep, unsigned char* deferred) {
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
@@ -68,9 +87,9 @@ __global__ void refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
   CertifiedAnswer<T> a;
   bool later = false;
   if constexpr (kVertexFace) {
-    a = Method::refine(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params, defer_level, &later);
+    a = Method::template refine_until<kDeferLevel>(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params, &later);
   } else {
-    a = Method::refine(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params, defer_level, &later);
+    a = Method::template refine_until<kDeferLevel>(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params, &later);
   }
   staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
   hit[i] = a.certainty == Certainty::hit ? 1 : 0;
@@ -109,20 +128,21 @@ struct FlagToCount {
 // Second pass, first attempt: the same search in one thread per query, for a few rounds and
 // little memory. Most queries end there; the others are flagged `pending` for the warp search
 // (which starts over and gives the answer the whole search gives).
-template <class Method, bool kVertexFace, class T, class P, int kRounds, int kStore>
-__global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                        const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
+template <class Method, bool kVertexFace, class T, class P, int kRounds, int kStore, class Item>
+__global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items,
+                                        std::size_t n, CcdParams<T> params,
                                         FeatureHit<T>* staged, unsigned char* flags, unsigned char* pending,
                                         unsigned long long* gave_up) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  const std::pair<index_t, index_t> p = pairs[i];
+  const std::pair<index_t, index_t> p = item_pair(items[i]);
+  const CcdParams<T> qp = item_params(items[i], params);
   CcdResult<T> r;
   bool done = true;
   auto attempt = [&](const auto& q) {
-    if (Traits::filtered && !non_penetration_filter(q, params)) return;
-    done = lwsccd::detail::inclusion_try<typename Traits::policy, kStore>(q, params, kRounds, r);
+    if (Traits::filtered && !non_penetration_filter(q, qp)) return;
+    done = lwsccd::detail::inclusion_try<typename Traits::policy, kStore>(q, qp, kRounds, r);
   };
   if constexpr (kVertexFace) attempt(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second));
   else attempt(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second));
@@ -148,10 +168,10 @@ LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, con
 // round and makes its new boxes; the new boxes are ranked among themselves and merged into the
 // sorted live boxes by rank, every lane placing its own. Same sets and answers as the one-thread
 // search (the order is total), with a long search's latency cut to that of its rounds.
-template <class Method, bool kVertexFace, class T, class P, int kWarps>
+template <class Method, bool kVertexFace, class T, class P, int kWarps, class Item>
 __global__ void __launch_bounds__(32 * kWarps)
-    inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* pairs,
-                          const unsigned* which, std::size_t n, CcdParams<T> params, FeatureHit<T>* staged,
+    inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, const unsigned* which,
+                          std::size_t n, CcdParams<T> params, FeatureHit<T>* staged,
                           unsigned char* flags, unsigned long long* gave_up) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
@@ -171,16 +191,17 @@ __global__ void __launch_bounds__(32 * kWarps)
   for (std::size_t w = static_cast<std::size_t>(blockIdx.x) * kWarps + warp; w < n;
        w += static_cast<std::size_t>(gridDim.x) * kWarps) {
     const std::size_t i = which[w];
-    const std::pair<index_t, index_t> p = pairs[i];
+    const std::pair<index_t, index_t> p = item_pair(items[i]);
+    const CcdParams<T> qp = item_params(items[i], params);
     CcdResult<T> r;
     auto solve = [&](const auto& q) {
-      if (Traits::filtered && !non_penetration_filter(q, params)) return;
-      const auto setup = lwsccd::detail::inclusion_setup(q, params);
+      if (Traits::filtered && !non_penetration_filter(q, qp)) return;
+      const auto setup = lwsccd::detail::inclusion_setup(q, qp);
       if (setup.separated) return;
       if (lane == 0) search.start();
       __syncwarp();
       while (true) {
-        if (lane == 0) state[warp] = static_cast<int>(search.next_round(params.max_iterations, results[warp]));
+        if (lane == 0) state[warp] = static_cast<int>(search.next_round(qp.max_iterations, results[warp]));
         __syncwarp();
         const Round round = static_cast<Round>(state[warp]);
         if (round != Round::examine) {
@@ -325,7 +346,7 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
     }
     for (auto& l : lists_) {
       l.num_survivors = l.num_undecided;
-      l.to_test = reinterpret_cast<const Pair*>(l.undecided.data());
+      l.to_test = nullptr;  // the fallback reads the undecided records instead
     }
   }
   // Mode earliest: the fallback need not look past the best certified time (as the CPU does).
@@ -482,8 +503,8 @@ std::size_t NarrowPhase<Method, T, Policy>::refine_chunk(const MeshFeatures& mes
   list.pending.resize_discard(std::max(list.pending.size(), m));
   list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
   const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-  detail::refine_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-      mesh, x0, x1, pairs, m, params, Policy::kRefineDeferLevel, list.staged.data(), list.hit_flags.data(), list.flags.data(),
+  detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+      mesh, x0, x1, pairs, m, params, list.staged.data(), list.hit_flags.data(), list.flags.data(),
       list.pending.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
@@ -494,18 +515,19 @@ std::size_t NarrowPhase<Method, T, Policy>::refine_chunk(const MeshFeatures& mes
       mesh, x0, x1, pairs, list.pending_index.data(), list.counters.data() + 2, params, list.staged.data(), list.hit_flags.data(),
       list.flags.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
-  // Room for every pair of this chunk after those kept so far (grown keeping them).
+  // Room for every pair of this chunk after those kept so far (grown keeping them). An undecided
+  // query is kept with the time before which the refinement excluded contact (staged toi): the
+  // fallback need not search there.
   if (list.undecided.size() < list.num_undecided + m) {
-    DeviceBuffer<unsigned long long> bigger(std::max(list.num_undecided + m, 2 * list.undecided.size()));
+    DeviceBuffer<FeatureHit<T>> bigger(std::max(list.num_undecided + m, 2 * list.undecided.size()));
     if (list.num_undecided)
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.undecided.data(), list.num_undecided * sizeof(unsigned long long),
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.undecided.data(), list.num_undecided * sizeof(FeatureHit<T>),
                                         cudaMemcpyDeviceToDevice, list.stream));
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
     list.undecided = std::move(bigger);
   }
   grow_hits(list, list.count + m);
-  select_flagged(list, reinterpret_cast<const unsigned long long*>(pairs), list.flags.data(),
-                 list.undecided.data() + list.num_undecided, list.counters.data(), m);
+  select_flagged(list, list.staged.data(), list.flags.data(), list.undecided.data() + list.num_undecided, list.counters.data(), m);
   select_flagged(list, list.staged.data(), list.hit_flags.data(), list.hits.data() + list.count, list.counters.data() + 3, m);
   LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts, list.counters.data(), 4 * sizeof(unsigned long long),
                                     cudaMemcpyDeviceToHost, list.stream));
@@ -528,36 +550,39 @@ void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, cons
                                                   const CcdParams<T>& params, List& list, std::size_t begin, std::size_t m) {
   list.staged.resize_discard(std::max(list.staged.size(), m));
   list.flags.resize_discard(std::max(list.flags.size(), m));
-  const Pair* pairs = list.to_test + begin;
-  if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
-    // A thread per query for a few rounds, then a warp per query still open.
-    list.pending.resize_discard(std::max(list.pending.size(), m));
-    list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
-    const unsigned thread_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-    detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
-        <<<thread_blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, pairs, m, params, list.staged.data(),
-                                                            list.flags.data(), list.pending.data(), list.counters.data() + 1);
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
-                   list.counters.data() + 2, m);
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts + 2, list.counters.data() + 2, sizeof(unsigned long long),
-                                      cudaMemcpyDeviceToHost, list.stream));
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-    const unsigned long long open = list.host_counts[2];
-    list.warp_searches += static_cast<std::size_t>(open);
-    if (open) {
-      constexpr int kWarps = Policy::kSearchWarpsPerBlock;
-      const unsigned blocks = static_cast<unsigned>((open + kWarps - 1) / kWarps);
-      detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
-          mesh, x0, x1, pairs, list.pending_index.data(), static_cast<std::size_t>(open), params, list.staged.data(),
-          list.flags.data(), list.counters.data() + 1);
+  auto launch = [&](const auto* items) {
+    if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
+      // A thread per query for a few rounds, then a warp per query still open.
+      list.pending.resize_discard(std::max(list.pending.size(), m));
+      list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
+      const unsigned thread_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+      detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
+          <<<thread_blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, items, m, params, list.staged.data(),
+                                                              list.flags.data(), list.pending.data(), list.counters.data() + 1);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
+                     list.counters.data() + 2, m);
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts + 2, list.counters.data() + 2, sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToHost, list.stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
+      const unsigned long long open = list.host_counts[2];
+      list.warp_searches += static_cast<std::size_t>(open);
+      if (open) {
+        constexpr int kWarps = Policy::kSearchWarpsPerBlock;
+        const unsigned blocks = static_cast<unsigned>((open + kWarps - 1) / kWarps);
+        detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
+            mesh, x0, x1, items, list.pending_index.data(), static_cast<std::size_t>(open), params, list.staged.data(),
+            list.flags.data(), list.counters.data() + 1);
+      }
+    } else {
+      const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
+      detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+          mesh, x0, x1, items, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
     }
-  } else {
-    const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-    detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-        mesh, x0, x1, pairs, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
-  }
-  LWSCCD_CUDA_CHECK_LAUNCH();
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  };
+  if constexpr (kCertified) launch(list.undecided.data() + begin);
+  else launch(list.to_test + begin);
   grow_hits(list, list.count + m);  // (one-pass methods: grown keeping the hits)
   select_flagged(list, list.staged.data(), list.flags.data(), list.hits.data() + list.count, list.counters.data(), m);
 }
