@@ -23,6 +23,7 @@
 #include "bench_common.hpp"
 #include "lwsccd/ccd_filters.hpp"
 #include "lwsccd/ccd_query.hpp"
+#include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/cubic_ccd.hpp"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/error.hpp"
@@ -79,7 +80,7 @@ struct Options {
   std::size_t limit = 0;  // 0: all
 };
 
-const char* const kAllMethods[] = {"cubic", "inclusion", "filtered-inclusion", "filter-only"};
+const char* const kAllMethods[] = {"certified", "cubic", "inclusion", "filtered-inclusion", "filter-only"};
 
 void print_usage(std::FILE* out) {
   std::fprintf(out,
@@ -98,7 +99,8 @@ void print_usage(std::FILE* out) {
                "  DATA_DIR    a data root with queries/<set>/ and scenes/<scene>/: every set and scene\n"
                "\n"
                "options\n"
-               "  --methods LIST        comma-separated from cubic, inclusion, filtered-inclusion, filter-only\n"
+               "  --methods LIST        comma-separated from certified, cubic, inclusion, filtered-inclusion,\n"
+               "                        filter-only\n"
                "                        (default all; filter-only = the non-penetration filter alone, hit = may collide)\n"
                "  --precision LIST      float, double or both (default float,double); float queries are the\n"
                "                        double queries rounded to float\n"
@@ -166,7 +168,7 @@ Options parse(int argc, char** argv) {
       for (const auto& m : o.methods)
         if (std::find(std::begin(kAllMethods), std::end(kAllMethods), m) == std::end(kAllMethods))
           throw InputError("command line", a,
-                           "unknown method '" + m + "' (expected cubic, inclusion, filtered-inclusion, filter-only)");
+                           "unknown method '" + m + "' (expected certified, cubic, inclusion, filtered-inclusion, filter-only)");
     } else if (a == "--precision") {
       o.precisions = split_list(value(), a);
       for (const auto& p : o.precisions)
@@ -468,6 +470,7 @@ MethodEntry entry(const char* name, bool reports_toi) {
 
 const MethodEntry& method_entry(const std::string& name) {
   static const MethodEntry entries[] = {
+      entry<lwsccd::CertifiedCcd>("certified", true),
       entry<lwsccd::CubicCcd>("cubic", true),
       entry<lwsccd::InclusionCcd>("inclusion", true),
       entry<lwsccd::Filtered<lwsccd::InclusionCcd>>("filtered-inclusion", true),
