@@ -219,25 +219,23 @@ struct StepReport {
   std::size_t check_differences = 0;
 };
 
-// The CPU oracle for --check: every candidate of sort-and-sweep over swept AABBs (not the BVH),
-// adjacent pairs left to the orphans, the same narrow phase. Counts contacts that differ.
+// The CPU oracle for --check: every feature pair whose swept feature boxes overlap, found by
+// sort-and-sweep over the boxes (no BVH, no triangle pairs), the same narrow phase. Counts
+// contacts that differ.
 std::size_t oracle_differences(const lwsccd::Step& step, const lwsccd::BodyLayout& layout, const Options& o,
                                const lwsccd::NarrowPhaseResult<double>& contacts) {
   return ccd_app::dispatch_policies(o.policies, [&](auto, auto method, auto scalar) {
     using Method = typename decltype(method)::type;
     using T = typename decltype(scalar)::type;
     const lwsccd::TriangleMesh& mesh = *step.mesh;
-    std::vector<lwsccd::TrianglePair> candidates;
-    for (const auto& p : lwsccd::sweep_and_prune_pairs(mesh, lwsccd::swept_triangle_bvs<lwsccd::Aabbd>(mesh, step.x0, step.x1), layout))
-      if (!p.adjacent) candidates.push_back(p);
-    const auto orphans = lwsccd::orphans_for_layout(mesh, lwsccd::find_orphan_sets(mesh), layout);
+    const lwsccd::RepresentativeTriangles rep(mesh, layout);
     lwsccd::CcdParams<T> ccd;
     ccd.min_separation = static_cast<T>(o.params.min_separation);
     ccd.tolerance = static_cast<T>(o.params.tolerance);
     ccd.max_iterations = o.params.max_iterations;
     ccd.mode = o.params.mode;
     const auto expected = ccd_app::to_double(lwsccd::cpu::test_feature_pairs<Method, T>(
-        mesh, step.x0, step.x1, lwsccd::culled_feature_pairs(mesh, candidates, orphans), ccd));
+        mesh, step.x0, step.x1, lwsccd::sweep_feature_pairs(rep, lwsccd::feature_boxes(mesh, step.x0, step.x1)), ccd));
     auto differences = [](const auto& a, const auto& b) {
       std::size_t d = 0, i = 0, j = 0;
       while (i < a.size() || j < b.size()) {

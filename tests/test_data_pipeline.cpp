@@ -8,12 +8,30 @@
 
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/pipeline.hpp"
+#include "lwsccd/representative.hpp"
 #include "contact_compare.hpp"
 #include "test_support.hpp"
 
 using namespace lwsccd;
 
 namespace {
+
+// The feature pairs of representative triangles over sort-and-sweep candidates equal, pair for
+// pair, the sweep over the feature boxes themselves (no triangle pairs); returns that oracle.
+FeaturePairs require_emission_equals_oracle(const RepresentativeTriangles& rep, const Step& step) {
+  const TriangleMesh& mesh = rep.mesh();
+  const std::vector<Aabbf> boxes = feature_boxes(mesh, step.x0, step.x1);
+  std::vector<TrianglePair> candidates;
+  for (const auto& p : sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, step.x0, step.x1)))
+    if (!p.adjacent) candidates.push_back(p);
+  FeaturePairs emitted = emit_feature_pairs(rep, candidates, boxes);
+  std::sort(emitted.vf.begin(), emitted.vf.end());
+  std::sort(emitted.ee.begin(), emitted.ee.end());
+  const FeaturePairs oracle = sweep_feature_pairs(rep, boxes);
+  REQUIRE(emitted.vf == oracle.vf);
+  REQUIRE(emitted.ee == oracle.ee);
+  return oracle;
+}
 
 StepResult<double> run_scene(const std::string& name, Scene& scene) {
   scene = load_scene(lwsccd_test::data_dir() + "/scenes/" + name);
@@ -28,6 +46,10 @@ StepResult<double> run_scene(const std::string& name, Scene& scene) {
               r.stats.triangle_pairs, r.stats.feature_pairs_vf, r.stats.feature_pairs_ee, r.stats.hits_vf, r.stats.hits_ee,
               r.contacts.earliest_toi, r.stats.gave_up, s.false_negatives, s.false_positives);
   CHECK(s.false_negatives == 0);
+  // The pipeline tested exactly the feature oracle's pairs (each once).
+  const FeaturePairs oracle = require_emission_equals_oracle(RepresentativeTriangles(*scene.step.mesh), scene.step);
+  CHECK(r.stats.feature_pairs_vf == oracle.vf.size());
+  CHECK(r.stats.feature_pairs_ee == oracle.ee.size());
   return r;
 }
 
@@ -62,6 +84,7 @@ TEST_CASE("CPU pipeline over horse-gallop: front tracking equals fresh traversal
   PipelineParams fresh_params;
   fresh_params.front_tracking = false;
   cpu::CcdPipeline<> tracked(seq.mesh()), fresh(seq.mesh(), fresh_params);
+  const RepresentativeTriangles rep(*seq.mesh());
   std::size_t restarts = 0, tracked_nodes = 0, fresh_nodes = 0, contacts = 0;
   for (std::size_t s = 0; s < seq.num_steps(); ++s) {
     INFO("step " << s);
@@ -71,6 +94,9 @@ TEST_CASE("CPU pipeline over horse-gallop: front tracking equals fresh traversal
     REQUIRE(a.stats.triangle_pairs == b.stats.triangle_pairs);
     REQUIRE(a.stats.feature_pairs_vf == b.stats.feature_pairs_vf);
     REQUIRE(a.stats.feature_pairs_ee == b.stats.feature_pairs_ee);
+    const FeaturePairs oracle = require_emission_equals_oracle(rep, step);
+    REQUIRE(a.stats.feature_pairs_vf == oracle.vf.size());
+    REQUIRE(a.stats.feature_pairs_ee == oracle.ee.size());
     lwsccd_test::require_same_contacts(a.contacts, b.contacts);
     restarts += a.stats.restarted_from_root;
     tracked_nodes += a.stats.bvtt_nodes;

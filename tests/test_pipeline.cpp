@@ -15,7 +15,7 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
   const auto first = lwsccd_test::folded_cloth(30, 1);
   auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
   cpu::CcdPipeline<Aabbf> pipeline(mesh);
-  const OrphanSets orphans = find_orphan_sets(*mesh);
+  const RepresentativeTriangles rep(*mesh);
   for (int s = 0; s < 4; ++s) {
     INFO("step " << s);
     const auto m = lwsccd_test::folded_cloth(30, 1 + s);
@@ -23,7 +23,8 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
     std::vector<TrianglePair> non_adjacent;
     for (const auto& p : brute_force_pairs(*mesh, swept_triangle_bvs<Aabbf>(*mesh, m.x0, m.x1)))
       if (!p.adjacent) non_adjacent.push_back(p);
-    const FeaturePairs features = culled_feature_pairs(*mesh, non_adjacent, orphans);
+    // The feature pairs are the brute-force feature oracle's, each tested once.
+    const FeaturePairs features = brute_force_feature_pairs(rep, feature_boxes(*mesh, m.x0, m.x1));
     const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(*mesh, m.x0, m.x1, features);
     REQUIRE(r.stats.triangle_pairs == non_adjacent.size());
     REQUIRE(r.stats.feature_pairs_vf == features.vf.size());
@@ -39,15 +40,12 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
 
 namespace {
 
-// The oracle for a scene with bodies: brute-force candidates under the layout, adjacent pairs
-// left to the orphans (restricted to the layout), the narrow phase.
+// The oracle for a scene with bodies: the brute-force feature pairs under the layout (a feature's
+// body is its representing face's), the narrow phase.
 NarrowPhaseResult<double> oracle_contacts(const MultiBodyStep& scene) {
   const TriangleMesh& mesh = *scene.step.mesh;
-  std::vector<TrianglePair> non_adjacent;
-  for (const auto& p : brute_force_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, scene.step.x0, scene.step.x1), scene.layout))
-    if (!p.adjacent) non_adjacent.push_back(p);
-  const OrphanSets orphans = orphans_for_layout(mesh, find_orphan_sets(mesh), scene.layout);
-  const FeaturePairs features = culled_feature_pairs(mesh, non_adjacent, orphans);
+  const RepresentativeTriangles rep(mesh, scene.layout);
+  const FeaturePairs features = sweep_feature_pairs(rep, feature_boxes(mesh, scene.step.x0, scene.step.x1));
   return cpu::test_feature_pairs<CertifiedCcd, double>(mesh, scene.step.x0, scene.step.x1, features);
 }
 

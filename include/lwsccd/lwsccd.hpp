@@ -21,6 +21,7 @@
 #include "lwsccd/query_io.hpp"
 #include "lwsccd/orphans.hpp"
 #include "lwsccd/pipeline.hpp"
+#include "lwsccd/representative.hpp"
 #include "lwsccd/scenes.hpp"
 #include "lwsccd/simulation.hpp"
 #include "lwsccd/vec.hpp"

@@ -1,9 +1,10 @@
 // lwsccd — the end-to-end CCD pipeline, CPU backend, and the types both backends share.
 //
-// One object per mesh topology: set up once (BVH, orphan sets), then step(x0, x1) per time step:
-// refit (or rebuild when the tree decayed), BVTT self-collision traversal from the kept front,
-// feature pairs of the non-adjacent candidate triangle pairs plus the orphan pairs, and the
-// narrow phase. gpu::CcdPipeline (pipeline.cuh) is the same on the GPU.
+// One object per mesh topology: set up once (BVH, representative triangles and their orphans),
+// then step(x0, x1) per time step: refit (or rebuild when the tree decayed), BVTT self-collision
+// traversal from the kept front, the feature pairs that the non-adjacent candidate triangle pairs
+// represent plus the orphans, each produced once and kept when their feature boxes overlap
+// (representative.hpp), and the narrow phase. gpu::CcdPipeline (pipeline.cuh) is the same on the GPU.
 #pragma once
 
 #include <algorithm>
@@ -20,6 +21,7 @@
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase.hpp"
 #include "lwsccd/orphans.hpp"
+#include "lwsccd/representative.hpp"
 #include "lwsccd/traverse.hpp"
 
 namespace lwsccd {
@@ -100,7 +102,7 @@ class CcdPipeline {
   /// subtrees are pruned whole in the traversal, its orphan pairs dropped).
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(detail::checked_mesh(std::move(mesh), "cpu::CcdPipeline")), layout_(std::move(layout)), self_collides_(detail::self_collision_flags(layout_)),
-        params_(detail::validated(params)), orphans_(orphans_for_layout(*mesh_, find_orphan_sets(*mesh_), layout_)),
+        params_(detail::validated(params)), representatives_(*mesh_, layout_),
         tracker_(FrontPolicy{params.front_growth_limit}) {}
 
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
@@ -130,13 +132,12 @@ class CcdPipeline {
     r.stats.restarted_from_root = !params_.front_tracking || tracker_.last_was_restart();
     auto traversal = cpu::traverse(task, seeds, params_.front_tracking, WorkStealingScheduler{});
     if (params_.front_tracking) tracker_.update(std::move(traversal.front));
-    std::sort(traversal.results.begin(), traversal.results.end());
     r.stats.traverse_ms = ms(t);
     r.stats.bvtt_nodes = traversal.stats.items_processed;
     r.stats.front_size = tracker_.size();
     r.stats.triangle_pairs = traversal.results.size();
     t = clock::now();
-    const FeaturePairs features = culled_feature_pairs(*mesh_, traversal.results, orphans_);
+    const FeaturePairs features = emit_feature_pairs(representatives_, traversal.results, feature_boxes(*mesh_, x0, x1));
     r.stats.features_ms = ms(t);
     r.stats.feature_pairs_vf = features.vf.size();
     r.stats.feature_pairs_ee = features.ee.size();
@@ -169,7 +170,7 @@ class CcdPipeline {
   std::vector<index_t> node_body_;
   std::uint64_t node_body_generation_ = ~std::uint64_t(0);
   PipelineParams params_;
-  OrphanSets orphans_;
+  RepresentativeTriangles representatives_;
   Bvh<BV> bvh_;
   bool built_ = false;
   FrontTracker tracker_;

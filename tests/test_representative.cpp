@@ -1,0 +1,195 @@
+// Representative triangles and feature-box culling against the brute-force feature-pair oracle.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <string>
+#include <vector>
+
+#include "lwsccd/narrow_phase.hpp"
+#include "lwsccd/representative.hpp"
+#include "lwsccd/scenes.hpp"
+#include "scene_fixtures.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+std::vector<TrianglePair> non_adjacent(const std::vector<TrianglePair>& pairs) {
+  std::vector<TrianglePair> out;
+  std::copy_if(pairs.begin(), pairs.end(), std::back_inserter(out), [](const TrianglePair& p) { return !p.adjacent; });
+  return out;
+}
+
+FeaturePairs sorted(FeaturePairs p) {
+  std::sort(p.vf.begin(), p.vf.end());
+  std::sort(p.ee.begin(), p.ee.end());
+  return p;
+}
+
+bool has_repeats(const std::vector<std::pair<index_t, index_t>>& sorted_pairs) {
+  return std::adjacent_find(sorted_pairs.begin(), sorted_pairs.end()) != sorted_pairs.end();
+}
+
+// The emission over the brute-force AABB candidates equals the brute-force feature oracle, with
+// no pair produced twice; the sweep oracle equals the brute-force one.
+void require_emission_equals_oracle(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
+                                    const BodyLayout& layout = {}) {
+  const RepresentativeTriangles rep(mesh, layout);
+  const std::vector<Aabbf> boxes = feature_boxes(mesh, x0, x1);
+  const auto candidates = non_adjacent(brute_force_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, x0, x1), layout));
+  const FeaturePairs emitted = sorted(emit_feature_pairs(rep, candidates, boxes));
+  const FeaturePairs oracle = brute_force_feature_pairs(rep, boxes);
+  INFO(mesh.num_faces() << " faces, " << candidates.size() << " candidates, oracle " << oracle.vf.size() << " VF + "
+                        << oracle.ee.size() << " EE");
+  REQUIRE_FALSE(has_repeats(emitted.vf));
+  REQUIRE_FALSE(has_repeats(emitted.ee));
+  REQUIRE(emitted.vf == oracle.vf);
+  REQUIRE(emitted.ee == oracle.ee);
+  const FeaturePairs swept = sweep_feature_pairs(rep, boxes);
+  REQUIRE(swept.vf == oracle.vf);
+  REQUIRE(swept.ee == oracle.ee);
+}
+
+}  // namespace
+
+TEST_CASE("representatives: each used vertex and each edge has exactly one incident representing face", "[representative]") {
+  const auto cloth = lwsccd_test::folded_cloth(12, 3);
+  const MultiBodyStep ball = make_cloth_ball_scene(1500);
+  for (const TriangleMesh* mesh : {&cloth.mesh, ball.step.mesh.get()}) {
+    const RepresentativeTriangles rep(*mesh);
+    std::vector<int> vertex_count(static_cast<std::size_t>(mesh->num_vertices()), 0), edge_count(static_cast<std::size_t>(mesh->num_edges()), 0);
+    int most_vertices = 0, most_edges = 0;
+    for (index_t f = 0; f < mesh->num_faces(); ++f) {
+      const unsigned bits = rep.represents()[f];
+      REQUIRE(bits < 64u);
+      int vertices = 0, edges = 0;
+      for (int k = 0; k < 3; ++k) {
+        if ((bits >> k) & 1u) {
+          const index_t v = mesh->face(f).v[k];
+          ++vertex_count[v], ++vertices;
+          REQUIRE(rep.vertex_owner(v) == f);
+        }
+        if ((bits >> (3 + k)) & 1u) {
+          const index_t e = mesh->face_edges(f)[k];
+          ++edge_count[e], ++edges;
+          REQUIRE(rep.edge_owner(e) == f);
+        }
+      }
+      most_vertices = std::max(most_vertices, vertices);
+      most_edges = std::max(most_edges, edges);
+    }
+    for (index_t v = 0; v < mesh->num_vertices(); ++v) REQUIRE(vertex_count[v] == (mesh->vertex_faces(v).size() > 0 ? 1 : 0));
+    for (index_t e = 0; e < mesh->num_edges(); ++e) REQUIRE(edge_count[e] == 1);
+    // Balanced: about half a vertex and 1.5 edges per face, so no face carries all six.
+    CHECK(most_vertices <= 2);
+    CHECK(most_edges <= 2);
+    CHECK(rep.owner_of_feature(mesh->face_feature_id(7)) == 7);
+  }
+}
+
+TEST_CASE("representatives: the orphans are exactly the non-incident pairs whose representing faces share a vertex",
+          "[representative]") {
+  const auto cloth = lwsccd_test::folded_cloth(6, 1);
+  const MultiBodyStep ball = make_cloth_ball_scene(300);
+  for (const TriangleMesh* mesh : {&cloth.mesh, ball.step.mesh.get()}) {
+    const RepresentativeTriangles rep(*mesh);
+    OrphanSets expected;
+    for (index_t v = 0; v < mesh->num_vertices(); ++v)
+      for (index_t f = 0; f < mesh->num_faces(); ++f) {
+        const Face& t = mesh->face(f);
+        const index_t owner = rep.vertex_owner(v);
+        if (owner < 0 || t.v[0] == v || t.v[1] == v || t.v[2] == v) continue;
+        if (mesh->faces_share_vertex(owner, f)) expected.vf.emplace_back(v, mesh->face_feature_id(f));
+      }
+    for (index_t e = 0; e < mesh->num_edges(); ++e)
+      for (index_t g = e + 1; g < mesh->num_edges(); ++g) {
+        const Edge &a = mesh->edge(e), &b = mesh->edge(g);
+        if (a.v[0] == b.v[0] || a.v[0] == b.v[1] || a.v[1] == b.v[0] || a.v[1] == b.v[1]) continue;
+        REQUIRE(rep.edge_owner(e) != rep.edge_owner(g));  // two edges of one face always touch
+        if (mesh->faces_share_vertex(rep.edge_owner(e), rep.edge_owner(g)))
+          expected.ee.emplace_back(mesh->edge_feature_id(e), mesh->edge_feature_id(g));
+      }
+    INFO(expected.vf.size() << " VF, " << expected.ee.size() << " EE orphans");
+    REQUIRE(rep.orphans().vf == expected.vf);
+    REQUIRE(rep.orphans().ee == expected.ee);
+    CHECK(!expected.vf.empty());
+  }
+}
+
+TEST_CASE("representatives: emission equals the brute-force feature oracle, each pair once", "[representative]") {
+  SECTION("folded cloth, several motions") {
+    for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+      const auto m = lwsccd_test::folded_cloth(14, seed);
+      require_emission_equals_oracle(m.mesh, m.x0, m.x1);
+    }
+  }
+  SECTION("random soup (no adjacency: no orphans)") {
+    const auto m = lwsccd_test::random_soup(300, 5, 0.08);
+    REQUIRE(RepresentativeTriangles(m.mesh).orphans().vf.empty());
+    require_emission_equals_oracle(m.mesh, m.x0, m.x1);
+  }
+  SECTION("coincident triangles (every box overlaps every other)") {
+    const auto m = lwsccd_test::coincident_triangles(12);
+    require_emission_equals_oracle(m.mesh, m.x0, m.x1);
+  }
+  SECTION("cloth over a ball, one body and with a rigid ball") {
+    const MultiBodyStep scene = make_cloth_ball_scene(1200);
+    require_emission_equals_oracle(*scene.step.mesh, scene.step.x0, scene.step.x1);
+    require_emission_equals_oracle(*scene.step.mesh, scene.step.x0, scene.step.x1, scene.layout);
+  }
+  SECTION("a non-manifold book: three faces on one edge, and a fan") {
+    const std::vector<Vec3d> x0 = {{0, 0, 0}, {1, 0, 0}, {0.5, 1, 0}, {0.5, -1, 0}, {0.5, 0.2, 1}, {2, 0.5, 0}, {1.5, 1.2, 0}};
+    std::vector<Vec3d> x1 = x0;
+    for (auto& p : x1) p = p + Vec3d{0.01, -0.02, 0.05};
+    const TriangleMesh book(7, {{{0, 1, 2}}, {{1, 0, 3}}, {{0, 1, 4}}, {{1, 5, 2}}, {{2, 5, 6}}}, "book");
+    require_emission_equals_oracle(book, x0, x1);
+  }
+}
+
+TEST_CASE("representatives: adjacent candidates add nothing; the orphans matter", "[representative]") {
+  const auto m = lwsccd_test::folded_cloth(12, 2);
+  const RepresentativeTriangles rep(m.mesh);
+  const auto boxes = feature_boxes(m.mesh, m.x0, m.x1);
+  const auto all = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbf>(m.mesh, m.x0, m.x1));
+  const FeaturePairs from_all = emit_feature_pairs(rep, all, boxes);
+  const FeaturePairs from_separated = emit_feature_pairs(rep, non_adjacent(all), boxes);
+  REQUIRE(from_all.vf == from_separated.vf);  // same order too: adjacent pairs emit nothing
+  REQUIRE(from_all.ee == from_separated.ee);
+  // Without candidates, only the kept orphans come out: pairs the oracle needs.
+  const FeaturePairs orphans_only = sorted(emit_feature_pairs(rep, {}, boxes));
+  const FeaturePairs oracle = brute_force_feature_pairs(rep, boxes);
+  CHECK(orphans_only.vf.size() > 0);
+  CHECK(orphans_only.ee.size() > 0);
+  CHECK(std::includes(oracle.vf.begin(), oracle.vf.end(), orphans_only.vf.begin(), orphans_only.vf.end()));
+  CHECK(std::includes(oracle.ee.begin(), oracle.ee.end(), orphans_only.ee.begin(), orphans_only.ee.end()));
+  CHECK(orphans_only.vf.size() < rep.orphans().vf.size());  // some orphans are culled by their boxes
+}
+
+TEST_CASE("representatives: OBB candidates lose no contact of the AABB feature oracle", "[representative][obb]") {
+  const auto m = lwsccd_test::folded_cloth(14, 4);
+  const RepresentativeTriangles rep(m.mesh);
+  const auto boxes = feature_boxes(m.mesh, m.x0, m.x1);
+  const auto candidates = non_adjacent(brute_force_pairs(m.mesh, swept_triangle_bvs<Obbf>(m.mesh, m.x0, m.x1)));
+  const FeaturePairs emitted = sorted(emit_feature_pairs(rep, candidates, boxes));
+  const FeaturePairs oracle = brute_force_feature_pairs(rep, boxes);
+  // Tighter triangle BVs give a subset of the feature pairs...
+  REQUIRE(std::includes(oracle.vf.begin(), oracle.vf.end(), emitted.vf.begin(), emitted.vf.end()));
+  REQUIRE(std::includes(oracle.ee.begin(), oracle.ee.end(), emitted.ee.begin(), emitted.ee.end()));
+  // ...that keeps every contact.
+  const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, oracle);
+  const auto got = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, emitted);
+  REQUIRE(expected.vf.size() + expected.ee.size() > 0);
+  REQUIRE(got.vf.size() == expected.vf.size());
+  REQUIRE(got.ee.size() == expected.ee.size());
+  for (std::size_t i = 0; i < got.vf.size(); ++i) REQUIRE(got.vf[i].toi == expected.vf[i].toi);
+}
+
+TEST_CASE("representatives: bad input is refused with a message", "[representative]") {
+  const auto m = lwsccd_test::folded_cloth(4, 1);
+  const RepresentativeTriangles rep(m.mesh);
+  std::vector<Aabbf> short_boxes(3);
+  CHECK_THROWS_AS(emit_feature_pairs(rep, {}, short_boxes), InputError);
+  BodyLayout wrong;
+  wrong.face_body = {0, 1};
+  CHECK_THROWS_AS(RepresentativeTriangles(m.mesh, wrong), InputError);
+}
