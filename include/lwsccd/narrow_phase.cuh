@@ -2,6 +2,7 @@
 // with CUB into an output that grows as needed (nothing is dropped), earliest TOI by reduction.
 #pragma once
 
+#include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_reduce.cuh>
 #include <cub/device/device_select.cuh>
 
@@ -94,7 +95,7 @@ class NarrowPhase {
   std::size_t gave_up() const { return gave_up_; }
   /// How the last run answered each list's pairs (vertex-face, edge-edge).
   NarrowPhaseCounts counts(int list) const { return lists_[list].counts; }
-  /// Copies the hits to the host, sorted like the CPU backend's.
+  /// Copies the hits to the host (run() left them sorted on the device, like the CPU backend's).
   NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
   std::size_t device_bytes() const {
     std::size_t bytes = toi_.capacity_bytes() + reduce_scratch_.capacity_bytes();
@@ -102,14 +103,15 @@ class NarrowPhase {
       bytes += l.hits.capacity_bytes() + l.staged.capacity_bytes() + l.flags.capacity_bytes() + l.scratch.capacity_bytes() +
                l.hit_flags.capacity_bytes() +
                l.survivors.capacity_bytes() + l.undecided.capacity_bytes() + l.counters.capacity_bytes() + l.pending.capacity_bytes() +
-               l.pending_index.capacity_bytes();
+               l.pending_index.capacity_bytes() + l.sorted.capacity_bytes() + l.keys.capacity_bytes() + l.sorted_keys.capacity_bytes();
     return bytes;
   }
 
  private:
   // One list's buffers (vertex-face or edge-edge) and its stream.
   struct List {
-    DeviceBuffer<FeatureHit<T>> hits, staged;
+    DeviceBuffer<FeatureHit<T>> hits, staged, sorted;  ///< sorted: run()'s final ordering by (first, second)
+    DeviceBuffer<unsigned long long> keys, sorted_keys;
     DeviceBuffer<unsigned char> flags, scratch;
     DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
     DeviceBuffer<FeatureHit<T>> undecided;  ///< CertifiedCcd: pairs left to the fallback, with the time excluded before
@@ -141,6 +143,7 @@ class NarrowPhase {
   void launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params, List& list,
                     std::size_t begin, std::size_t m);
   void grow_hits(List& list, std::size_t room);
+  void sort_hits(List& list, cudaStream_t stream);
   T list_minimum(const List& list, cudaStream_t stream);
 
   std::size_t chunk_, initial_capacity_;

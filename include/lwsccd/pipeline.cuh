@@ -4,58 +4,19 @@
 // feature pairs generated, sorted and de-duplicated with CUB, the narrow phase.
 #pragma once
 
-#include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
-#include <cub/device/device_select.cuh>
 
 #include <memory>
 
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/narrow_phase.cuh"
 #include "lwsccd/pipeline.hpp"
+#include "lwsccd/representative.cuh"
 #include "lwsccd/traverse.cuh"
 
 namespace lwsccd::gpu {
 
 namespace detail {
-
-struct FaceEdges {
-  index_t e[3];
-};
-
-// Feature-pair keys (first << 32 | second) of non-adjacent triangle pairs: 6 VF, 9 EE each.
-// (Templates, so that the header defines them in every translation unit.)
-template <class Index>
-__global__ void feature_keys_kernel(const TrianglePair* pairs, std::size_t n, const Face* faces,
-                                    const FaceEdges* face_edges, const Edge* edges, Index num_vertices, Index num_edges,
-                                    unsigned long long* vf_keys, unsigned long long* ee_keys) {
-  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const TrianglePair p = pairs[i];
-  const Index tri[2] = {p.a, p.b};
-  auto key = [](Index first, Index second) {
-    return (static_cast<unsigned long long>(first) << 32) | static_cast<unsigned long long>(static_cast<unsigned>(second));
-  };
-  for (int side = 0; side < 2; ++side) {
-    const Face verts = faces[tri[side]];
-    const Index face_feature = num_vertices + num_edges + tri[1 - side];
-    for (int k = 0; k < 3; ++k) vf_keys[6 * i + 3 * side + k] = key(verts.v[k], face_feature);
-  }
-  const FaceEdges ea = face_edges[p.a], eb = face_edges[p.b];
-  for (int x = 0; x < 3; ++x)
-    for (int y = 0; y < 3; ++y) {
-      const Index fa = num_vertices + ea.e[x], fb = num_vertices + eb.e[y];
-      ee_keys[9 * i + 3 * x + y] = fa < fb ? key(fa, fb) : key(fb, fa);
-    }
-}
-
-template <class Index>
-__global__ void keys_to_pairs_kernel(const unsigned long long* keys, std::size_t n, Index* pairs) {
-  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  pairs[2 * i] = static_cast<Index>(keys[i] >> 32);
-  pairs[2 * i + 1] = static_cast<Index>(keys[i] & 0xffffffffu);
-}
 
 // Body changes between consecutive sorted leaves (the node_bodies prefix, before the scan).
 template <class Index>
@@ -85,25 +46,13 @@ class CcdPipeline {
   /// Several bodies (as cpu::CcdPipeline: a body that does not self-collide costs no traversal).
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(lwsccd::detail::checked_mesh(std::move(mesh), "gpu::CcdPipeline")), layout_(std::move(layout)),
-        params_(lwsccd::detail::validated(params)), features_(*mesh_) {
+        params_(lwsccd::detail::validated(params)), features_(*mesh_), emitter_(RepresentativeTriangles(*mesh_, layout_)) {
     if (params_.device_memory_budget) set_memory_budget(params_.device_memory_budget);
-    const OrphanSets orphans = orphans_for_layout(*mesh_, find_orphan_sets(*mesh_), layout_);
     const std::vector<unsigned char> self_collides = lwsccd::detail::self_collision_flags(layout_);
     if (!self_collides.empty()) {
       face_body_.upload(layout_.face_body);
       self_collides_.upload(self_collides);
     }
-    auto to_keys = [](const std::vector<std::pair<index_t, index_t>>& list) {
-      std::vector<unsigned long long> keys;
-      for (const auto& p : list)
-        keys.push_back((static_cast<unsigned long long>(p.first) << 32) | static_cast<unsigned>(p.second));
-      return keys;
-    };
-    orphan_vf_.upload(to_keys(orphans.vf));
-    orphan_ee_.upload(to_keys(orphans.ee));
-    std::vector<detail::FaceEdges> fe(static_cast<std::size_t>(mesh_->num_faces()));
-    for (index_t f = 0; f < mesh_->num_faces(); ++f) fe[f] = {{mesh_->face_edges(f)[0], mesh_->face_edges(f)[1], mesh_->face_edges(f)[2]}};
-    face_edges_.upload(fe);
     LWSCCD_CUDA_CHECK(cudaEventCreate(&mark_[0]));
     LWSCCD_CUDA_CHECK(cudaEventCreate(&mark_[1]));
   }
@@ -157,9 +106,8 @@ class CcdPipeline {
       ccd.tolerance = static_cast<T>(params_.tolerance);
       ccd.max_iterations = params_.max_iterations;
       ccd.mode = params_.mode;
-      narrow_.run(features_, step_->x0.data(), step_->x1.data(), reinterpret_cast<const std::pair<index_t, index_t>*>(vf_pairs_.data()),
-                  r.stats.feature_pairs_vf, reinterpret_cast<const std::pair<index_t, index_t>*>(ee_pairs_.data()),
-                  r.stats.feature_pairs_ee, ccd);
+      narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf(), emitter_.num_vf(), emitter_.ee(),
+                  emitter_.num_ee(), ccd);
     });
     r.contacts = narrow_.download();
     r.stats.hits_vf = r.contacts.vf.size();
@@ -232,61 +180,23 @@ class CcdPipeline {
     stats.triangle_pairs = traversal_.num_results();
   }
 
-  // Candidate triangle pairs -> sorted unique VF and EE feature pairs (+ orphans), on the device.
+  // Candidate triangle pairs -> the feature pairs they represent, kept when their boxes overlap,
+  // plus the kept orphans (each once; no sort).
   void feature_pairs(StepStats& stats) {
-    const std::size_t n = traversal_.num_results();
-    const std::size_t total_vf = 6 * n + orphan_vf_.size(), total_ee = 9 * n + orphan_ee_.size();
-    keys_vf_.resize_discard(std::max<std::size_t>(total_vf, 1));
-    keys_ee_.resize_discard(std::max<std::size_t>(total_ee, 1));
-    keys_sorted_.resize_discard(std::max<std::size_t>(std::max(total_vf, total_ee), 1));
-    counter_.resize_discard(1);
-    if (n) {
-      detail::feature_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256>>>(
-          traversal_.results(), n, features_.faces.data(), face_edges_.data(), features_.edges.data(), mesh_->num_vertices(),
-          mesh_->num_edges(), keys_vf_.data(), keys_ee_.data());
-      LWSCCD_CUDA_CHECK_LAUNCH();
-    }
-    for (int list = 0; list < 2; ++list) {
-      const bool vf = list == 0;
-      DeviceBuffer<unsigned long long>& keys = vf ? keys_vf_ : keys_ee_;
-      const DeviceBuffer<unsigned long long>& orphans = vf ? orphan_vf_ : orphan_ee_;
-      const std::size_t generated = (vf ? 6 : 9) * n, total = generated + orphans.size();
-      if (orphans.size())
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(keys.data() + generated, orphans.data(), orphans.size() * sizeof(unsigned long long),
-                                          cudaMemcpyDeviceToDevice));
-      std::size_t sort_bytes = 0, unique_bytes = 0;
-      LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortKeys(nullptr, sort_bytes, keys.data(), keys_sorted_.data(),
-                                                       static_cast<std::int64_t>(total)));
-      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Unique(nullptr, unique_bytes, keys_sorted_.data(), keys.data(), counter_.data(),
-                                                  static_cast<std::int64_t>(total)));
-      scratch_.resize_discard(std::max({sort_bytes, unique_bytes, scratch_.size(), std::size_t(1)}));
-      LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortKeys(scratch_.data(), sort_bytes, keys.data(), keys_sorted_.data(),
-                                                       static_cast<std::int64_t>(total)));
-      LWSCCD_CUDA_CHECK(cub::DeviceSelect::Unique(scratch_.data(), unique_bytes, keys_sorted_.data(), keys.data(),
-                                                  counter_.data(), static_cast<std::int64_t>(total)));
-      unsigned long long unique = 0;
-      LWSCCD_CUDA_CHECK(cudaMemcpy(&unique, counter_.data(), sizeof unique, cudaMemcpyDeviceToHost));
-      DeviceBuffer<index_t>& out = vf ? vf_pairs_ : ee_pairs_;
-      out.resize_discard(std::max<std::size_t>(2 * unique, 2));
-      if (unique) {
-        detail::keys_to_pairs_kernel<<<static_cast<unsigned>((unique + 255) / 256), 256>>>(keys.data(), unique, out.data());
-        LWSCCD_CUDA_CHECK_LAUNCH();
-      }
-      (vf ? stats.feature_pairs_vf : stats.feature_pairs_ee) = static_cast<std::size_t>(unique);
-    }
+    emitter_.run(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
+    stats.feature_pairs_vf = emitter_.num_vf();
+    stats.feature_pairs_ee = emitter_.num_ee();
   }
 
   std::shared_ptr<const TriangleMesh> mesh_;
   BodyLayout layout_;
   PipelineParams params_;
   DeviceMeshFeatures features_;
+  FeatureEmitter<> emitter_;
   DeviceBuffer<index_t> face_body_, node_body_, body_changes_;  ///< empty: no body pruning
   DeviceBuffer<unsigned char> self_collides_;
   std::uint64_t node_body_generation_ = ~std::uint64_t(0);
-  DeviceBuffer<detail::FaceEdges> face_edges_;
-  DeviceBuffer<unsigned long long> orphan_vf_, orphan_ee_, keys_vf_, keys_ee_, keys_sorted_, counter_;
   DeviceBuffer<unsigned char> scratch_;
-  DeviceBuffer<index_t> vf_pairs_, ee_pairs_;  ///< pairs of ids, interleaved
   std::unique_ptr<DeviceStep<double>> step_;
   Bvh<BV> bvh_;
   bool built_ = false;

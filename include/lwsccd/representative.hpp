@@ -76,38 +76,66 @@ LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_ve
   return box;
 }
 
-/// The feature pairs that the non-adjacent candidate triangle pair (a, b) represents, with
-/// overlapping boxes: calls on_vf(vertex id, face feature id) and on_ee(smaller edge feature id,
-/// larger) for each, vertices of a first, then of b, then edges in (a's, b's) order. Host and
-/// device; the counting and the writing passes of a backend call it alike.
-template <class OnVf, class OnEe>
-LWSCCD_HD void emit_triangle_pair(const EmissionView& m, index_t a, index_t b, OnVf&& on_vf, OnEe&& on_ee) {
+/// Which feature pairs the non-adjacent candidate triangle pair (a, b) keeps (represented by a
+/// and b, boxes overlapping), as a mask: bit k (k < 3) the vertex faces[a].v[k] with face b, bit
+/// 3 + k the vertex faces[b].v[k] with face a, bit 6 + 3x + y the edges face_edges[a].e[x] and
+/// face_edges[b].e[y]. The GPU's counting pass stores it; its writing pass only decodes it.
+LWSCCD_HD inline unsigned emission_mask(const EmissionView& m, index_t a, index_t b) {
   const unsigned ra = m.represents[a], rb = m.represents[b];
-  if (ra == 0 && rb == 0) return;
-  const index_t fa = m.face_feature(a), fb = m.face_feature(b);
-  const Aabbf box_a = m.boxes[fa], box_b = m.boxes[fb];
+  if (ra == 0 && rb == 0) return 0;
+  unsigned mask = 0;
+  const Aabbf box_a = m.boxes[m.face_feature(a)], box_b = m.boxes[m.face_feature(b)];
   if (ra & 7u) {
     const Face t = m.faces[a];
     for (int k = 0; k < 3; ++k)
-      if ((ra >> k) & 1u && m.boxes[t.v[k]].overlaps(box_b)) on_vf(t.v[k], fb);
+      if ((ra >> k) & 1u && m.boxes[t.v[k]].overlaps(box_b)) mask |= 1u << k;
   }
   if (rb & 7u) {
     const Face t = m.faces[b];
     for (int k = 0; k < 3; ++k)
-      if ((rb >> k) & 1u && m.boxes[t.v[k]].overlaps(box_a)) on_vf(t.v[k], fa);
+      if ((rb >> k) & 1u && m.boxes[t.v[k]].overlaps(box_a)) mask |= 1u << (3 + k);
   }
-  if ((ra >> 3) == 0 || (rb >> 3) == 0) return;
+  if ((ra >> 3) == 0 || (rb >> 3) == 0) return mask;
   const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
   for (int x = 0; x < 3; ++x) {
     if (!((ra >> (3 + x)) & 1u)) continue;
-    const index_t ex = m.edge_feature(ea.e[x]);
-    const Aabbf box_x = m.boxes[ex];
-    for (int y = 0; y < 3; ++y) {
-      if (!((rb >> (3 + y)) & 1u)) continue;
-      const index_t ey = m.edge_feature(eb.e[y]);
-      if (box_x.overlaps(m.boxes[ey])) ex < ey ? on_ee(ex, ey) : on_ee(ey, ex);
-    }
+    const Aabbf box_x = m.boxes[m.edge_feature(ea.e[x])];
+    for (int y = 0; y < 3; ++y)
+      if ((rb >> (3 + y)) & 1u && box_x.overlaps(m.boxes[m.edge_feature(eb.e[y])])) mask |= 1u << (6 + 3 * x + y);
   }
+  return mask;
+}
+
+/// Bits 0-5 of an emission mask (vertex-face pairs) and bits 6-14 (edge-edge pairs).
+constexpr unsigned kEmissionVfBits = 0x3fu, kEmissionEeBits = 0x7fc0u;
+
+/// Calls on_vf(vertex id, face feature id) and on_ee(smaller edge feature id, larger) for each
+/// pair of `mask` (emission_mask of (a, b)): vertices of a, then of b, then edges in (a's, b's)
+/// order. Host and device.
+template <class OnVf, class OnEe>
+LWSCCD_HD void decode_emission(const EmissionView& m, index_t a, index_t b, unsigned mask, OnVf&& on_vf, OnEe&& on_ee) {
+  if (mask & kEmissionVfBits) {
+    const Face ta = m.faces[a], tb = m.faces[b];
+    for (int k = 0; k < 3; ++k)
+      if ((mask >> k) & 1u) on_vf(ta.v[k], m.face_feature(b));
+    for (int k = 0; k < 3; ++k)
+      if ((mask >> (3 + k)) & 1u) on_vf(tb.v[k], m.face_feature(a));
+  }
+  if (mask & kEmissionEeBits) {
+    const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
+    for (int x = 0; x < 3; ++x)
+      for (int y = 0; y < 3; ++y)
+        if ((mask >> (6 + 3 * x + y)) & 1u) {
+          const index_t ex = m.edge_feature(ea.e[x]), ey = m.edge_feature(eb.e[y]);
+          ex < ey ? on_ee(ex, ey) : on_ee(ey, ex);
+        }
+  }
+}
+
+/// The kept feature pairs of the candidate pair (a, b): decode_emission of its emission_mask.
+template <class OnVf, class OnEe>
+LWSCCD_HD void emit_triangle_pair(const EmissionView& m, index_t a, index_t b, OnVf&& on_vf, OnEe&& on_ee) {
+  decode_emission(m, a, b, emission_mask(m, a, b), on_vf, on_ee);
 }
 
 /// True when the orphan pair (first, second) (feature ids) is kept: its boxes overlap.

@@ -281,6 +281,13 @@ struct HitToi {
   LWSCCD_HD T operator()(const FeatureHit<T>& h) const { return h.toi; }
 };
 
+// The sort key of a hit: (first, second) as one 64-bit word (ids are non-negative 32-bit).
+template <class T>
+__global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, unsigned long long* keys) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i < n) keys[i] = (static_cast<unsigned long long>(hits[i].first) << 32) | static_cast<unsigned>(hits[i].second);
+}
+
 template <class T>
 struct MinOp {
   LWSCCD_HD T operator()(T a, T b) const { return b < a ? b : a; }
@@ -395,7 +402,30 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
     earliest_ = list_min < earliest_ ? list_min : earliest_;
   }
   earliest_only_ = params.mode == CcdMode::earliest;
+  // The hits in (first, second) order, on the device: the pairs came in any order, and sorting
+  // here is far cheaper than on the host after the download.
+  if (!earliest_only_)
+    for (auto& l : lists_) sort_hits(l, stream);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::sort_hits(List& l, cudaStream_t stream) {
+  if (l.count < 2) return;
+  const std::size_t n = l.count;
+  l.keys.resize_discard(n);
+  l.sorted_keys.resize_discard(n);
+  l.sorted.resize_discard(std::max(n, l.hits.size()));
+  detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(l.hits.data(), n, l.keys.data());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  std::size_t bytes = 0;
+  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, l.keys.data(), l.sorted_keys.data(), l.hits.data(),
+                                                    l.sorted.data(), static_cast<std::int64_t>(n), 0, 64, stream));
+  l.scratch.resize_discard(std::max({bytes, l.scratch.size(), std::size_t(1)}));
+  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(l.scratch.data(), bytes, l.keys.data(), l.sorted_keys.data(), l.hits.data(),
+                                                    l.sorted.data(), static_cast<std::int64_t>(n), 0, 64, stream));
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  std::swap(l.hits, l.sorted);
 }
 
 // The hits' buffer with room for `room`, keeping the first `count`.
@@ -598,8 +628,6 @@ NarrowPhaseResult<T> NarrowPhase<Method, T, Policy>::download(cudaStream_t strea
   fetch(lists_[0].hits, earliest_only_ ? 0 : lists_[0].count, r.vf);
   fetch(lists_[1].hits, earliest_only_ ? 0 : lists_[1].count, r.ee);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  std::sort(r.vf.begin(), r.vf.end());
-  std::sort(r.ee.begin(), r.ee.end());
   r.earliest_toi = earliest_;
   r.gave_up = gave_up_;
   r.vf_counts = lists_[0].counts;
