@@ -266,3 +266,63 @@ TEST_CASE("culling adjacent triangles with orphan sets loses no contact (open cl
     REQUIRE(everything.vf.size() + everything.ee.size() > 0);
   }
 }
+
+namespace {
+
+// Two separate triangles: a static one in z = 0 and one whose vertex 3 moves from z = z0 to z1
+// (the rest of it far above): a single vertex-face pair (vertex 3, face 0).
+lwsccd_test::MovingMesh vertex_over_triangle(double z0, double z1) {
+  std::vector<Vec3d> x0 = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0.2, 0.2, z0}, {3, 3, 5}, {4, 3, 5}};
+  std::vector<Vec3d> x1 = x0;
+  x1[3].z = z1;
+  return {TriangleMesh(6, {{{0, 1, 2}}, {{3, 4, 5}}}), x0, x1};
+}
+
+}  // namespace
+
+TEST_CASE("mode earliest: growing time windows give the earliest TOI of mode contacts", "[narrow][certified]") {
+  auto compare = [](const lwsccd_test::MovingMesh& m, const FeaturePairs& fp) {
+    CcdParams<double> contacts_params, earliest_params;
+    earliest_params.mode = CcdMode::earliest;
+    const auto all = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, fp, contacts_params);
+    const auto earliest = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, fp, earliest_params);
+    INFO("contacts " << all.earliest_toi << ", earliest " << earliest.earliest_toi);
+    CHECK(earliest.vf.empty());
+    CHECK(earliest.ee.empty());
+    // Certified hits of the first window are the very same intervals; a fallback answer may be
+    // cut at another time, but stays a lower bound within the tolerance.
+    if (all.vf_counts.fallbacks + all.ee_counts.fallbacks == 0) CHECK(earliest.earliest_toi == all.earliest_toi);
+    CHECK(earliest.earliest_toi <= all.earliest_toi);
+    CHECK(earliest.earliest_toi >= all.earliest_toi - contacts_params.tolerance);
+    return earliest;
+  };
+  SECTION("a folded cloth: contacts early in the step") {
+    const auto m = lwsccd_test::folded_cloth(16, 3);
+    const FeaturePairs fp = feature_pairs(m.mesh, brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1)));
+    const auto r = compare(m, fp);
+    CHECK(r.earliest_toi < 1);
+  }
+  // 6 vertices and 6 edges: face 0's feature id is 12.
+  SECTION("one contact at t = 0.5: past the first two windows (2^-16, 2^-8)") {
+    const auto m = vertex_over_triangle(1.0, -1.0);
+    REQUIRE(m.mesh.num_edges() == 6);
+    const FeaturePairs fp{{{3, 12}}, {}};
+    const auto r = compare(m, fp);
+    CHECK(r.earliest_toi > 0.5 - 1e-6);
+    CHECK(r.earliest_toi <= 0.5);
+    CHECK(r.vf_counts.certified_hits == 1);  // the last window's counts
+  }
+  SECTION("one contact at t = 2^-10: in the second window") {
+    const auto m = vertex_over_triangle(1.0 / 1024, 1.0 / 1024 - 1.0);
+    const FeaturePairs fp{{{3, 12}}, {}};
+    const auto r = compare(m, fp);
+    CHECK(r.earliest_toi > std::ldexp(1.0, -10) - 1e-6);
+  }
+  SECTION("no contact: every window, then 1") {
+    const auto m = vertex_over_triangle(1.0, 0.5);
+    const FeaturePairs fp{{{3, 12}}, {}};
+    const auto r = compare(m, fp);
+    CHECK(r.earliest_toi == 1);
+    CHECK(r.vf_counts.certified_misses == 1);
+  }
+}

@@ -50,6 +50,13 @@ struct CertifiedPolicy {
   static constexpr double kCoefficientBound = 1.0;  ///< the cubic's Bernstein coefficients on [0, 1]
   static constexpr double kSplitBound = 1.0;        ///< rounding added by each de Casteljau halving
   static constexpr double kInsideBound = 1.0;       ///< the inside test's sign tests over an interval
+  /// Mode earliest: the certified pass (and its fallback) first look only at the window
+  /// [0, 2^-kEarliestFirst), then at windows kEarliestStep binary orders wider, up to the whole
+  /// step, and stop at the first window that holds a contact. A step's earliest contact is
+  /// usually early, and a search limited to a short window drops nearly all of each pair's time at
+  /// once. The windows are fixed, so the answer does not depend on the order of work.
+  static constexpr int kEarliestFirst = 16;
+  static constexpr int kEarliestStep = 8;
 };
 
 /// What the certified fast path decided about one query.
@@ -514,6 +521,15 @@ struct CertifiedCcdT {
   template <class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
     return detail::certified_refine<Policy>(q, params);
+  }
+  /// Mode earliest: the time limit of window `round` (0, 1, ...) for a caller's `time_limit`; the
+  /// last window is the one that returns `time_limit` itself.
+  template <class T>
+  LWSCCD_HD static T earliest_window(int round, T time_limit) {
+    const int exponent = Policy::kEarliestFirst - Policy::kEarliestStep * round;
+    if (exponent <= 0) return time_limit;
+    const T window = std::ldexp(T(1), -exponent);
+    return window < time_limit ? window : time_limit;
   }
   /// refine, stopped (*deferred set) where it would halve an interval at `kDeferLevel` or deeper
   /// (with a stack only that deep).

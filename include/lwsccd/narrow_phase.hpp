@@ -156,23 +156,46 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
   auto ee_pair = [&](std::size_t i) { return pairs.ee[i]; };
   auto from_zero = [](std::size_t) { return T(0); };
   if constexpr (lwsccd::detail::certified_of<Method>::value) {
-    std::vector<std::pair<std::size_t, T>> open_vf, open_ee;
-    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, params, &open_vf, result.vf,
-                                      result.vf_counts, result.gave_up);
-    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, from_zero, params, &open_ee, result.ee,
-                                      result.ee_counts, result.gave_up);
-    CcdParams<T> fallback_params = params;
-    if (params.mode == CcdMode::earliest)
-      for (const auto* list : {&result.vf, &result.ee})
-        for (const auto& h : *list) fallback_params.time_limit = std::min(fallback_params.time_limit, h.toi);
-    lwsccd::detail::test_list<Method>(
-        open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k].first); },
-        [&](std::size_t k) { return pairs.vf[open_vf[k].first]; }, [&](std::size_t k) { return open_vf[k].second; },
-        fallback_params, nullptr, result.vf, result.vf_counts, result.gave_up);
-    lwsccd::detail::test_list<Method>(
-        open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k].first); },
-        [&](std::size_t k) { return pairs.ee[open_ee[k].first]; }, [&](std::size_t k) { return open_ee[k].second; },
-        fallback_params, nullptr, result.ee, result.ee_counts, result.gave_up);
+    // The certified pass over every pair, then the fallback on the undecided ones, with the time
+    // limit limited.time_limit; into `out` (its counts' pairs already set).
+    auto certified_pass = [&](const CcdParams<T>& limited, NarrowPhaseResult<T>& out) {
+      std::vector<std::pair<std::size_t, T>> open_vf, open_ee;
+      lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, limited, &open_vf, out.vf,
+                                        out.vf_counts, out.gave_up);
+      lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, from_zero, limited, &open_ee, out.ee,
+                                        out.ee_counts, out.gave_up);
+      CcdParams<T> fallback_params = limited;
+      if (limited.mode == CcdMode::earliest)
+        for (const auto* list : {&out.vf, &out.ee})
+          for (const auto& h : *list) fallback_params.time_limit = std::min(fallback_params.time_limit, h.toi);
+      lwsccd::detail::test_list<Method>(
+          open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k].first); },
+          [&](std::size_t k) { return pairs.vf[open_vf[k].first]; }, [&](std::size_t k) { return open_vf[k].second; },
+          fallback_params, nullptr, out.vf, out.vf_counts, out.gave_up);
+      lwsccd::detail::test_list<Method>(
+          open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k].first); },
+          [&](std::size_t k) { return pairs.ee[open_ee[k].first]; }, [&](std::size_t k) { return open_ee[k].second; },
+          fallback_params, nullptr, out.ee, out.ee_counts, out.gave_up);
+    };
+    if (params.mode != CcdMode::earliest) {
+      certified_pass(params, result);
+    } else {
+      // Growing windows [0, limit) until one holds a contact (CertifiedPolicy::kEarliestFirst);
+      // the counts are the last window's.
+      for (int round = 0;; ++round) {
+        CcdParams<T> limited = params;
+        limited.time_limit = Method::earliest_window(round, params.time_limit);
+        NarrowPhaseResult<T> attempt;
+        attempt.vf_counts.pairs = pairs.vf.size();
+        attempt.ee_counts.pairs = pairs.ee.size();
+        certified_pass(limited, attempt);
+        const bool last = !(limited.time_limit < params.time_limit);
+        if (last || !attempt.vf.empty() || !attempt.ee.empty()) {
+          result = std::move(attempt);
+          break;
+        }
+      }
+    }
   } else {
     lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, params, nullptr, result.vf,
                                       result.vf_counts, result.gave_up);

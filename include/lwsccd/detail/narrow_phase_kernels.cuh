@@ -340,66 +340,88 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
     compact_screened(l);
   }
-  // CertifiedCcd: the refinement of the screened pairs, a chunk of each list at a time.
-  if constexpr (kCertified) {
-    while (lists_[0].refined < lists_[0].num_survivors || lists_[1].refined < lists_[1].num_survivors) {
-      const std::size_t launched[2] = {refine_chunk<P, true>(view, x0, x1, params, lists_[0]),
-                                       refine_chunk<P, false>(view, x0, x1, params, lists_[1])};
-      for (int k = 0; k < 2; ++k) {
-        if (!launched[k]) continue;
-        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(lists_[k].stream));
-        collect_refined(lists_[k], launched[k]);
+  // Mode earliest with CertifiedCcd: growing time windows (CertifiedPolicy::kEarliestFirst), each
+  // refining the screened pairs and running the fallback up to the window's end, until one holds
+  // a contact (as the CPU backend does). Other modes and methods: one window, the caller's.
+  const bool windows = kCertified && params.mode == CcdMode::earliest;
+  for (int round = 0;; ++round) {
+    CcdParams<T> limited = params;
+    if constexpr (kCertified)
+      if (windows) limited.time_limit = Method::earliest_window(round, params.time_limit);
+    if (round > 0) {  // a window that held no contact: start the refinement over
+      gave_up_ = 0;
+      earliest_ = T(1);
+      for (auto& l : lists_) {
+        l.count = l.tested = l.warp_searches = 0;
+        l.counts.certified_hits = l.counts.certified_misses = l.counts.fallbacks = 0;
+        l.num_survivors = l.counts.screened;
+        l.to_test = reinterpret_cast<const Pair*>(l.survivors.data());
+        l.refined = l.num_undecided = 0;
+        LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data() + 1, 0, sizeof(unsigned long long), l.stream));
       }
     }
+    // CertifiedCcd: the refinement of the screened pairs, a chunk of each list at a time.
+    if constexpr (kCertified) {
+      while (lists_[0].refined < lists_[0].num_survivors || lists_[1].refined < lists_[1].num_survivors) {
+        const std::size_t launched[2] = {refine_chunk<P, true>(view, x0, x1, limited, lists_[0]),
+                                         refine_chunk<P, false>(view, x0, x1, limited, lists_[1])};
+        for (int k = 0; k < 2; ++k) {
+          if (!launched[k]) continue;
+          LWSCCD_CUDA_CHECK(cudaStreamSynchronize(lists_[k].stream));
+          collect_refined(lists_[k], launched[k]);
+        }
+      }
+      for (auto& l : lists_) {
+        l.num_survivors = l.num_undecided;
+        l.to_test = nullptr;  // the fallback reads the undecided records instead
+      }
+    }
+    // Mode earliest: the fallback need not look past the best certified time (as the CPU does).
+    CcdParams<T> full = limited;
+    if (kCertified && params.mode == CcdMode::earliest)
+      for (auto& l : lists_) {
+        const T m = list_minimum(l, l.stream);
+        full.time_limit = m < full.time_limit ? m : full.time_limit;
+      }
     for (auto& l : lists_) {
-      l.num_survivors = l.num_undecided;
-      l.to_test = nullptr;  // the fallback reads the undecided records instead
+      l.counts.fallbacks = l.num_survivors;
+      l.counts.certified_misses = l.counts.pairs - l.counts.certified_hits - l.num_survivors;
+      // Two-pass methods: room for every survivor at once; one-pass methods grow chunk by chunk.
+      grow_hits(l, std::max(initial_capacity_, l.count + (kTwoPass ? l.num_survivors : 0)));
     }
-  }
-  // Mode earliest: the fallback need not look past the best certified time (as the CPU does).
-  CcdParams<T> full = params;
-  if (kCertified && params.mode == CcdMode::earliest)
+    // The full test, a chunk of each list at a time on its stream: the lists overlap, and a list's
+    // long searches hold up only its own chunk.
+    while (lists_[0].tested < lists_[0].num_survivors || lists_[1].tested < lists_[1].num_survivors) {
+      std::size_t launched[2] = {0, 0};
+      for (int k = 0; k < 2; ++k) {
+        List& l = lists_[k];
+        const std::size_t m = std::min(chunk_, l.num_survivors - l.tested);
+        if (m == 0) continue;
+        if (k == 0) launch_chunk<P, true>(view, x0, x1, full, l, l.tested, m);
+        else launch_chunk<P, false>(view, x0, x1, full, l, l.tested, m);
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts, l.counters.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+                                          l.stream));
+        launched[k] = m;
+      }
+      for (int k = 0; k < 2; ++k) {
+        if (!launched[k]) continue;
+        List& l = lists_[k];
+        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
+        l.count += static_cast<std::size_t>(l.host_counts[0]);
+        l.tested += launched[k];
+      }
+    }
+    // Earliest TOI over both lists, and the bounded-work count.
+    for (auto& l : lists_)
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts + 1, l.counters.data() + 1, sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToHost, l.stream));
     for (auto& l : lists_) {
-      const T m = list_minimum(l, l.stream);
-      full.time_limit = m < full.time_limit ? m : full.time_limit;
-    }
-  for (auto& l : lists_) {
-    l.counts.fallbacks = l.num_survivors;
-    l.counts.certified_misses = l.counts.pairs - l.counts.certified_hits - l.num_survivors;
-    // Two-pass methods: room for every survivor at once; one-pass methods grow chunk by chunk.
-    grow_hits(l, std::max(initial_capacity_, l.count + (kTwoPass ? l.num_survivors : 0)));
-  }
-  // The full test, a chunk of each list at a time on its stream: the lists overlap, and a list's
-  // long searches hold up only its own chunk.
-  while (lists_[0].tested < lists_[0].num_survivors || lists_[1].tested < lists_[1].num_survivors) {
-    std::size_t launched[2] = {0, 0};
-    for (int k = 0; k < 2; ++k) {
-      List& l = lists_[k];
-      const std::size_t m = std::min(chunk_, l.num_survivors - l.tested);
-      if (m == 0) continue;
-      if (k == 0) launch_chunk<P, true>(view, x0, x1, full, l, l.tested, m);
-      else launch_chunk<P, false>(view, x0, x1, full, l, l.tested, m);
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts, l.counters.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost,
-                                        l.stream));
-      launched[k] = m;
-    }
-    for (int k = 0; k < 2; ++k) {
-      if (!launched[k]) continue;
-      List& l = lists_[k];
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-      l.count += static_cast<std::size_t>(l.host_counts[0]);
-      l.tested += launched[k];
+      gave_up_ += static_cast<std::size_t>(l.host_counts[1]);
+      const T list_min = list_minimum(l, stream);
+      earliest_ = list_min < earliest_ ? list_min : earliest_;
     }
-  }
-  // Earliest TOI over both lists, and the bounded-work count.
-  for (auto& l : lists_)
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts + 1, l.counters.data() + 1, sizeof(unsigned long long),
-                                      cudaMemcpyDeviceToHost, l.stream));
-  for (auto& l : lists_) {
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-    gave_up_ += static_cast<std::size_t>(l.host_counts[1]);
-    const T list_min = list_minimum(l, stream);
-    earliest_ = list_min < earliest_ ? list_min : earliest_;
+    if (!windows || !(limited.time_limit < params.time_limit) || lists_[0].count + lists_[1].count > 0) break;
   }
   earliest_only_ = params.mode == CcdMode::earliest;
   // The hits in (first, second) order, on the device: the pairs came in any order, and sorting
