@@ -40,7 +40,13 @@ struct NarrowPhasePolicy {
   static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~12 KiB of shared memory each)
   /// CertifiedCcd: refinements that would halve intervals this deep (width 2^-level) go to a
   /// second kernel, so that the long searches of contacts do not hold up warps of quick misses.
-  static constexpr int kRefineDeferLevel = 8;
+  /// On an H100 levels 3 and 4 were fastest (cloth-ball narrow 3.3 ms against 3.5 at level 8,
+  /// built-in 100K 1.05 against 1.5; docs/BENCHMARKS.md).
+  static constexpr int kRefineDeferLevel = 4;
+  /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
+  /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
+  /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.
+  static constexpr int kRefineMinBlocks = 1;
 };
 
 /// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as

@@ -77,8 +77,8 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
 // intervals at kDeferLevel or deeper stop (with a stack only that deep) and are flagged in `deferred` (they are the contacts,
 // resolved at the time tolerance, and would hold up whole warps of quick misses); the others
 // store their answer: certified hits staged (flag in `hit`), the undecided flagged in `keep`.
-template <class Method, bool kVertexFace, int kDeferLevel, class T, class P>
-__global__ void refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+template <class Method, bool kVertexFace, int kDeferLevel, int kBlock, int kMinBlocks, class T, class P>
+__global__ void __launch_bounds__(kBlock, kMinBlocks) refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                               const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
                               FeatureHit<T>* staged, unsigned char* hit, unsigned char* keep, unsigned char* deferred) {
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
@@ -555,7 +555,7 @@ std::size_t NarrowPhase<Method, T, Policy>::refine_chunk(const MeshFeatures& mes
   list.pending.resize_discard(std::max(list.pending.size(), m));
   list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
   const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-  detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
+  detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
       mesh, x0, x1, pairs, m, params, list.staged.data(), list.hit_flags.data(), list.flags.data(),
       list.pending.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
