@@ -235,7 +235,8 @@ std::size_t oracle_differences(const lwsccd::Step& step, const lwsccd::BodyLayou
     ccd.max_iterations = o.params.max_iterations;
     ccd.mode = o.params.mode;
     const auto expected = ccd_app::to_double(lwsccd::cpu::test_feature_pairs<Method, T>(
-        mesh, step.x0, step.x1, lwsccd::sweep_feature_pairs(rep, lwsccd::feature_boxes(mesh, step.x0, step.x1)), ccd));
+        mesh, step.x0, step.x1, lwsccd::sweep_feature_pairs(rep, lwsccd::feature_boxes(mesh, step.x0, step.x1, o.params.min_separation / 2)),
+        ccd));
     auto differences = [](const auto& a, const auto& b) {
       std::size_t d = 0, i = 0, j = 0;
       while (i < a.size() || j < b.size()) {

@@ -146,3 +146,27 @@ TEST_CASE("CPU pipeline rejects bad parameters, layouts and positions with a cle
   std::vector<Vec3d> too_few(m.x0.begin(), m.x0.end() - 1);
   CHECK_THROWS_AS(pipeline.step(too_few, m.x1), InputError);
 }
+
+TEST_CASE("CPU pipeline with a minimum separation: pairs closer than it are found though their boxes are apart",
+          "[pipeline][separation]") {
+  // Two separate triangles in parallel planes 0.004 apart, still: no contact, but closer than 0.01.
+  const std::vector<Vec3d> x = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0.1, 0.1, 0.004}, {1.1, 0.1, 0.004}, {0.1, 1.1, 0.004}};
+  auto mesh = std::make_shared<const TriangleMesh>(6, std::vector<Face>{{{0, 1, 2}}, {{3, 4, 5}}});
+  PipelineParams near, contact;
+  near.min_separation = 0.01;
+  const auto r = cpu::CcdPipeline<Aabbf>(mesh, near).step(x, x);
+  CHECK(r.stats.triangle_pairs == 1);
+  CHECK(r.stats.hits_vf + r.stats.hits_ee > 0);
+  const auto r0 = cpu::CcdPipeline<Aabbf>(mesh, contact).step(x, x);
+  CHECK(r0.stats.triangle_pairs == 0);
+  CHECK(r0.stats.hits_vf + r0.stats.hits_ee == 0);
+  PipelineParams far;
+  far.min_separation = 0.002;
+  const auto r2 = cpu::CcdPipeline<Obbf>(mesh, far).step(x, x);
+  CHECK(r2.stats.hits_vf + r2.stats.hits_ee == 0);
+  const auto r3 = cpu::CcdPipeline<Obbf>(mesh, near).step(x, x);
+  CHECK(r3.stats.hits_vf + r3.stats.hits_ee == r.stats.hits_vf + r.stats.hits_ee);
+  cpu::Bvh<Aabbf> bvh;
+  CHECK_THROWS_AS(bvh.set_leaf_margin(-1), InputError);
+  CHECK_THROWS_AS(feature_boxes(*mesh, x, x, -0.5), InputError);
+}

@@ -33,10 +33,13 @@ bool has_repeats(const std::vector<std::pair<index_t, index_t>>& sorted_pairs) {
 // The emission over the brute-force AABB candidates equals the brute-force feature oracle, with
 // no pair produced twice; the sweep oracle equals the brute-force one.
 void require_emission_equals_oracle(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
-                                    const BodyLayout& layout = {}) {
+                                    const BodyLayout& layout = {}, double margin = 0) {
   const RepresentativeTriangles rep(mesh, layout);
-  const std::vector<Aabbf> boxes = feature_boxes(mesh, x0, x1);
-  const auto candidates = non_adjacent(brute_force_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, x0, x1), layout));
+  const std::vector<Aabbf> boxes = feature_boxes(mesh, x0, x1, margin);
+  std::vector<Aabbf> bvs = swept_triangle_bvs<Aabbf>(mesh, x0, x1);
+  if (margin > 0)
+    for (auto& b : bvs) b = b.inflated(lwsccd::detail::round_up<float>(margin));
+  const auto candidates = non_adjacent(brute_force_pairs(mesh, bvs, layout));
   const FeaturePairs emitted = sorted(emit_feature_pairs(rep, candidates, boxes));
   const FeaturePairs oracle = brute_force_feature_pairs(rep, boxes);
   INFO(mesh.num_faces() << " faces, " << candidates.size() << " candidates, oracle " << oracle.vf.size() << " VF + "
@@ -122,6 +125,13 @@ TEST_CASE("representatives: emission equals the brute-force feature oracle, each
       const auto m = lwsccd_test::folded_cloth(14, seed);
       require_emission_equals_oracle(m.mesh, m.x0, m.x1);
     }
+  }
+  SECTION("folded cloth with a margin (proximity): more pairs, still the oracle's") {
+    const auto m = lwsccd_test::folded_cloth(14, 2);
+    require_emission_equals_oracle(m.mesh, m.x0, m.x1, {}, 0.01);
+    const RepresentativeTriangles rep(m.mesh);
+    CHECK(brute_force_feature_pairs(rep, feature_boxes(m.mesh, m.x0, m.x1, 0.01)).ee.size() >
+          brute_force_feature_pairs(rep, feature_boxes(m.mesh, m.x0, m.x1)).ee.size());
   }
   SECTION("random soup (no adjacency: no orphans)") {
     const auto m = lwsccd_test::random_soup(300, 5, 0.08);

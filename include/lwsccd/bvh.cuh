@@ -66,6 +66,12 @@ class Bvh {
   /// Synchronizes and throws InputError if positions seen since the last check were non-finite.
   void check_status(cudaStream_t stream = nullptr);
 
+  /// As cpu::Bvh::set_leaf_margin: every leaf grown by `margin` from the next build or refit on.
+  void set_leaf_margin(double margin) {
+    leaf_margin_ = lwsccd::detail::checked_leaf_margin<BV>(margin, "gpu::Bvh::set_leaf_margin");
+  }
+  double leaf_margin() const { return leaf_margin_; }
+
   BvhView<BV> view() const {
     return {num_leaves_, bvs_.data(), left_.data(), right_.data(), parent_.data(), ranges_.data(), leaf_primitive_.data()};
   }
@@ -81,6 +87,7 @@ class Bvh {
   index_t num_leaves_ = 0;
   std::uint64_t generation_ = 0;
   double cost_at_build_ = 0;
+  typename bv_traits<BV>::scalar_type leaf_margin_ = 0;
   DeviceBuffer<BV> bvs_;
   DeviceBuffer<index_t> left_, right_, parent_, leaf_primitive_, primitive_scratch_;
   DeviceBuffer<LeafRange> ranges_;

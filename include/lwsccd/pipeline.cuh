@@ -48,6 +48,9 @@ class CcdPipeline {
       : mesh_(lwsccd::detail::checked_mesh(std::move(mesh), "gpu::CcdPipeline")), layout_(std::move(layout)),
         params_(lwsccd::detail::validated(params)), features_(*mesh_), emitter_(RepresentativeTriangles(*mesh_, layout_)) {
     if (params_.device_memory_budget) set_memory_budget(params_.device_memory_budget);
+    // Features that come within min_separation: their boxes, each grown by half of it, overlap.
+    bvh_.set_leaf_margin(params_.min_separation / 2);
+    emitter_.set_box_margin(params_.min_separation / 2);
     const std::vector<unsigned char> self_collides = lwsccd::detail::self_collision_flags(layout_);
     if (!self_collides.empty()) {
       face_body_.upload(layout_.face_body);

@@ -103,7 +103,10 @@ class CcdPipeline {
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(detail::checked_mesh(std::move(mesh), "cpu::CcdPipeline")), layout_(std::move(layout)), self_collides_(detail::self_collision_flags(layout_)),
         params_(detail::validated(params)), representatives_(*mesh_, layout_),
-        tracker_(FrontPolicy{params.front_growth_limit}) {}
+        tracker_(FrontPolicy{params.front_growth_limit}) {
+    // Features that come within min_separation: their boxes, each grown by half of it, overlap.
+    bvh_.set_leaf_margin(params_.min_separation / 2);
+  }
 
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
     using clock = std::chrono::steady_clock;
@@ -137,7 +140,8 @@ class CcdPipeline {
     r.stats.front_size = tracker_.size();
     r.stats.triangle_pairs = traversal.results.size();
     t = clock::now();
-    const FeaturePairs features = emit_feature_pairs(representatives_, traversal.results, feature_boxes(*mesh_, x0, x1));
+    const FeaturePairs features = emit_feature_pairs(representatives_, traversal.results,
+                                                         feature_boxes(*mesh_, x0, x1, params_.min_separation / 2));
     r.stats.features_ms = ms(t);
     r.stats.feature_pairs_vf = features.vf.size();
     r.stats.feature_pairs_ee = features.ee.size();

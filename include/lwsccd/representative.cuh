@@ -36,10 +36,11 @@ LWSCCD_HD inline unsigned long long pack_counts(unsigned vf, unsigned ee) {
 }
 
 template <class P>
-__global__ void feature_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec3<P>* x1, index_t n, Aabbf* boxes) {
+__global__ void feature_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec3<P>* x1, index_t n, float margin,
+                                     Aabbf* boxes) {
   const index_t id = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
   if (id >= n) return;
-  boxes[id] = feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, id);
+  boxes[id] = feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, id, margin);
 }
 
 // Item i: candidate triangle pair i (i < n), then vertex-face orphan i - n, then edge-edge orphan.
@@ -147,7 +148,7 @@ class FeatureEmitter {
     const index_t features = num_vertices_ + num_edges_ + num_faces_;
     const EmissionView m = view();
     detail::feature_boxes_kernel<<<static_cast<unsigned>((features + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
-                                   stream>>>(m, x0, x1, features, boxes_.data());
+                                   stream>>>(m, x0, x1, features, margin_, boxes_.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
     const std::size_t items = n + orphan_vf_.size() + orphan_ee_.size();
     num_vf_ = num_ee_ = 0;
@@ -176,6 +177,9 @@ class FeatureEmitter {
         vf_.data(), ee_.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
+
+  /// Grows every feature box by `margin` from the next run on (as feature_boxes' margin).
+  void set_box_margin(double margin) { margin_ = lwsccd::detail::checked_leaf_margin<Aabbf>(margin, "gpu::FeatureEmitter"); }
 
   const Pair* vf() const { return vf_.data(); }
   const Pair* ee() const { return ee_.data(); }
@@ -217,6 +221,7 @@ class FeatureEmitter {
   DeviceBuffer<unsigned short> masks_;          ///< per item: its emission mask
   DeviceBuffer<unsigned long long> block_totals_;  ///< per block: packed counts, then their inclusive scan
   std::size_t num_vf_ = 0, num_ee_ = 0;
+  float margin_ = 0;
 };
 
 }  // namespace lwsccd::gpu

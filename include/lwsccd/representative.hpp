@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "lwsccd/aabb.hpp"
+#include "lwsccd/bvh.hpp"
 #include "lwsccd/config.hpp"
 #include "lwsccd/mesh.hpp"
 #include "lwsccd/oracle.hpp"
@@ -52,10 +53,11 @@ struct EmissionView {
   LWSCCD_HD index_t edge_feature(index_t e) const { return num_vertices + e; }
 };
 
-/// The swept box of feature `id` (dataset convention) from its points at t0 and t1.
+/// The swept box of feature `id` (dataset convention) from its points at t0 and t1, grown by
+/// `margin` on every side when it is positive (proximity queries: half the minimum separation).
 template <class P>
 LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_vertices, index_t num_edges,
-                            const Vec3<P>* x0, const Vec3<P>* x1, index_t id) {
+                            const Vec3<P>* x0, const Vec3<P>* x1, index_t id, float margin = 0) {
   Aabbf box = Aabbf::empty();
   auto add = [&](index_t v) {
     box.expand(x0[v]);
@@ -73,7 +75,7 @@ LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_ve
     add(f.v[1]);
     add(f.v[2]);
   }
-  return box;
+  return margin > 0 ? box.inflated(margin) : box;
 }
 
 /// Which feature pairs the non-adjacent candidate triangle pair (a, b) keeps (represented by a
@@ -188,9 +190,11 @@ class RepresentativeTriangles {
   OrphanSets orphans_;
 };
 
-/// One swept box per feature id (vertices, edges, faces) from the positions at t0 and t1.
+/// One swept box per feature id (vertices, edges, faces) from the positions at t0 and t1, each
+/// grown by `margin` (>= 0; a pipeline uses half its minimum separation, as for the BVH's leaves).
 template <class P>
-std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1);
+std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
+                                 double margin = 0);
 
 /// The feature pairs of the candidate triangle pairs and of the orphans, each produced once and
 /// kept when its feature boxes overlap, on all cores. Adjacent candidate pairs are skipped (the

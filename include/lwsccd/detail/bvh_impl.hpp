@@ -216,7 +216,7 @@ void Bvh<BV>::build_tree(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<
   std::vector<Vec3<P>> centers(static_cast<std::size_t>(n));
   Aabb<P> scene = Aabb<P>::empty();
   for (index_t f = 0; f < n; ++f) {
-    detail::leaf_volume(faces_[f], x0.data(), x1.data(), leaf_bvs[f], centers[f]);
+    detail::leaf_volume(faces_[f], x0.data(), x1.data(), leaf_bvs[f], centers[f], leaf_margin_);
     scene.expand(centers[f]);
   }
   std::vector<std::uint64_t> codes(static_cast<std::size_t>(n));
@@ -261,7 +261,7 @@ void Bvh<BV>::fit_bottom_up(const std::vector<Vec3<P>>& x0, const std::vector<Ve
   std::vector<unsigned char> arrived(static_cast<std::size_t>(n > 0 ? n - 1 : 0), 0);
   for (index_t k = 0; k < n; ++k) {
     Vec3<P> unused_center;
-    detail::leaf_volume(faces_[t.leaf_primitive[k]], x0.data(), x1.data(), t.bvs[n - 1 + k], unused_center);
+    detail::leaf_volume(faces_[t.leaf_primitive[k]], x0.data(), x1.data(), t.bvs[n - 1 + k], unused_center, leaf_margin_);
     for (index_t p = t.parent[n - 1 + k]; p != -1; p = t.parent[p]) {
       if (arrived[p]++ == 0) break;
       t.bvs[p] = bv_traits<BV>::merge(t.bvs[t.left[p]], t.bvs[t.right[p]]);

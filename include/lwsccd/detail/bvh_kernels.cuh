@@ -89,13 +89,13 @@ __global__ void radix_tree_kernel(const std::uint64_t* codes, Index n, Index* le
 template <class BV, class P>
 __global__ void bottom_up_kernel(const Face* faces, const index_t* leaf_primitive, index_t n, const Vec3<P>* x0,
                                  const Vec3<P>* x1, const index_t* left, const index_t* right, const index_t* parent,
-                                 BV* bvs, int* arrivals, int* status) {
+                                 BV* bvs, int* arrivals, int* status, typename bv_traits<BV>::scalar_type margin) {
   const index_t k = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
   if (k >= n) return;
   const Face f = faces[leaf_primitive[k]];
   BV bv;
   Vec3<P> center;
-  lwsccd::detail::leaf_volume(f, x0, x1, bv, center);
+  lwsccd::detail::leaf_volume(f, x0, x1, bv, center, margin);
   if (!is_finite(center)) status[0] = 1;
   index_t node = n - 1 + k;
   bvs[node] = bv;
@@ -243,7 +243,7 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
   const index_t n = num_leaves_;
   detail::bottom_up_kernel<BV, P><<<detail::blocks_for(n), detail::kBvhBlock, 0, stream>>>(
       step.faces.data(), leaf_primitive_.data(), n, step.x0.data(), step.x1.data(), left_.data(), right_.data(),
-      parent_.data(), bvs_.data(), arrivals_.data(), status_.data());
+      parent_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
   LWSCCD_CUDA_CHECK_LAUNCH();
 }
 

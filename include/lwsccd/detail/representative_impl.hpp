@@ -176,13 +176,15 @@ inline index_t RepresentativeTriangles::owner_of_feature(index_t id) const {
 }
 
 template <class P>
-std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
+std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
+                                 double margin) {
+  const float grow = detail::checked_leaf_margin<Aabbf>(margin, "feature_boxes");
   const index_t n = mesh.num_vertices() + mesh.num_edges() + mesh.num_faces();
   std::vector<Aabbf> boxes(static_cast<std::size_t>(n));
   detail::run_on_all_cores([&](unsigned w, unsigned nw) {
     for (index_t id = static_cast<index_t>(w); id < n; id += static_cast<index_t>(nw))
       boxes[id] = feature_box(mesh.faces().data(), mesh.edges().data(), mesh.num_vertices(), mesh.num_edges(), x0.data(),
-                              x1.data(), id);
+                              x1.data(), id, grow);
   });
   return boxes;
 }
