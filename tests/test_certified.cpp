@@ -307,3 +307,28 @@ TEST_CASE("inclusion search: time_from drops the time a caller proved free of co
   params.time_from = 0.5;  // a (false) claim past the only contact: nothing left to find
   CHECK_FALSE(InclusionCcd::vertex_face(through, params).hit);
 }
+
+TEST_CASE("certified screen with a time limit: rejects only pairs whose cubic keeps its sign before it", "[narrow][certified]") {
+  // A vertex falling through a static triangle, crossing its plane at tc: the windowed screen must
+  // keep the pair for every window that reaches tc, and may drop it for windows ending before.
+  using V = Vec3<double>;
+  const V a{0, 0, 0}, b{1, 0, 0}, c{0, 1, 0};
+  std::size_t dropped = 0;
+  for (int k = 1; k <= 20; ++k) {
+    const double tc = std::ldexp(1.0, -k) * 0.75;  // between 2^-(k+1) and 2^-k
+    const VertexFaceQuery<double> q{V{0.2, 0.2, tc}, a, b, c, V{0.2, 0.2, tc - 1.0}, a, b, c};
+    for (int w = 0; w <= 24; ++w) {
+      CcdParams<double> params;
+      params.time_limit = std::ldexp(1.0, -w);
+      const bool rejected = CertifiedCcd::screen(q, params);
+      INFO("contact at " << tc << ", window 2^-" << w);
+      if (params.time_limit > tc) REQUIRE_FALSE(rejected);  // the contact lies in the window
+      dropped += rejected;
+      // Consistent with the refinement: a hit it certifies starts before the window's end.
+      const auto answer = CertifiedCcd::refine(q, params);
+      if (params.time_limit > tc) REQUIRE(answer.certainty == Certainty::hit);
+      else REQUIRE(answer.certainty != Certainty::hit);
+    }
+  }
+  CHECK(dropped > 100);  // windows that end well before the contact are screened out
+}

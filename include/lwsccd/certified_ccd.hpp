@@ -344,7 +344,8 @@ struct certified_compute<float> {
 };
 
 /// The certified path's cheap first step: true when the query is certainly a miss by its swept
-/// boxes or by the cubic's coefficients under the screening bound. Most pairs of a real step end
+/// boxes or by the cubic's coefficients under the screening bound (with params.time_limit < 1:
+/// no contact before it, the cubic restricted to [0, time_limit)). Most pairs of a real step end
 /// here; a batch runs it on every pair and certified_refine on the others.
 template <class Policy, class Q, class T>
 LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
@@ -359,7 +360,19 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   const W k = W(Policy::kCoefficientBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
   const W screen = fadd(fmul(k, screening_bernstein(q, b, m, perturbation)), slack);
   const bool finite = finite_value(screen) && finite_value(b[0]) && finite_value(b[1]) && finite_value(b[2]) && finite_value(b[3]);
-  return finite && same_sign_beyond(b, screen);
+  if (!finite) return false;
+  if (same_sign_beyond(b, screen)) return true;
+  if (!(params.time_limit < T(1))) return false;
+  // Only [0, time_limit) is asked for (mode earliest's windows): the cubic on the smallest dyadic
+  // [0, 2^-k] that covers it, by k left halvings, each adding its rounding to the bound as in the
+  // refinement (a halving is a convex combination, so the bound on [0, 1] still bounds the error).
+  BernsteinPiece<W> piece{{b[0], b[1], b[2], b[3]}, screen, screen};
+  for (int level = 0; level < 30 && std::ldexp(W(1), -(level + 1)) >= W(params.time_limit); ++level) {
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(piece, left, right);
+    piece = left;
+  }
+  return same_sign_beyond(piece.c, piece.bound);
 }
 
 /// The certified classification of a query that certified_screen did not reject (see the file

@@ -333,32 +333,30 @@ void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const V
   }
   lists_[0].counts.pairs = num_vf;
   lists_[1].counts.pairs = num_ee;
-  // Pass 1, both lists at once: the screen, then the survivors compacted.
-  screen<P, true>(view, x0, x1, vf, num_vf, params, lists_[0]);
-  screen<P, false>(view, x0, x1, ee, num_ee, params, lists_[1]);
-  for (auto& l : lists_) {
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-    compact_screened(l);
-  }
   // Mode earliest with CertifiedCcd: growing time windows (CertifiedPolicy::kEarliestFirst), each
-  // refining the screened pairs and running the fallback up to the window's end, until one holds
-  // a contact (as the CPU backend does). Other modes and methods: one window, the caller's.
+  // screening and refining the pairs and running the fallback up to the window's end, until one
+  // holds a contact (as the CPU backend does). Other modes and methods: one window, the caller's.
   const bool windows = kCertified && params.mode == CcdMode::earliest;
   for (int round = 0;; ++round) {
     CcdParams<T> limited = params;
     if constexpr (kCertified)
       if (windows) limited.time_limit = Method::earliest_window(round, params.time_limit);
-    if (round > 0) {  // a window that held no contact: start the refinement over
+    if (round > 0) {  // a window that held no contact: start over with the next one
       gave_up_ = 0;
       earliest_ = T(1);
       for (auto& l : lists_) {
         l.count = l.tested = l.warp_searches = 0;
-        l.counts.certified_hits = l.counts.certified_misses = l.counts.fallbacks = 0;
-        l.num_survivors = l.counts.screened;
-        l.to_test = reinterpret_cast<const Pair*>(l.survivors.data());
-        l.refined = l.num_undecided = 0;
+        l.counts.certified_hits = l.counts.certified_misses = l.counts.fallbacks = l.counts.screened = 0;
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data() + 1, 0, sizeof(unsigned long long), l.stream));
       }
+    }
+    // Pass 1, both lists at once: the screen (of the window: CertifiedCcd's screen also drops the
+    // pairs whose cubic keeps its sign up to the window's end), then the survivors compacted.
+    screen<P, true>(view, x0, x1, vf, num_vf, limited, lists_[0]);
+    screen<P, false>(view, x0, x1, ee, num_ee, limited, lists_[1]);
+    for (auto& l : lists_) {
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
+      compact_screened(l);
     }
     // CertifiedCcd: the refinement of the screened pairs, a chunk of each list at a time.
     if constexpr (kCertified) {
