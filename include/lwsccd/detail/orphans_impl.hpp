@@ -10,6 +10,18 @@ namespace lwsccd {
 
 namespace detail {
 
+// The faces that share a vertex with face f, f excluded, ascending.
+inline void vertex_ring_of_face(const TriangleMesh& mesh, index_t f, std::vector<index_t>& ring) {
+  ring.clear();
+  for (const index_t v : mesh.face(f).v) {
+    const auto fs = mesh.vertex_faces(v);
+    ring.insert(ring.end(), fs.begin(), fs.end());
+  }
+  std::sort(ring.begin(), ring.end());
+  ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+  ring.erase(std::remove(ring.begin(), ring.end(), f), ring.end());
+}
+
 // For each face, the other faces that share at least one vertex with it (CSR, ascending).
 inline void face_vertex_rings(const TriangleMesh& mesh, std::vector<index_t>& offsets, std::vector<index_t>& ids) {
   const index_t nf = mesh.num_faces();
@@ -17,14 +29,7 @@ inline void face_vertex_rings(const TriangleMesh& mesh, std::vector<index_t>& of
   ids.clear();
   std::vector<index_t> row;
   for (index_t f = 0; f < nf; ++f) {
-    row.clear();
-    for (const index_t v : mesh.face(f).v) {
-      const auto fs = mesh.vertex_faces(v);
-      row.insert(row.end(), fs.begin(), fs.end());
-    }
-    std::sort(row.begin(), row.end());
-    row.erase(std::unique(row.begin(), row.end()), row.end());
-    row.erase(std::remove(row.begin(), row.end(), f), row.end());
+    vertex_ring_of_face(mesh, f, row);
     ids.insert(ids.end(), row.begin(), row.end());
     offsets[f + 1] = static_cast<index_t>(ids.size());
   }

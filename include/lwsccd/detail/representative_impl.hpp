@@ -14,21 +14,7 @@ namespace lwsccd {
 
 namespace detail {
 
-// The faces that share a vertex with face f, f excluded, ascending.
-inline void vertex_ring_of_face(const TriangleMesh& mesh, index_t f, std::vector<index_t>& ring) {
-  ring.clear();
-  for (const index_t v : mesh.face(f).v) {
-    const auto fs = mesh.vertex_faces(v);
-    ring.insert(ring.end(), fs.begin(), fs.end());
-  }
-  std::sort(ring.begin(), ring.end());
-  ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
-  ring.erase(std::remove(ring.begin(), ring.end(), f), ring.end());
-}
-
-inline bool edges_touch(const Edge& x, const Edge& y) {
-  return x.v[0] == y.v[0] || x.v[0] == y.v[1] || x.v[1] == y.v[0] || x.v[1] == y.v[1];
-}
+// (vertex_ring_of_face and edges_share_vertex: orphans_impl.hpp.)
 
 // Splits [0, n) into one contiguous range per worker, runs body(begin, end, worker) on each and
 // returns the per-worker outputs in range order (so the concatenation keeps the input order).
@@ -159,7 +145,7 @@ inline RepresentativeTriangles::RepresentativeTriangles(const TriangleMesh& mesh
       for (int k = 0; k < 3; ++k) {
         if (!((represents_[g] >> (3 + k)) & 1u)) continue;
         const index_t other = face_edges_[g].e[k];
-        if (other <= e || detail::edges_touch(mesh.edge(e), mesh.edge(other))) continue;  // listed once; adjacent edges never
+        if (other <= e || detail::edges_share_vertex(mesh.edge(e), mesh.edge(other))) continue;  // listed once; adjacent edges never
         if (layout_.considers(owner, g)) orphans_.ee.emplace_back(mesh.edge_feature_id(e), mesh.edge_feature_id(other));
       }
     }
@@ -236,7 +222,7 @@ inline void add_feature_query(const RepresentativeTriangles& rep, index_t x, ind
     if (t.v[0] == x || t.v[1] == x || t.v[2] == x || !rep.considers(x, y)) return;
     out.vf.emplace_back(x, y);
   } else if (kx == 1 && ky == 1) {
-    if (edges_touch(mesh.edge(x - nv), mesh.edge(y - nv)) || !rep.considers(x, y)) return;
+    if (edges_share_vertex(mesh.edge(x - nv), mesh.edge(y - nv)) || !rep.considers(x, y)) return;
     out.ee.emplace_back(std::min(x, y), std::max(x, y));
   }
 }
