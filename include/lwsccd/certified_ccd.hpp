@@ -367,7 +367,9 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   // [0, 2^-k] that covers it, by k left halvings, each adding its rounding to the bound as in the
   // refinement (a halving is a convex combination, so the bound on [0, 1] still bounds the error).
   BernsteinPiece<W> piece{{b[0], b[1], b[2], b[3]}, screen, screen};
+  // A wider piece that keeps its sign already covers the window: stop there (most pairs do early).
   for (int level = 0; level < 30 && std::ldexp(W(1), -(level + 1)) >= W(params.time_limit); ++level) {
+    if (level > 0 && same_sign_beyond(piece.c, piece.bound)) return true;
     BernsteinPiece<W> left, right;
     bernstein_halves<Policy>(piece, left, right);
     piece = left;
