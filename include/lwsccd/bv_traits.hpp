@@ -6,10 +6,13 @@
 // separation, also after rounding.
 #pragma once
 
+#include <limits>
 #include <type_traits>
 
 #include "lwsccd/aabb.hpp"
 #include "lwsccd/config.hpp"
+#include "lwsccd/detail/rounding.hpp"
+#include "lwsccd/error.hpp"
 #include "lwsccd/obb.hpp"
 #include "lwsccd/vec.hpp"
 
@@ -61,6 +64,16 @@ struct bv_traits<Obb<T>> {
 };
 
 namespace detail {
+// A margin to grow a BV by, in its scalar, rounded up (the grown BV still holds the whole margin).
+// Throws InputError naming `who` unless finite and >= 0.
+template <class BV>
+typename bv_traits<BV>::scalar_type checked_margin(double margin, const char* who) {
+  using S = typename bv_traits<BV>::scalar_type;
+  if (!(margin >= 0) || !(margin <= static_cast<double>(std::numeric_limits<S>::max())))
+    throw InputError(who, "margin", "must be finite and >= 0");
+  return round_up<S>(margin);
+}
+
 template <class BV, class = void>
 struct has_bv_traits : std::false_type {};
 template <class BV>

@@ -68,7 +68,7 @@ class Bvh {
 
   /// As cpu::Bvh::set_leaf_margin: every leaf grown by `margin` from the next build or refit on.
   void set_leaf_margin(double margin) {
-    leaf_margin_ = lwsccd::detail::checked_leaf_margin<BV>(margin, "gpu::Bvh::set_leaf_margin");
+    leaf_margin_ = lwsccd::detail::checked_margin<BV>(margin, "gpu::Bvh::set_leaf_margin");
   }
   double leaf_margin() const { return leaf_margin_; }
 

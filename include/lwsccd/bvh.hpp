@@ -19,21 +19,10 @@
 
 #include "lwsccd/bv_traits.hpp"
 #include "lwsccd/config.hpp"
-#include "lwsccd/detail/rounding.hpp"
-#include "lwsccd/error.hpp"
 #include "lwsccd/mesh.hpp"
 #include "lwsccd/vec.hpp"
 
 namespace lwsccd {
-
-namespace detail {
-// A leaf margin in the BV's scalar, rounded up (so the grown leaf still holds the whole margin).
-template <class BV>
-typename bv_traits<BV>::scalar_type checked_leaf_margin(double margin, const char* who) {
-  if (!(margin >= 0) || !(margin < 1e300)) throw InputError(who, "margin", "must be finite and >= 0");
-  return round_up<typename bv_traits<BV>::scalar_type>(margin);
-}
-}  // namespace detail
 
 /// The sorted leaves a node covers: [first, last] in Morton order.
 struct LeafRange {
@@ -133,7 +122,7 @@ class Bvh {
   /// Grows every leaf by `margin` on every side (rounded outward) from the next build or refit
   /// on: two leaves then overlap whenever their triangles come within 2 * margin, so proximity
   /// queries (a minimum separation d) use d / 2. Throws InputError unless finite and >= 0.
-  void set_leaf_margin(double margin) { leaf_margin_ = detail::checked_leaf_margin<BV>(margin, "cpu::Bvh::set_leaf_margin"); }
+  void set_leaf_margin(double margin) { leaf_margin_ = detail::checked_margin<BV>(margin, "cpu::Bvh::set_leaf_margin"); }
   double leaf_margin() const { return leaf_margin_; }
 
   BvhView<BV> view() const { return nodes_.view(); }

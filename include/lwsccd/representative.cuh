@@ -179,7 +179,7 @@ class FeatureEmitter {
   }
 
   /// Grows every feature box by `margin` from the next run on (as feature_boxes' margin).
-  void set_box_margin(double margin) { margin_ = lwsccd::detail::checked_leaf_margin<Aabbf>(margin, "gpu::FeatureEmitter"); }
+  void set_box_margin(double margin) { margin_ = lwsccd::detail::checked_margin<Aabbf>(margin, "gpu::FeatureEmitter"); }
 
   const Pair* vf() const { return vf_.data(); }
   const Pair* ee() const { return ee_.data(); }

@@ -24,7 +24,7 @@
 #include <vector>
 
 #include "lwsccd/aabb.hpp"
-#include "lwsccd/bvh.hpp"
+#include "lwsccd/bv_traits.hpp"
 #include "lwsccd/config.hpp"
 #include "lwsccd/mesh.hpp"
 #include "lwsccd/oracle.hpp"

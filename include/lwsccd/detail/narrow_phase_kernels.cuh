@@ -29,6 +29,24 @@ LWSCCD_HD CcdParams<T> item_params(const FeatureHit<T>& h, const CcdParams<T>& p
   return p;
 }
 
+// The query of the feature pair p, in T: vertex-face when kVertexFace, else edge-edge.
+template <bool kVertexFace, class T, class P>
+LWSCCD_HD auto gather_query(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                            const std::pair<index_t, index_t>& p) {
+  if constexpr (kVertexFace) return gather_vertex_face<T>(mesh, x0, x1, p.first, p.second);
+  else return gather_edge_edge<T>(mesh, x0, x1, p.first, p.second);
+}
+
+// A method's test of either kind of query.
+template <class Method, class T>
+LWSCCD_HD CcdResult<T> run_method(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
+  return Method::vertex_face(q, params);
+}
+template <class Method, class T>
+LWSCCD_HD CcdResult<T> run_method(const EdgeEdgeQuery<T>& q, const CcdParams<T>& params) {
+  return Method::edge_edge(q, params);
+}
+
 template <class Method, bool kVertexFace, class T, class P, class Item>
 __global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, std::size_t n,
                                  CcdParams<T> params, FeatureHit<T>* staged, unsigned char* flags,
@@ -37,12 +55,7 @@ __global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec
   if (i >= n) return;
   const std::pair<index_t, index_t> p = item_pair(items[i]);
   const CcdParams<T> qp = item_params(items[i], params);
-  CcdResult<T> r;
-  if constexpr (kVertexFace) {
-    r = Method::vertex_face(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), qp);
-  } else {
-    r = Method::edge_edge(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), qp);
-  }
+  const CcdResult<T> r = run_method<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), qp);
   staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
   flags[i] = r.hit ? 1 : 0;
   if (r.gave_up) atomicAdd(gave_up, 1ull);
@@ -64,12 +77,7 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
   const std::pair<index_t, index_t> p = pairs[i];
-  bool rejected;
-  if constexpr (kVertexFace) {
-    rejected = first_step_rejects<Method>(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
-  } else {
-    rejected = first_step_rejects<Method>(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
-  }
+  const bool rejected = first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
   keep[i] = rejected ? 0 : 1;
 }
 
@@ -84,13 +92,9 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks) refine_kernel(MeshFeatures
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
   const std::pair<index_t, index_t> p = pairs[i];
-  CertifiedAnswer<T> a;
   bool later = false;
-  if constexpr (kVertexFace) {
-    a = Method::template refine_until<kDeferLevel>(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params, &later);
-  } else {
-    a = Method::template refine_until<kDeferLevel>(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params, &later);
-  }
+  const CertifiedAnswer<T> a =
+      Method::template refine_until<kDeferLevel>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
   staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
   hit[i] = a.certainty == Certainty::hit ? 1 : 0;
   keep[i] = !later && a.certainty == Certainty::undecided ? 1 : 0;
@@ -109,12 +113,7 @@ __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, con
        w += static_cast<std::size_t>(gridDim.x) * blockDim.x) {
     const std::size_t i = which[w];
     const std::pair<index_t, index_t> p = pairs[i];
-    CertifiedAnswer<T> a;
-    if constexpr (kVertexFace) {
-      a = Method::refine(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second), params);
-    } else {
-      a = Method::refine(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second), params);
-    }
+    const CertifiedAnswer<T> a = Method::refine(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
     staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
     hit[i] = a.certainty == Certainty::hit ? 1 : 0;
     keep[i] = a.certainty == Certainty::undecided ? 1 : 0;
@@ -144,8 +143,7 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
     if (Traits::filtered && !non_penetration_filter(q, qp)) return;
     done = lwsccd::detail::inclusion_try<typename Traits::policy, kStore>(q, qp, kRounds, r);
   };
-  if constexpr (kVertexFace) attempt(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second));
-  else attempt(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second));
+  attempt(gather_query<kVertexFace, T>(mesh, x0, x1, p));
   pending[i] = done ? 0 : 1;
   staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
   flags[i] = done && r.hit ? 1 : 0;
@@ -265,8 +263,7 @@ __global__ void __launch_bounds__(32 * kWarps)
         __syncwarp();
       }
     };
-    if constexpr (kVertexFace) solve(gather_vertex_face<T>(mesh, x0, x1, p.first, p.second));
-    else solve(gather_edge_edge<T>(mesh, x0, x1, p.first, p.second));
+    solve(gather_query<kVertexFace, T>(mesh, x0, x1, p));
     if (lane == 0) {
       staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
       flags[i] = r.hit ? 1 : 0;

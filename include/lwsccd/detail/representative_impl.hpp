@@ -164,7 +164,7 @@ inline index_t RepresentativeTriangles::owner_of_feature(index_t id) const {
 template <class P>
 std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
                                  double margin) {
-  const float grow = detail::checked_leaf_margin<Aabbf>(margin, "feature_boxes");
+  const float grow = detail::checked_margin<Aabbf>(margin, "feature_boxes");
   const index_t n = mesh.num_vertices() + mesh.num_edges() + mesh.num_faces();
   std::vector<Aabbf> boxes(static_cast<std::size_t>(n));
   detail::run_on_all_cores([&](unsigned w, unsigned nw) {
