@@ -52,6 +52,18 @@ void require_gpu_emission_equals_cpu(const TriangleMesh& mesh, const std::vector
     REQUIRE(gpu_pairs.vf == cpu.vf);
     REQUIRE(gpu_pairs.ee == cpu.ee);
   }
+  // Without waiting: buffers sized by a run over an eighth of the candidates; the whole list may
+  // outgrow them (collect() says so, grows them and writes again) and nothing is lost.
+  gpu::FeatureEmitter<> unwaited(rep);
+  unwaited.run(d_x0.data(), d_x1.data(), d_candidates.data(), candidates.size() / 8);
+  const std::size_t part_vf = unwaited.num_vf(), part_ee = unwaited.num_ee();
+  unwaited.enqueue(d_x0.data(), d_x1.data(), d_candidates.data(), candidates.size());
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+  const bool fitted = unwaited.collect();
+  CHECK(fitted == (cpu.vf.size() <= part_vf + part_vf / 4 && cpu.ee.size() <= part_ee + part_ee / 4));
+  const FeaturePairs unwaited_pairs = unwaited.download();
+  REQUIRE(unwaited_pairs.vf == cpu.vf);
+  REQUIRE(unwaited_pairs.ee == cpu.ee);
   FeaturePairs sorted = cpu;
   std::sort(sorted.vf.begin(), sorted.vf.end());
   std::sort(sorted.ee.begin(), sorted.ee.end());

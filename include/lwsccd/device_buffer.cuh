@@ -6,9 +6,11 @@
 #include <atomic>
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "lwsccd/error.hpp"
+#include "lwsccd/mesh.hpp"  // index_t
 
 #include "lwsccd/cuda_check.cuh"
 
@@ -127,6 +129,67 @@ class DeviceBuffer {
   T* ptr_ = nullptr;
   std::size_t size_ = 0;
   std::size_t capacity_ = 0;
+};
+
+
+/// Page-locked host memory (RAII): the target of asynchronous copies of counts, read after a sync.
+template <class T>
+class PinnedBuffer {
+ public:
+  PinnedBuffer() = default;
+  explicit PinnedBuffer(std::size_t n) : size_(n) {
+    void* p = nullptr;
+    LWSCCD_CUDA_CHECK(cudaMallocHost(&p, n * sizeof(T)));
+    ptr_ = static_cast<T*>(p);
+    for (std::size_t i = 0; i < n; ++i) ptr_[i] = T{};
+  }
+  ~PinnedBuffer() {
+    if (ptr_) cudaFreeHost(ptr_);  // never throws from a destructor
+  }
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  PinnedBuffer(PinnedBuffer&& o) noexcept : ptr_(o.ptr_), size_(o.size_) { o.ptr_ = nullptr, o.size_ = 0; }
+  PinnedBuffer& operator=(PinnedBuffer&& o) noexcept {
+    std::swap(ptr_, o.ptr_);
+    std::swap(size_, o.size_);
+    return *this;
+  }
+  T* data() { return ptr_; }
+  const T* data() const { return ptr_; }
+  T& operator[](std::size_t i) { return ptr_[i]; }
+  const T& operator[](std::size_t i) const { return ptr_[i]; }
+  std::size_t size() const { return size_; }
+
+ private:
+  T* ptr_ = nullptr;
+  std::size_t size_ = 0;
+};
+
+/// The length of a device list that is known only on the device (written by an earlier kernel:
+/// no host round trip), bounded by the room its buffer has. `word` null: the length is `room`.
+/// Packed words hold two 32-bit counts (FeatureEmitter: vertex-face high, edge-edge low).
+struct DeviceCount {
+  enum class Part : unsigned char { whole, high, low };
+  const unsigned long long* word = nullptr;
+  Part part = Part::whole;
+  std::size_t room = 0;
+
+  /// A length known on the host.
+  static DeviceCount known(std::size_t n) { return {nullptr, Part::whole, n}; }
+  __device__ std::size_t get() const {
+    if (!word) return room;
+    unsigned long long v = *word;
+    if (part == Part::high) v >>= 32;
+    else if (part == Part::low) v &= 0xffffffffull;
+    return v < room ? static_cast<std::size_t>(v) : room;
+  }
+};
+
+/// A device list of candidate feature pairs and its length (known on the host, or left on the
+/// device by an earlier stage such as gpu::FeatureEmitter).
+struct PairList {
+  const std::pair<index_t, index_t>* pairs = nullptr;
+  DeviceCount count;
 };
 
 }  // namespace lwsccd::gpu

@@ -1,10 +1,8 @@
-// lwsccd — the narrow phase on the GPU: one thread per candidate feature pair, hits compacted
-// with CUB into an output that grows as needed (nothing is dropped), earliest TOI by reduction.
+// lwsccd — the narrow phase on the GPU: a thread per candidate feature pair, hits appended on the
+// device into an output that grows as needed (nothing is dropped), no host round trip inside a run.
 #pragma once
 
 #include <cub/device/device_radix_sort.cuh>
-#include <cub/device/device_reduce.cuh>
-#include <cub/device/device_select.cuh>
 
 #include <algorithm>
 #include <utility>
@@ -47,43 +45,75 @@ struct NarrowPhasePolicy {
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
   /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.
   static constexpr int kRefineMinBlocks = 1;
+  /// Kernels whose input length is read on the device loop over it (grid-stride) in a grid of
+  /// this many blocks per SM (or fewer, where the input's room is smaller).
+  static constexpr int kGridBlocksPerSm = 16;
 };
 
 /// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as
 /// cpu::test_feature_pairs, with the same answers). CertifiedCcd classifies every pair in the
 /// first pass, a thread per pair (its hits are stored at once), and runs its fallback only on the
 /// undecided ones. Other methods with a quick_reject (the conservative inclusion method, filtered
-/// methods) run their cheap first step on every pair, then the full test on the compacted
-/// survivors. The inclusion method's full test runs a thread per query for a few rounds, then a
-/// warp per query still open. Owns its scratch and output buffers (reused; they only grow).
+/// methods) run their cheap first step on every pair, then the full test on the survivors. The
+/// inclusion method's full test runs a thread per query for a few rounds, then a warp per query
+/// still open.
+///
+/// No host round trip inside a run: every list is appended on the device (an atomic counter per
+/// list, warp-aggregated) into buffers sized from earlier runs, every kernel reads its input's
+/// length on the device (grid-stride loops), and mode earliest's windows are all enqueued, each
+/// skipped on the device once an earlier one holds a contact. The host reads the counters once at
+/// the end (collect()); where a list outgrew its buffer the run is enqueued again with room for it,
+/// so nothing is lost. Owns its buffers (reused; they only grow).
 template <class Method, class T, class Policy = NarrowPhasePolicy>
 class NarrowPhase {
  public:
   static_assert(require_ccd_method<Method>::value, "");
   using Pair = std::pair<index_t, index_t>;
 
-  /// Pairs are processed in chunks of `chunk_pairs`; the output starts at `initial_capacity`
-  /// hits and doubles whenever a chunk might not fit (tests force tiny values).
-  explicit NarrowPhase(std::size_t chunk_pairs = std::size_t(1) << 22, std::size_t initial_capacity = 1 << 16)
-      : chunk_(std::max<std::size_t>(chunk_pairs, 1)), initial_capacity_(std::max<std::size_t>(initial_capacity, 1)) {}
+  /// Output buffers start with room for `initial_capacity` pairs and grow (with a rerun) whenever
+  /// a run needed more (tests force tiny values).
+  explicit NarrowPhase(std::size_t initial_capacity = 1 << 16)
+      : initial_capacity_(std::max<std::size_t>(initial_capacity, 1)) {}
 
-  /// Tests `num_vf` vertex-face and `num_ee` edge-edge pairs (device arrays of id pairs). The
-  /// two lists run on streams of their own, overlapping; `stream` is ordered before and after
-  /// them. Synchronizes once per chunk (to size the outputs); the hits stay on the device until
+  /// Tests `num_vf` vertex-face and `num_ee` edge-edge pairs (device arrays of id pairs) and waits
+  /// for the answer (enqueue, then collect until complete). The hits stay on the device until
   /// download().
   template <class P>
   void run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* vf, std::size_t num_vf,
-           const Pair* ee, std::size_t num_ee, const CcdParams<T>& params, cudaStream_t stream = nullptr);
+           const Pair* ee, std::size_t num_ee, const CcdParams<T>& params, cudaStream_t stream = nullptr) {
+    run(mesh, x0, x1, PairList{vf, DeviceCount::known(num_vf)}, PairList{ee, DeviceCount::known(num_ee)}, params, stream);
+  }
+  template <class P>
+  void run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList vf, PairList ee,
+           const CcdParams<T>& params, cudaStream_t stream = nullptr) {
+    do {
+      enqueue(mesh, x0, x1, vf, ee, params, stream);
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    } while (!collect());
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  }
+
+  /// Enqueues a run on `stream` without waiting (the two lists run on streams of their own,
+  /// ordered after `stream`'s earlier work; `stream` waits for them). The inputs must stay valid
+  /// until collect() returns true.
+  template <class P>
+  void enqueue(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList vf, PairList ee,
+               const CcdParams<T>& params, cudaStream_t stream = nullptr);
+
+  /// After `stream` (the last enqueue's) has been synchronized: reads the run's counters. Returns
+  /// false when an output outgrew its buffer (now grown: enqueue the same run again); true when
+  /// the run is complete, in which case the hits' sort by (first, second) is enqueued on `stream`.
+  bool collect();
 
   NarrowPhase(const NarrowPhase&) = delete;
   NarrowPhase& operator=(const NarrowPhase&) = delete;
   ~NarrowPhase() {
     for (auto& l : lists_) {
-      if (l.host_counts) cudaFreeHost(l.host_counts);
       if (l.stream) cudaStreamDestroy(l.stream);
       if (l.done) cudaEventDestroy(l.done);
     }
     if (start_) cudaEventDestroy(start_);
+    if (joined_) cudaEventDestroy(joined_);
   }
 
   /// The method that runs on the first pass's survivors: CertifiedCcd's fallback, or Method.
@@ -91,75 +121,70 @@ class NarrowPhase {
   static constexpr bool kCertified = lwsccd::detail::certified_of<Method>::value;
   static constexpr bool kTwoPass = kCertified || lwsccd::detail::has_quick_reject<Method>::value;
 
+  // Results of the last collected run:
   std::size_t num_vf_hits() const { return lists_[0].count; }
+  std::size_t num_ee_hits() const { return lists_[1].count; }
   /// Pairs of the last run left for the full test by the first pass (all pairs for one-pass methods).
-  std::size_t survivors() const { return lists_[0].num_survivors + lists_[1].num_survivors; }
+  std::size_t survivors() const { return lists_[0].num_full + lists_[1].num_full; }
   /// Queries of the last run that the one-thread attempt left to a warp search (InclusionCcd).
   std::size_t warp_searches() const { return lists_[0].warp_searches + lists_[1].warp_searches; }
-  std::size_t num_ee_hits() const { return lists_[1].count; }
   T earliest_toi() const { return earliest_; }
   std::size_t gave_up() const { return gave_up_; }
+  /// Runs enqueued again because an output outgrew its buffer, since construction.
+  std::size_t reruns() const { return reruns_; }
   /// How the last run answered each list's pairs (vertex-face, edge-edge).
   NarrowPhaseCounts counts(int list) const { return lists_[list].counts; }
-  /// Copies the hits to the host (run() left them sorted on the device, like the CPU backend's).
+  /// Copies the hits to the host, sorted by (first, second) like the CPU backend's.
   NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
+  /// The hits of the last collected run on the device (sorted once `stream` reaches them).
+  const FeatureHit<T>* vf_hits() const { return lists_[0].hits.data(); }
+  const FeatureHit<T>* ee_hits() const { return lists_[1].hits.data(); }
   std::size_t device_bytes() const {
-    std::size_t bytes = toi_.capacity_bytes() + reduce_scratch_.capacity_bytes();
+    std::size_t bytes = control_.capacity_bytes();
     for (const auto& l : lists_)
-      bytes += l.hits.capacity_bytes() + l.staged.capacity_bytes() + l.flags.capacity_bytes() + l.scratch.capacity_bytes() +
-               l.hit_flags.capacity_bytes() +
-               l.survivors.capacity_bytes() + l.undecided.capacity_bytes() + l.counters.capacity_bytes() + l.pending.capacity_bytes() +
-               l.pending_index.capacity_bytes() + l.sorted.capacity_bytes() + l.keys.capacity_bytes() + l.sorted_keys.capacity_bytes();
+      bytes += l.hits.capacity_bytes() + l.sorted.capacity_bytes() + l.keys.capacity_bytes() + l.sorted_keys.capacity_bytes() +
+               l.scratch.capacity_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
+               l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes();
     return bytes;
   }
 
  private:
   // One list's buffers (vertex-face or edge-edge) and its stream.
   struct List {
-    DeviceBuffer<FeatureHit<T>> hits, staged, sorted;  ///< sorted: run()'s final ordering by (first, second)
+    DeviceBuffer<FeatureHit<T>> hits, sorted;    ///< sorted: the ordering by (first, second)
     DeviceBuffer<unsigned long long> keys, sorted_keys;
-    DeviceBuffer<unsigned char> flags, scratch;
-    DeviceBuffer<unsigned long long> survivors;  ///< pairs left after Method::quick_reject, as 64-bit words
-    DeviceBuffer<FeatureHit<T>> undecided;  ///< CertifiedCcd: pairs left to the fallback, with the time excluded before
-    DeviceBuffer<unsigned long long> counters;   ///< [0]: selected, [1]: gave up, [2]: left to warp searches, [3]: certified hits
-    DeviceBuffer<unsigned char> hit_flags;       ///< CertifiedCcd's first pass: certified hits
+    DeviceBuffer<unsigned char> scratch;
+    DeviceBuffer<Pair> survivors;                ///< pairs the first pass keeps
+    DeviceBuffer<FeatureHit<T>> undecided;       ///< CertifiedCcd: left to the fallback, with the time excluded before
+    DeviceBuffer<unsigned> deferred, open;       ///< indices: refinements deferred, searches left to a warp
+    DeviceBuffer<unsigned long long> counters;   ///< detail::NarrowCounter words
+    PinnedBuffer<unsigned long long> host_counters;
+    std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors, undecided, deferred and open
     NarrowPhaseCounts counts;
-    DeviceBuffer<unsigned char> pending;         ///< per query: left open by the one-thread attempt (or refinement deferred)
-    DeviceBuffer<unsigned> pending_index;
-    std::size_t count = 0, num_survivors = 0, tested = 0, warp_searches = 0;
-    std::size_t refined = 0, num_undecided = 0;  ///< CertifiedCcd: screened pairs refined, left undecided
-    unsigned long long* host_counts = nullptr;   ///< pinned copies of counters
-    const Pair* to_test = nullptr;  ///< survivors, or the input pairs for one-pass methods
+    std::size_t count = 0, num_full = 0, warp_searches = 0;
     cudaStream_t stream = nullptr;
     cudaEvent_t done = nullptr;
   };
 
   void ensure_streams();
+  void join_lists(cudaStream_t stream);
   template <class P, bool kVertexFace>
-  void screen(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs, std::size_t n,
-              const CcdParams<T>& params, List& list);
-  void compact_screened(List& list);
+  void enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
+                          const CcdParams<T>& params, List& list);
   template <class P, bool kVertexFace>
-  std::size_t refine_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params,
-                           List& list);
-  void collect_refined(List& list, std::size_t m);
-  template <class In, class Out>
-  void select_flagged(List& list, In in, const unsigned char* flags, Out out, unsigned long long* count, std::size_t n);
-  template <class P, bool kVertexFace>
-  void launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const CcdParams<T>& params, List& list,
-                    std::size_t begin, std::size_t m);
-  void grow_hits(List& list, std::size_t room);
+  void enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
+                         const CcdParams<T>& params, const unsigned long long* limit, List& list);
   void sort_hits(List& list, cudaStream_t stream);
-  T list_minimum(const List& list, cudaStream_t stream);
+  unsigned grid_for(std::size_t room, int block, int per_sm) const;
 
-  std::size_t chunk_, initial_capacity_;
+  std::size_t initial_capacity_;
   List lists_[2];  ///< vertex-face, edge-edge
-  cudaEvent_t start_ = nullptr;
-  DeviceBuffer<T> toi_;
-  DeviceBuffer<unsigned char> reduce_scratch_;
-  std::size_t gave_up_ = 0;
+  cudaEvent_t start_ = nullptr, joined_ = nullptr;
+  cudaStream_t stream_ = nullptr;  ///< the last enqueue's
+  DeviceBuffer<unsigned long long> control_;  ///< detail::NarrowControl words
+  std::size_t gave_up_ = 0, reruns_ = 0;
   T earliest_ = T(1);
-  int deferred_grid_ = 1;        ///< blocks of the deferred refinement kernel (a grid-stride loop)
+  int sms_ = 1;
   bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
 };
 

@@ -1,7 +1,10 @@
 // lwsccd — the end-to-end CCD pipeline on the GPU: same API and same answers as
 // cpu::CcdPipeline (pipeline.hpp). Everything between the positions' upload and the hits'
 // download stays on the device: refit (or rebuild), traversal from the front kept on the device,
-// feature pairs generated, sorted and de-duplicated with CUB, the narrow phase.
+// feature pairs produced once (representative triangles, culled by their boxes), the narrow
+// phase. The feature pairs and the narrow phase run without a host round trip: their lengths stay
+// on the device, and the host reads them once, after the narrow phase (stage times are events,
+// read then too).
 #pragma once
 
 #include <cub/device/device_scan.cuh>
@@ -56,12 +59,10 @@ class CcdPipeline {
       face_body_.upload(layout_.face_body);
       self_collides_.upload(self_collides);
     }
-    LWSCCD_CUDA_CHECK(cudaEventCreate(&mark_[0]));
-    LWSCCD_CUDA_CHECK(cudaEventCreate(&mark_[1]));
+    for (auto& e : mark_) LWSCCD_CUDA_CHECK(cudaEventCreate(&e));
   }
   ~CcdPipeline() {
-    cudaEventDestroy(mark_[0]);
-    cudaEventDestroy(mark_[1]);
+    for (auto& e : mark_) cudaEventDestroy(e);
   }
   CcdPipeline(const CcdPipeline&) = delete;
   CcdPipeline& operator=(const CcdPipeline&) = delete;
@@ -92,26 +93,43 @@ class CcdPipeline {
  private:
   StepResult<T> run_step(std::chrono::steady_clock::time_point start) {
     StepResult<T> r;
-    timed(r.stats.refit_ms, [&] {
-      if (!built_) {
-        bvh_.build(*step_);
-        built_ = r.stats.rebuilt = true;
-      } else {
-        r.stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
-      }
-      if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
-    });
-    timed(r.stats.traverse_ms, [&] { traverse_step(r.stats); });
-    timed(r.stats.features_ms, [&] { feature_pairs(r.stats); });
-    timed(r.stats.narrow_ms, [&] {
-      CcdParams<T> ccd;
-      ccd.min_separation = static_cast<T>(params_.min_separation);
-      ccd.tolerance = static_cast<T>(params_.tolerance);
-      ccd.max_iterations = params_.max_iterations;
-      ccd.mode = params_.mode;
-      narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf(), emitter_.num_vf(), emitter_.ee(),
-                  emitter_.num_ee(), ccd);
-    });
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
+    if (!built_) {
+      bvh_.build(*step_);
+      built_ = r.stats.rebuilt = true;
+    } else {
+      r.stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
+    }
+    if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
+    traverse_step(r.stats);
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[2]));
+    // The feature pairs: the first step waits for their numbers (to size their buffers); later
+    // steps reuse the room earlier ones needed and leave the numbers on the device.
+    if (!emitter_sized_) emitter_.run(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
+    else emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
+    emitter_sized_ = true;
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[3]));
+    CcdParams<T> ccd;
+    ccd.min_separation = static_cast<T>(params_.min_separation);
+    ccd.tolerance = static_cast<T>(params_.tolerance);
+    ccd.max_iterations = params_.max_iterations;
+    ccd.mode = params_.mode;
+    // One host round trip for both stages: their counters, read once the narrow phase is done;
+    // a list that outgrew its buffer has it grown, and what read it runs again.
+    while (true) {
+      narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd);
+      LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[4]));
+      LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[4]));
+      if (emitter_.collect() && narrow_.collect()) break;
+      ++r.stats.reruns;
+    }
+    r.stats.refit_ms = elapsed(mark_[0], mark_[1]);
+    r.stats.traverse_ms = elapsed(mark_[1], mark_[2]);
+    r.stats.features_ms = elapsed(mark_[2], mark_[3]);
+    r.stats.narrow_ms = elapsed(mark_[3], mark_[4]);
+    r.stats.feature_pairs_vf = emitter_.num_vf();
+    r.stats.feature_pairs_ee = emitter_.num_ee();
     r.contacts = narrow_.download();
     r.stats.hits_vf = r.contacts.vf.size();
     r.stats.hits_ee = r.contacts.ee.size();
@@ -144,15 +162,11 @@ class CcdPipeline {
     node_body_generation_ = bvh_.generation();
   }
 
-  template <class F>
-  void timed(double& ms, F&& f) {
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
-    f();
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
-    LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[1]));
+  // Milliseconds between two recorded events (both complete).
+  static double elapsed(cudaEvent_t from, cudaEvent_t to) {
     float t = 0;
-    LWSCCD_CUDA_CHECK(cudaEventElapsedTime(&t, mark_[0], mark_[1]));
-    ms = t;
+    LWSCCD_CUDA_CHECK(cudaEventElapsedTime(&t, from, to));
+    return t;
   }
 
   // Traversal from the front kept on the device (FrontTracker's policy, without a host copy).
@@ -183,14 +197,6 @@ class CcdPipeline {
     stats.triangle_pairs = traversal_.num_results();
   }
 
-  // Candidate triangle pairs -> the feature pairs they represent, kept when their boxes overlap,
-  // plus the kept orphans (each once; no sort).
-  void feature_pairs(StepStats& stats) {
-    emitter_.run(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
-    stats.feature_pairs_vf = emitter_.num_vf();
-    stats.feature_pairs_ee = emitter_.num_ee();
-  }
-
   std::shared_ptr<const TriangleMesh> mesh_;
   BodyLayout layout_;
   PipelineParams params_;
@@ -208,8 +214,9 @@ class CcdPipeline {
   std::size_t front_size_ = 0, size_at_restart_ = 0;
   std::uint64_t generation_ = ~std::uint64_t(0);
   bool reset_next_ = false;
+  bool emitter_sized_ = false;  ///< the emitter's buffers have been sized by a step
   NarrowPhase<Method, T> narrow_;
-  cudaEvent_t mark_[2];
+  cudaEvent_t mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
 };
 
 }  // namespace lwsccd::gpu

@@ -80,6 +80,9 @@ struct StepStats {
   std::size_t narrow_warp_searches = 0;  ///< GPU: of those, searched by a warp (still open after the thread's rounds)
   NarrowPhaseCounts narrow_vf, narrow_ee;  ///< certified hits / misses and fallbacks per list (CertifiedCcd)
   std::size_t peak_device_bytes = 0;
+  /// GPU: stages enqueued again in this step because a list outgrew the room earlier steps gave
+  /// it (the feature pairs' or the narrow phase's; nothing is lost, the step just costs more).
+  std::size_t reruns = 0;
   bool rebuilt = false, restarted_from_root = false;
 };
 

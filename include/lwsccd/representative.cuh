@@ -5,9 +5,11 @@
 // shared emission test (emission_mask, orphan_kept) over every candidate triangle pair and every
 // orphan, stores each item's mask and sums each block's counts (vertex-face and edge-edge packed in
 // one 64-bit word, so one scan gives both offsets); an inclusive scan of the block totals; a write
-// pass that ranks the items within their block and decodes each mask at its offset. The output has exactly the size
-// it needs and the order of the items (candidates, then vertex-face orphans, then edge-edge
-// orphans), the order cpu emit_feature_pairs gives for the same candidate list.
+// pass that ranks the items within their block and decodes each mask at its offset, into buffers
+// sized by earlier runs (enqueue() leaves the totals on the device for the narrow phase; collect()
+// grows a buffer that was short and writes again). The pairs come in the order of the items
+// (candidates, then vertex-face orphans, then edge-edge orphans), the order cpu
+// emit_feature_pairs gives for the same candidate list.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>
@@ -90,7 +92,8 @@ template <int kBlock, class Pair>
 __global__ void __launch_bounds__(kBlock)
     emission_write_kernel(EmissionView m, const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf,
                           std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t items, const unsigned short* masks,
-                          const unsigned long long* block_inclusive, Pair* vf_out, Pair* ee_out) {
+                          const unsigned long long* block_inclusive, Pair* vf_out, std::size_t vf_room, Pair* ee_out,
+                          std::size_t ee_room) {
   using Scan = cub::BlockScan<unsigned long long, kBlock>;
   __shared__ typename Scan::TempStorage storage;
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * kBlock + threadIdx.x;
@@ -101,20 +104,25 @@ __global__ void __launch_bounds__(kBlock)
   offset += blockIdx.x ? block_inclusive[blockIdx.x - 1] : 0ull;
   unsigned long long vf = offset >> 32, ee = offset & 0xffffffffull;
   // (std::pair's assignment is host-only before C++20: the fields are written one by one.)
-  auto put = [](Pair* out, unsigned long long& at, index_t x, index_t y) {
-    out[at].first = x;
-    out[at++].second = y;
+  // Pairs past the room are not stored (the host sees the totals and writes again with more).
+  auto put = [](Pair* out, std::size_t room, unsigned long long& at, index_t x, index_t y) {
+    if (at < room) {
+      out[at].first = x;
+      out[at].second = y;
+    }
+    ++at;
   };
   if (i < n) {
     const TrianglePair p = candidates[i];
     decode_emission(
-        m, p.a, p.b, mask, [&](index_t x, index_t y) { put(vf_out, vf, x, y); }, [&](index_t x, index_t y) { put(ee_out, ee, x, y); });
+        m, p.a, p.b, mask, [&](index_t x, index_t y) { put(vf_out, vf_room, vf, x, y); },
+        [&](index_t x, index_t y) { put(ee_out, ee_room, ee, x, y); });
   } else if (i < n + num_orphan_vf) {
     const Pair q = orphan_vf[i - n];
-    put(vf_out, vf, q.first, q.second);
+    put(vf_out, vf_room, vf, q.first, q.second);
   } else {
     const Pair q = orphan_ee[i - n - num_orphan_vf];
-    put(ee_out, ee, q.first, q.second);
+    put(ee_out, ee_room, ee, q.first, q.second);
   }
 }
 
@@ -141,48 +149,80 @@ class FeatureEmitter {
   }
 
   /// The feature pairs of `n` candidate triangle pairs (device memory; adjacent ones are skipped)
-  /// for the positions x0, x1 (device, one per vertex). Synchronizes `stream` once, to size the
-  /// outputs; the pairs stay on the device (vf(), ee()).
+  /// for the positions x0, x1 (device, one per vertex), and waits for them: the pairs stay on the
+  /// device (vf(), ee()), their numbers are known on the host.
   template <class P>
   void run(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr) {
+    enqueue(x0, x1, candidates, n, stream);
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    if (!collect(stream)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  }
+
+  /// As run() without waiting: the pairs go to buffers sized by earlier runs and their numbers stay
+  /// on the device (vf_list(), ee_list() give them to the narrow phase); call collect() after
+  /// `stream` has been synchronized. The candidates must stay valid until then.
+  template <class P>
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr) {
     const index_t features = num_vertices_ + num_edges_ + num_faces_;
     const EmissionView m = view();
     detail::feature_boxes_kernel<<<static_cast<unsigned>((features + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
                                    stream>>>(m, x0, x1, features, margin_, boxes_.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
+    candidates_ = candidates;
+    num_candidates_ = n;
     const std::size_t items = n + orphan_vf_.size() + orphan_ee_.size();
-    num_vf_ = num_ee_ = 0;
-    if (items == 0) return;
-    const std::size_t blocks = (items + Policy::kBlock - 1) / Policy::kBlock;
-    masks_.resize_discard(items);
-    block_totals_.resize_discard(blocks);
-    detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks), Policy::kBlock, 0, stream>>>(
-        m, candidates, n, orphan_vf_.data(), orphan_vf_.size(), orphan_ee_.data(), items, masks_.data(), block_totals_.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
-                                                    static_cast<std::int64_t>(blocks), stream));
-    scratch_.resize_discard(std::max<std::size_t>(bytes, 1));
-    LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, block_totals_.data(), block_totals_.data(),
-                                                    static_cast<std::int64_t>(blocks), stream));
-    unsigned long long total = 0;
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&total, block_totals_.data() + blocks - 1, sizeof total, cudaMemcpyDeviceToHost, stream));
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    blocks_ = (items + Policy::kBlock - 1) / Policy::kBlock;
+    vf_.resize_discard(std::max<std::size_t>(vf_room_, 1));
+    ee_.resize_discard(std::max<std::size_t>(ee_room_, 1));
+    if (items == 0) {
+      LWSCCD_CUDA_CHECK(cudaMemsetAsync(total_.data(), 0, sizeof(unsigned long long), stream));
+    } else {
+      masks_.resize_discard(items);
+      block_totals_.resize_discard(blocks_);
+      detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
+          m, candidates, n, orphan_vf_.data(), orphan_vf_.size(), orphan_ee_.data(), items, masks_.data(), block_totals_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      std::size_t bytes = 0;
+      LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
+                                                      static_cast<std::int64_t>(blocks_), stream));
+      scratch_.resize_discard(std::max<std::size_t>(bytes, 1));
+      LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, block_totals_.data(), block_totals_.data(),
+                                                      static_cast<std::int64_t>(blocks_), stream));
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(total_.data(), block_totals_.data() + blocks_ - 1, sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToDevice, stream));
+      write(stream);
+    }
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(host_total_.data(), total_.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream));
+  }
+
+  /// After `stream` (the last enqueue's) has been synchronized: reads the numbers of pairs. Returns
+  /// false when a list outgrew its buffer: the buffer is grown and the pairs written again on
+  /// `stream` (what read the short lists must run again); true when the lists were complete.
+  bool collect(cudaStream_t stream = nullptr) {
+    const unsigned long long total = host_total_[0];
     num_vf_ = static_cast<std::size_t>(total >> 32);
     num_ee_ = static_cast<std::size_t>(total & 0xffffffffull);
-    vf_.resize_discard(std::max<std::size_t>(num_vf_, 1));
-    ee_.resize_discard(std::max<std::size_t>(num_ee_, 1));
-    detail::emission_write_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks), Policy::kBlock, 0, stream>>>(
-        m, candidates, n, orphan_vf_.data(), orphan_vf_.size(), orphan_ee_.data(), items, masks_.data(), block_totals_.data(),
-        vf_.data(), ee_.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    if (num_vf_ <= vf_room_ && num_ee_ <= ee_room_) return true;
+    // A quarter more room than needed, so that lists that grow a little do not repeat the writing.
+    vf_room_ = std::max(vf_room_, num_vf_ + num_vf_ / 4);
+    ee_room_ = std::max(ee_room_, num_ee_ + num_ee_ / 4);
+    vf_.resize_discard(std::max<std::size_t>(vf_room_, 1));
+    ee_.resize_discard(std::max<std::size_t>(ee_room_, 1));
+    write(stream);
+    return false;
   }
+
+  /// The lists for the narrow phase, their lengths read on the device (valid after enqueue()).
+  PairList vf_list() const { return {vf_.data(), DeviceCount{total_.data(), DeviceCount::Part::high, vf_room_}}; }
+  PairList ee_list() const { return {ee_.data(), DeviceCount{total_.data(), DeviceCount::Part::low, ee_room_}}; }
+
 
   /// Grows every feature box by `margin` from the next run on (as feature_boxes' margin).
   void set_box_margin(double margin) { margin_ = lwsccd::detail::checked_margin<Aabbf>(margin, "gpu::FeatureEmitter"); }
 
   const Pair* vf() const { return vf_.data(); }
   const Pair* ee() const { return ee_.data(); }
+  /// The numbers of pairs of the last collected run.
   std::size_t num_vf() const { return num_vf_; }
   std::size_t num_ee() const { return num_ee_; }
   /// The swept box of every feature id, from the last run.
@@ -202,11 +242,21 @@ class FeatureEmitter {
   std::size_t device_bytes() const {
     return faces_.capacity_bytes() + edges_.capacity_bytes() + face_edges_.capacity_bytes() + represents_.capacity_bytes() +
            orphan_vf_.capacity_bytes() + orphan_ee_.capacity_bytes() + boxes_.capacity_bytes() + masks_.capacity_bytes() +
-           block_totals_.capacity_bytes() +
+           block_totals_.capacity_bytes() + total_.capacity_bytes() +
            scratch_.capacity_bytes() + vf_.capacity_bytes() + ee_.capacity_bytes();
   }
 
  private:
+  // The writing pass of the last enqueue (the masks and the block totals are still there).
+  void write(cudaStream_t stream) {
+    const std::size_t items = num_candidates_ + orphan_vf_.size() + orphan_ee_.size();
+    if (items == 0) return;
+    detail::emission_write_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
+        view(), candidates_, num_candidates_, orphan_vf_.data(), orphan_vf_.size(), orphan_ee_.data(), items, masks_.data(),
+        block_totals_.data(), vf_.data(), vf_room_, ee_.data(), ee_room_);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  }
+
   EmissionView view() const {
     return {faces_.data(), face_edges_.data(), edges_.data(), represents_.data(), boxes_.data(), num_vertices_, num_edges_};
   }
@@ -220,6 +270,11 @@ class FeatureEmitter {
   DeviceBuffer<Aabbf> boxes_;
   DeviceBuffer<unsigned short> masks_;          ///< per item: its emission mask
   DeviceBuffer<unsigned long long> block_totals_;  ///< per block: packed counts, then their inclusive scan
+  DeviceBuffer<unsigned long long> total_{1};     ///< the last run's packed totals (read by the narrow phase)
+  PinnedBuffer<unsigned long long> host_total_{1};
+  const TrianglePair* candidates_ = nullptr;
+  std::size_t num_candidates_ = 0, blocks_ = 0;
+  std::size_t vf_room_ = 0, ee_room_ = 0;         ///< room of vf_, ee_ (grown by collect())
   std::size_t num_vf_ = 0, num_ee_ = 0;
   float margin_ = 0;
 };

@@ -1,8 +1,10 @@
 // lwsccd — kernels and definitions for narrow_phase.cuh.
 #pragma once
 
-#include <thrust/iterator/counting_iterator.h>
-#include <thrust/iterator/transform_iterator.h>
+#include <cooperative_groups.h>
+#include <cooperative_groups/reduce.h>
+
+#include <cstring>
 
 #include "lwsccd/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase.cuh"
@@ -47,18 +49,126 @@ LWSCCD_HD CcdResult<T> run_method(const EdgeEdgeQuery<T>& q, const CcdParams<T>&
   return Method::edge_edge(q, params);
 }
 
+// Words of a list's counters (device, read by the host once per run).
+enum NarrowCounter : int {
+  kPairs = 0,       // the input's length, as read on the device
+  kSurvivors,       // kept by the first pass (more than the room: the run is repeated with more)
+  kSurvivorsPeak,   // the most kept by an earlier window of mode earliest (its counters are reset)
+  kDeferred,        // CertifiedCcd: refinements left to the second kernel
+  kCertifiedHits,
+  kUndecided,       // CertifiedCcd: left to the fallback
+  kOpen,            // InclusionCcd: searches left to a warp
+  kHits,            // hits appended (more than the room: the run is repeated with more)
+  kGaveUp,
+  kEarliestBits,    // the smallest TOI of a hit, as the bits of a double (ordered like unsigned words for t >= 0)
+  kNarrowCounters
+};
+// Words of a run's control block, shared by both lists.
+enum NarrowControl : int { kSkip = 0, kFallbackLimitBits, kNarrowControlWords };
+
+// A time in [0, 1] as a word whose unsigned order is the time's order (-0 taken as +0).
+template <class T>
+LWSCCD_HD unsigned long long time_bits(T t) {
+  const double d = t > T(0) ? static_cast<double>(t) : 0.0;
+  unsigned long long bits = 0;
+  std::memcpy(&bits, &d, sizeof d);
+  return bits;
+}
+LWSCCD_HD inline double time_of_bits(unsigned long long bits) {
+  double d = 0;
+  std::memcpy(&d, &bits, sizeof d);
+  return d;
+}
+
+// The next free index of a list whose length is *counter: one atomic per group of converged
+// threads (they take consecutive indices).
+__device__ inline unsigned long long append_index(unsigned long long* counter) {
+  namespace cg = cooperative_groups;
+  const cg::coalesced_group g = cg::coalesced_threads();
+  unsigned long long base = 0;
+  if (g.thread_rank() == 0) base = atomicAdd(counter, static_cast<unsigned long long>(g.size()));
+  return g.shfl(base, 0) + g.thread_rank();
+}
+
+// A hit appended (stored where it fits; counted always, so that the host sees the room it needs),
+// and the list's earliest time lowered (one atomic per converged group).
+template <class T>
+__device__ void push_hit(const FeatureHit<T>& hit, FeatureHit<T>* hits, std::size_t room, unsigned long long* counters) {
+  namespace cg = cooperative_groups;
+  const unsigned long long at = append_index(counters + kHits);
+  if (at < room) hits[at] = hit;
+  const cg::coalesced_group g = cg::coalesced_threads();
+  const unsigned long long least = cg::reduce(g, time_bits(hit.toi), cg::less<unsigned long long>());
+  if (g.thread_rank() == 0 && least < counters[kEarliestBits]) atomicMin(counters + kEarliestBits, least);
+}
+
+// The parameters of a full test: mode earliest lowers the time limit to the best certified time
+// (limit_bits; null in other modes).
+template <class T>
+__device__ CcdParams<T> limited_params(CcdParams<T> params, const unsigned long long* limit_bits) {
+  if (limit_bits) {
+    const T limit = static_cast<T>(time_of_bits(*limit_bits));
+    params.time_limit = limit < params.time_limit ? limit : params.time_limit;
+  }
+  return params;
+}
+
+#define LWSCCD_GRID_STRIDE(i, n)                                                                              \
+  for (std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < (n); \
+       i += static_cast<std::size_t>(gridDim.x) * blockDim.x)
+
+// Starts a window of a run (one thread). The first: clears the counters and records the inputs'
+// lengths. A later one (mode earliest): skipped when an earlier window holds a hit, else the
+// counters start over (the survivors' peak kept: an overflow there must still be seen).
+// (Kernels in headers are templates, so that every translation unit may define them.)
+template <class Word = unsigned long long>
+__global__ void window_begin_kernel(unsigned long long* control, unsigned long long* vf_counters, unsigned long long* ee_counters,
+                                    DeviceCount num_vf, DeviceCount num_ee, bool first) {
+  if (first) {
+    control[kSkip] = 0;
+  } else if (control[kSkip] || vf_counters[kHits] + ee_counters[kHits] > 0) {
+    control[kSkip] = 1;
+    return;
+  }
+  control[kFallbackLimitBits] = time_bits(1.0);
+  unsigned long long* lists[2] = {vf_counters, ee_counters};
+  const DeviceCount sizes[2] = {num_vf, num_ee};
+  for (int k = 0; k < 2; ++k) {
+    unsigned long long* c = lists[k];
+    const unsigned long long peak = first ? 0ull : (c[kSurvivors] > c[kSurvivorsPeak] ? c[kSurvivors] : c[kSurvivorsPeak]);
+    for (int w = 0; w < kNarrowCounters; ++w) c[w] = 0;
+    c[kSurvivorsPeak] = peak;
+    c[kPairs] = sizes[k].get();
+    c[kEarliestBits] = time_bits(1.0);
+  }
+}
+
+// Mode earliest: the fallback need not look past the best certified time of either list, nor the
+// window's end (one thread, after both lists' first passes).
+template <class Word = unsigned long long>
+__global__ void fallback_limit_kernel(unsigned long long* control, const unsigned long long* vf_counters,
+                                      const unsigned long long* ee_counters, unsigned long long window_end_bits) {
+  if (control[kSkip]) return;
+  unsigned long long m = window_end_bits;
+  m = vf_counters[kEarliestBits] < m ? vf_counters[kEarliestBits] : m;
+  m = ee_counters[kEarliestBits] < m ? ee_counters[kEarliestBits] : m;
+  control[kFallbackLimitBits] = m;
+}
+
+// A full test of every item (one-pass methods, and the fallbacks that are not inclusion searches).
 template <class Method, bool kVertexFace, class T, class P, class Item>
-__global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, std::size_t n,
-                                 CcdParams<T> params, FeatureHit<T>* staged, unsigned char* flags,
-                                 unsigned long long* gave_up) {
-  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const std::pair<index_t, index_t> p = item_pair(items[i]);
-  const CcdParams<T> qp = item_params(items[i], params);
-  const CcdResult<T> r = run_method<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), qp);
-  staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
-  flags[i] = r.hit ? 1 : 0;
-  if (r.gave_up) atomicAdd(gave_up, 1ull);
+__global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, DeviceCount count,
+                                 CcdParams<T> params, const unsigned long long* control, const unsigned long long* limit_bits,
+                                 unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room) {
+  if (control[kSkip]) return;
+  const CcdParams<T> base = limited_params(params, limit_bits);
+  const std::size_t n = count.get();
+  LWSCCD_GRID_STRIDE(i, n) {
+    const std::pair<index_t, index_t> p = item_pair(items[i]);
+    const CcdResult<T> r = run_method<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), item_params(items[i], base));
+    if (r.hit) push_hit(FeatureHit<T>{p.first, p.second, r.toi}, hits, hit_room, counters);
+    if (r.gave_up) atomicAdd(counters + kGaveUp, 1ull);
+  }
 }
 
 // The first step of a two-pass method on one query: true when it certainly rejects the pair
@@ -69,85 +179,102 @@ __device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
   else return Method::quick_reject(q, params);
 }
 
-// Pass 1: flags the pairs that the method's cheap first step does not reject, a thread per pair.
+// Pass 1: the pairs that the method's cheap first step does not reject, appended to `kept`.
 template <class Method, bool kVertexFace, class T, class P>
-__global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                              const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
-                              unsigned char* keep) {
-  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const std::pair<index_t, index_t> p = pairs[i];
-  const bool rejected = first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
-  keep[i] = rejected ? 0 : 1;
-}
-
-// CertifiedCcd's refinement of the screened pairs, first part: searches that would halve
-// intervals at kDeferLevel or deeper stop (with a stack only that deep) and are flagged in `deferred` (they are the contacts,
-// resolved at the time tolerance, and would hold up whole warps of quick misses); the others
-// store their answer: certified hits staged (flag in `hit`), the undecided flagged in `keep`.
-template <class Method, bool kVertexFace, int kDeferLevel, int kBlock, int kMinBlocks, class T, class P>
-__global__ void __launch_bounds__(kBlock, kMinBlocks) refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                              const std::pair<index_t, index_t>* pairs, std::size_t n, CcdParams<T> params,
-                              FeatureHit<T>* staged, unsigned char* hit, unsigned char* keep, unsigned char* deferred) {
-  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const std::pair<index_t, index_t> p = pairs[i];
-  bool later = false;
-  const CertifiedAnswer<T> a =
-      Method::template refine_until<kDeferLevel>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
-  staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
-  hit[i] = a.certainty == Certainty::hit ? 1 : 0;
-  keep[i] = !later && a.certainty == Certainty::undecided ? 1 : 0;
-  deferred[i] = later ? 1 : 0;
-}
-
-// Second part: the deferred searches, whole, on a compacted list of their indices (its length
-// read on the device: no host sync), answers stored where the first part would have put them.
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                       const std::pair<index_t, index_t>* pairs, const unsigned* which,
-                                       const unsigned long long* count, CcdParams<T> params, FeatureHit<T>* staged,
-                                       unsigned char* hit, unsigned char* keep) {
-  const std::size_t n = static_cast<std::size_t>(*count);
-  for (std::size_t w = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x; w < n;
-       w += static_cast<std::size_t>(gridDim.x) * blockDim.x) {
-    const std::size_t i = which[w];
-    const std::pair<index_t, index_t> p = pairs[i];
-    const CertifiedAnswer<T> a = Method::refine(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
-    staged[i] = FeatureHit<T>{p.first, p.second, a.lo};
-    hit[i] = a.certainty == Certainty::hit ? 1 : 0;
-    keep[i] = a.certainty == Certainty::undecided ? 1 : 0;
+__global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList in, CcdParams<T> params,
+                              const unsigned long long* control, std::pair<index_t, index_t>* kept, std::size_t room,
+                              unsigned long long* counters) {
+  if (control[kSkip]) return;
+  const std::size_t n = in.count.get();
+  LWSCCD_GRID_STRIDE(i, n) {
+    const std::pair<index_t, index_t> p = in.pairs[i];
+    if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) continue;
+    const unsigned long long at = append_index(counters + kSurvivors);
+    if (at < room) {  // (std::pair's assignment is host-only before C++20)
+      kept[at].first = p.first;
+      kept[at].second = p.second;
+    }
   }
 }
 
-struct FlagToCount {
-  LWSCCD_HD unsigned long long operator()(unsigned char f) const { return f; }
-};
+// A refinement's answer stored: a certified hit appended to the hits, an undecided query to the
+// fallback's list with the time before which contact was excluded (a certain miss: nothing).
+template <class T>
+__device__ void settle_refined(const CertifiedAnswer<T>& a, index_t first, index_t second, unsigned long long* counters,
+                               FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided) {
+  if (a.certainty == Certainty::hit) {
+    push_hit(FeatureHit<T>{first, second, a.lo}, hits, hit_room, counters);
+    atomicAdd(counters + kCertifiedHits, 1ull);
+  } else if (a.certainty == Certainty::undecided) {
+    undecided[append_index(counters + kUndecided)] = FeatureHit<T>{first, second, a.lo};
+  }
+}
+
+// CertifiedCcd's refinement of the screened pairs, first part: searches that would halve
+// intervals at kDeferLevel or deeper stop (with a stack only that deep) and are listed in
+// `deferred` (they are the contacts, resolved at the time tolerance, and would hold up whole warps
+// of quick misses); the others settle their answer.
+template <class Method, bool kVertexFace, int kDeferLevel, int kBlock, int kMinBlocks, class T, class P>
+__global__ void __launch_bounds__(kBlock, kMinBlocks)
+    refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
+                  std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                  FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    const std::pair<index_t, index_t> p = kept[i];
+    bool later = false;
+    const CertifiedAnswer<T> a =
+        Method::template refine_until<kDeferLevel>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
+    if (later) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
+    else settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// Second part: the deferred searches, whole (a grid-stride loop keeps the warps full).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                       const std::pair<index_t, index_t>* kept, const unsigned* deferred, CcdParams<T> params,
+                                       const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
+                                       std::size_t hit_room, FeatureHit<T>* undecided) {
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  LWSCCD_GRID_STRIDE(w, n) {
+    const std::pair<index_t, index_t> p = kept[deferred[w]];
+    const CertifiedAnswer<T> a = Method::refine(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
+    settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
 
 // Second pass, first attempt: the same search in one thread per query, for a few rounds and
-// little memory. Most queries end there; the others are flagged `pending` for the warp search
+// little memory. Most queries end there; the others are listed in `open` for the warp search
 // (which starts over and gives the answer the whole search gives).
 template <class Method, bool kVertexFace, class T, class P, int kRounds, int kStore, class Item>
 __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items,
-                                        std::size_t n, CcdParams<T> params,
-                                        FeatureHit<T>* staged, unsigned char* flags, unsigned char* pending,
-                                        unsigned long long* gave_up) {
+                                        DeviceCount count, CcdParams<T> params, const unsigned long long* control,
+                                        const unsigned long long* limit_bits, unsigned long long* counters, FeatureHit<T>* hits,
+                                        std::size_t hit_room, unsigned* open) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
-  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const std::pair<index_t, index_t> p = item_pair(items[i]);
-  const CcdParams<T> qp = item_params(items[i], params);
-  CcdResult<T> r;
-  bool done = true;
-  auto attempt = [&](const auto& q) {
-    if (Traits::filtered && !non_penetration_filter(q, qp)) return;
-    done = lwsccd::detail::inclusion_try<typename Traits::policy, kStore>(q, qp, kRounds, r);
-  };
-  attempt(gather_query<kVertexFace, T>(mesh, x0, x1, p));
-  pending[i] = done ? 0 : 1;
-  staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
-  flags[i] = done && r.hit ? 1 : 0;
-  if (done && r.gave_up) atomicAdd(gave_up, 1ull);
+  if (control[kSkip]) return;
+  const CcdParams<T> base = limited_params(params, limit_bits);
+  const std::size_t n = count.get();
+  LWSCCD_GRID_STRIDE(i, n) {
+    const std::pair<index_t, index_t> p = item_pair(items[i]);
+    const CcdParams<T> qp = item_params(items[i], base);
+    CcdResult<T> r;
+    bool done = true;
+    auto attempt = [&](const auto& q) {
+      if (Traits::filtered && !non_penetration_filter(q, qp)) return;
+      done = lwsccd::detail::inclusion_try<typename Traits::policy, kStore>(q, qp, kRounds, r);
+    };
+    attempt(gather_query<kVertexFace, T>(mesh, x0, x1, p));
+    if (!done) {
+      open[append_index(counters + kOpen)] = static_cast<unsigned>(i);
+      continue;
+    }
+    if (r.hit) push_hit(FeatureHit<T>{p.first, p.second, r.toi}, hits, hit_room, counters);
+    if (r.gave_up) atomicAdd(counters + kGaveUp, 1ull);
+  }
 }
 
 // The rank of `x` among the n sorted boxes at `sorted` (how many come before it).
@@ -169,8 +296,8 @@ LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, con
 template <class Method, bool kVertexFace, class T, class P, int kWarps, class Item>
 __global__ void __launch_bounds__(32 * kWarps)
     inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, const unsigned* which,
-                          std::size_t n, CcdParams<T> params, FeatureHit<T>* staged,
-                          unsigned char* flags, unsigned long long* gave_up) {
+                          CcdParams<T> params, const unsigned long long* control, const unsigned long long* limit_bits,
+                          unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
   using Round = typename Search::Round;
@@ -184,13 +311,16 @@ __global__ void __launch_bounds__(32 * kWarps)
   __shared__ CcdResult<T> results[kWarps];
   __shared__ unsigned long long dropped[kWarps];
   __shared__ int state[kWarps];
+  if (control[kSkip]) return;
+  const CcdParams<T> base = limited_params(params, limit_bits);
+  const std::size_t n = static_cast<std::size_t>(counters[kOpen]);
   const int warp = static_cast<int>(threadIdx.x) / 32, lane = static_cast<int>(threadIdx.x) % 32;
   Search& search = reinterpret_cast<Search*>(storage)[warp];
   for (std::size_t w = static_cast<std::size_t>(blockIdx.x) * kWarps + warp; w < n;
        w += static_cast<std::size_t>(gridDim.x) * kWarps) {
     const std::size_t i = which[w];
     const std::pair<index_t, index_t> p = item_pair(items[i]);
-    const CcdParams<T> qp = item_params(items[i], params);
+    const CcdParams<T> qp = item_params(items[i], base);
     CcdResult<T> r;
     auto solve = [&](const auto& q) {
       if (Traits::filtered && !non_penetration_filter(q, qp)) return;
@@ -265,18 +395,12 @@ __global__ void __launch_bounds__(32 * kWarps)
     };
     solve(gather_query<kVertexFace, T>(mesh, x0, x1, p));
     if (lane == 0) {
-      staged[i] = FeatureHit<T>{p.first, p.second, r.toi};
-      flags[i] = r.hit ? 1 : 0;
-      if (r.gave_up) atomicAdd(gave_up, 1ull);
+      if (r.hit) push_hit(FeatureHit<T>{p.first, p.second, r.toi}, hits, hit_room, counters);
+      if (r.gave_up) atomicAdd(counters + kGaveUp, 1ull);
     }
     __syncwarp();
   }
 }
-
-template <class T>
-struct HitToi {
-  LWSCCD_HD T operator()(const FeatureHit<T>& h) const { return h.toi; }
-};
 
 // The sort key of a hit: (first, second) as one 64-bit word (ids are non-negative 32-bit).
 template <class T>
@@ -285,10 +409,12 @@ __global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, unsign
   if (i < n) keys[i] = (static_cast<unsigned long long>(hits[i].first) << 32) | static_cast<unsigned>(hits[i].second);
 }
 
-template <class T>
-struct MinOp {
-  LWSCCD_HD T operator()(T a, T b) const { return b < a ? b : a; }
-};
+// Room for a list that needed `needed`: a quarter more, so that a list that grows a little from
+// step to step does not repeat runs.
+inline std::size_t grown_room(unsigned long long needed) {
+  const std::size_t n = static_cast<std::size_t>(needed);
+  return n + n / 4 + 1024;
+}
 
 }  // namespace detail
 
@@ -296,134 +422,200 @@ template <class Method, class T, class Policy>
 void NarrowPhase<Method, T, Policy>::ensure_streams() {
   if (start_) return;
   LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&start_, cudaEventDisableTiming));
-  // The deferred searches run in a grid that fills the device a few times over.
-  int device = 0, sms = 0;
+  LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&joined_, cudaEventDisableTiming));
+  int device = 0;
   LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
-  LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  deferred_grid_ = std::max(1, sms) * 8;
+  LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms_, cudaDevAttrMultiProcessorCount, device));
+  sms_ = std::max(1, sms_);
+  control_.resize_discard(detail::kNarrowControlWords);
   for (auto& l : lists_) {
-    void* pinned = nullptr;  // pinned, so that copies of counts are asynchronous
-    LWSCCD_CUDA_CHECK(cudaMallocHost(&pinned, 4 * sizeof(unsigned long long)));
-    l.host_counts = static_cast<unsigned long long*>(pinned);
+    l.host_counters = PinnedBuffer<unsigned long long>(detail::kNarrowCounters);
+    l.counters.resize_discard(detail::kNarrowCounters);
     LWSCCD_CUDA_CHECK(cudaStreamCreateWithFlags(&l.stream, cudaStreamNonBlocking));
     LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&l.done, cudaEventDisableTiming));
   }
 }
 
+// Blocks of a grid-stride kernel over a list with room for `room` items (0: nothing to launch).
+template <class Method, class T, class Policy>
+unsigned NarrowPhase<Method, T, Policy>::grid_for(std::size_t room, int block, int per_sm) const {
+  const std::size_t wanted = (room + static_cast<std::size_t>(block) - 1) / static_cast<std::size_t>(block);
+  return static_cast<unsigned>(std::min<std::size_t>(wanted, static_cast<std::size_t>(sms_) * static_cast<std::size_t>(per_sm)));
+}
+
+// `stream` waits for both lists' work so far; the lists then wait for `stream`.
+template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::join_lists(cudaStream_t stream) {
+  for (auto& l : lists_) {
+    LWSCCD_CUDA_CHECK(cudaEventRecord(l.done, l.stream));
+    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(stream, l.done, 0));
+  }
+}
+
 template <class Method, class T, class Policy>
 template <class P>
-void NarrowPhase<Method, T, Policy>::run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                         const Pair* vf, std::size_t num_vf, const Pair* ee, std::size_t num_ee,
-                                         const CcdParams<T>& params, cudaStream_t stream) {
+void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList vf,
+                                             PairList ee, const CcdParams<T>& params, cudaStream_t stream) {
   ensure_streams();
-  gave_up_ = 0;
-  earliest_ = T(1);
+  stream_ = stream;
   const MeshFeatures view = mesh.view();
-  // The lists start once `stream`'s work (positions, pairs) is done.
-  LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
-  for (auto& l : lists_) {
-    l.count = l.tested = l.warp_searches = 0;
-    l.counts = {};
-    l.counters.resize_discard(4);
-    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data(), 0, 4 * sizeof(unsigned long long), l.stream));
+  const PairList inputs[2] = {vf, ee};
+  for (int k = 0; k < 2; ++k) {
+    List& l = lists_[k];
+    const std::size_t room = inputs[k].count.room;
+    if (l.hit_room == 0) l.hit_room = initial_capacity_;
+    if (l.work_room == 0) l.work_room = initial_capacity_;
+    if (!kTwoPass) l.work_room = std::max(l.work_room, room);  // one-pass methods test the input itself
+    l.work_room = std::max<std::size_t>(l.work_room, 1);
+    l.hits.resize_discard(l.hit_room);
+    if (kTwoPass) l.survivors.resize_discard(l.work_room);
+    if (kCertified) {
+      l.undecided.resize_discard(l.work_room);
+      l.deferred.resize_discard(l.work_room);
+    }
+    if (lwsccd::detail::inclusion_search_of<FullTest>::value) l.open.resize_discard(l.work_room);
   }
-  lists_[0].counts.pairs = num_vf;
-  lists_[1].counts.pairs = num_ee;
   // Mode earliest with CertifiedCcd: growing time windows (CertifiedPolicy::kEarliestFirst), each
-  // screening and refining the pairs and running the fallback up to the window's end, until one
-  // holds a contact (as the CPU backend does). Other modes and methods: one window, the caller's.
+  // screening and refining the pairs and running the fallback up to the window's end; a window
+  // after one that holds a contact is skipped on the device (as the CPU backend stops there).
+  // Other modes and methods: one window, the caller's.
   const bool windows = kCertified && params.mode == CcdMode::earliest;
+  unsigned long long* control = control_.data();
   for (int round = 0;; ++round) {
     CcdParams<T> limited = params;
     if constexpr (kCertified)
       if (windows) limited.time_limit = Method::earliest_window(round, params.time_limit);
-    if (round > 0) {  // a window that held no contact: start over with the next one
-      gave_up_ = 0;
-      earliest_ = T(1);
-      for (auto& l : lists_) {
-        l.count = l.tested = l.warp_searches = 0;
-        l.counts.certified_hits = l.counts.certified_misses = l.counts.fallbacks = l.counts.screened = 0;
-        LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.counters.data() + 1, 0, sizeof(unsigned long long), l.stream));
-      }
+    detail::window_begin_kernel<><<<1, 1, 0, stream>>>(control, lists_[0].counters.data(), lists_[1].counters.data(),
+                                                     vf.count, ee.count, round == 0);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
+    for (auto& l : lists_) LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
+    enqueue_first_pass<P, true>(view, x0, x1, vf, limited, lists_[0]);
+    enqueue_first_pass<P, false>(view, x0, x1, ee, limited, lists_[1]);
+    const unsigned long long* limit = nullptr;
+    if (kCertified && params.mode == CcdMode::earliest) {
+      // The fallback need not look past the best certified time of either list (as the CPU does).
+      join_lists(stream);
+      detail::fallback_limit_kernel<><<<1, 1, 0, stream>>>(control, lists_[0].counters.data(), lists_[1].counters.data(),
+                                                          detail::time_bits(limited.time_limit));
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
+      for (auto& l : lists_) LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
+      limit = control + detail::kFallbackLimitBits;
     }
-    // Pass 1, both lists at once: the screen (of the window: CertifiedCcd's screen also drops the
-    // pairs whose cubic keeps its sign up to the window's end), then the survivors compacted.
-    screen<P, true>(view, x0, x1, vf, num_vf, limited, lists_[0]);
-    screen<P, false>(view, x0, x1, ee, num_ee, limited, lists_[1]);
-    for (auto& l : lists_) {
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-      compact_screened(l);
-    }
-    // CertifiedCcd: the refinement of the screened pairs, a chunk of each list at a time.
-    if constexpr (kCertified) {
-      while (lists_[0].refined < lists_[0].num_survivors || lists_[1].refined < lists_[1].num_survivors) {
-        const std::size_t launched[2] = {refine_chunk<P, true>(view, x0, x1, limited, lists_[0]),
-                                         refine_chunk<P, false>(view, x0, x1, limited, lists_[1])};
-        for (int k = 0; k < 2; ++k) {
-          if (!launched[k]) continue;
-          LWSCCD_CUDA_CHECK(cudaStreamSynchronize(lists_[k].stream));
-          collect_refined(lists_[k], launched[k]);
-        }
-      }
-      for (auto& l : lists_) {
-        l.num_survivors = l.num_undecided;
-        l.to_test = nullptr;  // the fallback reads the undecided records instead
-      }
-    }
-    // Mode earliest: the fallback need not look past the best certified time (as the CPU does).
-    CcdParams<T> full = limited;
-    if (kCertified && params.mode == CcdMode::earliest)
-      for (auto& l : lists_) {
-        const T m = list_minimum(l, l.stream);
-        full.time_limit = m < full.time_limit ? m : full.time_limit;
-      }
-    for (auto& l : lists_) {
-      l.counts.fallbacks = l.num_survivors;
-      l.counts.certified_misses = l.counts.pairs - l.counts.certified_hits - l.num_survivors;
-      // Two-pass methods: room for every survivor at once; one-pass methods grow chunk by chunk.
-      grow_hits(l, std::max(initial_capacity_, l.count + (kTwoPass ? l.num_survivors : 0)));
-    }
-    // The full test, a chunk of each list at a time on its stream: the lists overlap, and a list's
-    // long searches hold up only its own chunk.
-    while (lists_[0].tested < lists_[0].num_survivors || lists_[1].tested < lists_[1].num_survivors) {
-      std::size_t launched[2] = {0, 0};
-      for (int k = 0; k < 2; ++k) {
-        List& l = lists_[k];
-        const std::size_t m = std::min(chunk_, l.num_survivors - l.tested);
-        if (m == 0) continue;
-        if (k == 0) launch_chunk<P, true>(view, x0, x1, full, l, l.tested, m);
-        else launch_chunk<P, false>(view, x0, x1, full, l, l.tested, m);
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts, l.counters.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost,
-                                          l.stream));
-        launched[k] = m;
-      }
-      for (int k = 0; k < 2; ++k) {
-        if (!launched[k]) continue;
-        List& l = lists_[k];
-        LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-        l.count += static_cast<std::size_t>(l.host_counts[0]);
-        l.tested += launched[k];
-      }
-    }
-    // Earliest TOI over both lists, and the bounded-work count.
-    for (auto& l : lists_)
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counts + 1, l.counters.data() + 1, sizeof(unsigned long long),
-                                        cudaMemcpyDeviceToHost, l.stream));
-    for (auto& l : lists_) {
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-      gave_up_ += static_cast<std::size_t>(l.host_counts[1]);
-      const T list_min = list_minimum(l, stream);
-      earliest_ = list_min < earliest_ ? list_min : earliest_;
-    }
-    if (!windows || !(limited.time_limit < params.time_limit) || lists_[0].count + lists_[1].count > 0) break;
+    enqueue_full_test<P, true>(view, x0, x1, vf, limited, limit, lists_[0]);
+    enqueue_full_test<P, false>(view, x0, x1, ee, limited, limit, lists_[1]);
+    join_lists(stream);
+    if (!windows || !(limited.time_limit < params.time_limit)) break;
   }
+  for (auto& l : lists_)
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counters.data(), l.counters.data(), detail::kNarrowCounters * sizeof(unsigned long long),
+                                      cudaMemcpyDeviceToHost, stream));
   earliest_only_ = params.mode == CcdMode::earliest;
-  // The hits in (first, second) order, on the device: the pairs came in any order, and sorting
-  // here is far cheaper than on the host after the download.
+}
+
+// Pass 1 on the list's stream: two-pass methods' cheap first step on every pair (survivors
+// appended); CertifiedCcd's refinement of the survivors (hits and undecided queries appended).
+template <class Method, class T, class Policy>
+template <class P, bool kVertexFace>
+void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                        const PairList& in, const CcdParams<T>& params, List& l) {
+  if constexpr (kTwoPass) {
+    const unsigned blocks = grid_for(in.count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
+    if (blocks == 0) return;
+    detail::screen_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+        mesh, x0, x1, in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  }
+  if constexpr (kCertified) {
+    const std::size_t room = std::min(l.work_room, in.count.room);
+    detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
+        <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
+            l.undecided.data(), l.deferred.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+        mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+        l.hit_room, l.undecided.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  }
+}
+
+// The full test on the list's stream, of CertifiedCcd's undecided queries, of the first pass's
+// survivors, or (one-pass methods) of the input: hits appended after the list's earlier ones.
+template <class Method, class T, class Policy>
+template <class P, bool kVertexFace>
+void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                       const PairList& in, const CcdParams<T>& params,
+                                                       const unsigned long long* limit, List& l) {
+  auto launch = [&](const auto* items, DeviceCount count) {
+    count.room = std::min(count.room, in.count.room);
+    if (count.room == 0) return;
+    if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
+      // A thread per query for a few rounds, then a warp per query still open.
+      detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
+          <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room,
+              l.open.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      constexpr int kWarps = Policy::kSearchWarpsPerBlock;
+      detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps>
+          <<<grid_for(count.room, kWarps, Policy::kGridBlocksPerSm), 32 * kWarps, 0, l.stream>>>(
+              mesh, x0, x1, items, l.open.data(), params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+    } else {
+      detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P>
+          <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+    }
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  };
+  const unsigned long long* counters = l.counters.data();
+  if constexpr (kCertified) launch(l.undecided.data(), DeviceCount{counters + detail::kUndecided, DeviceCount::Part::whole, l.work_room});
+  else if constexpr (kTwoPass) launch(l.survivors.data(), DeviceCount{counters + detail::kSurvivors, DeviceCount::Part::whole, l.work_room});
+  else launch(in.pairs, in.count);
+}
+
+template <class Method, class T, class Policy>
+bool NarrowPhase<Method, T, Policy>::collect() {
+  bool complete = true;
+  for (auto& l : lists_) {
+    const unsigned long long* c = l.host_counters.data();
+    const unsigned long long kept = std::max(c[detail::kSurvivors], c[detail::kSurvivorsPeak]);
+    if (kTwoPass && kept > l.work_room) {
+      l.work_room = detail::grown_room(kept);
+      complete = false;
+    }
+    if (c[detail::kHits] > l.hit_room) {
+      l.hit_room = detail::grown_room(c[detail::kHits]);
+      complete = false;
+    }
+  }
+  if (!complete) {
+    ++reruns_;
+    return false;
+  }
+  gave_up_ = 0;
+  earliest_ = T(1);
+  for (auto& l : lists_) {
+    const unsigned long long* c = l.host_counters.data();
+    const auto pairs = static_cast<std::size_t>(c[detail::kPairs]);
+    l.count = static_cast<std::size_t>(c[detail::kHits]);
+    l.num_full = static_cast<std::size_t>(kCertified ? c[detail::kUndecided] : kTwoPass ? c[detail::kSurvivors] : pairs);
+    l.warp_searches = static_cast<std::size_t>(c[detail::kOpen]);
+    l.counts = {};
+    l.counts.pairs = pairs;
+    l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
+    l.counts.certified_hits = static_cast<std::size_t>(c[detail::kCertifiedHits]);
+    l.counts.fallbacks = l.num_full;
+    l.counts.certified_misses = pairs - l.counts.certified_hits - l.num_full;
+    gave_up_ += static_cast<std::size_t>(c[detail::kGaveUp]);
+    const T list_min = static_cast<T>(detail::time_of_bits(c[detail::kEarliestBits]));
+    earliest_ = list_min < earliest_ ? list_min : earliest_;
+  }
+  // The hits in (first, second) order, on the device: they were appended in any order.
   if (!earliest_only_)
-    for (auto& l : lists_) sort_hits(l, stream);
-  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    for (auto& l : lists_) sort_hits(l, stream_);
+  return true;
 }
 
 template <class Method, class T, class Policy>
@@ -432,7 +624,7 @@ void NarrowPhase<Method, T, Policy>::sort_hits(List& l, cudaStream_t stream) {
   const std::size_t n = l.count;
   l.keys.resize_discard(n);
   l.sorted_keys.resize_discard(n);
-  l.sorted.resize_discard(std::max(n, l.hits.size()));
+  l.sorted.resize_discard(std::max(n, l.hit_room));
   detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(l.hits.data(), n, l.keys.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::size_t bytes = 0;
@@ -441,202 +633,16 @@ void NarrowPhase<Method, T, Policy>::sort_hits(List& l, cudaStream_t stream) {
   l.scratch.resize_discard(std::max({bytes, l.scratch.size(), std::size_t(1)}));
   LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(l.scratch.data(), bytes, l.keys.data(), l.sorted_keys.data(), l.hits.data(),
                                                     l.sorted.data(), static_cast<std::int64_t>(n), 0, 64, stream));
-  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  std::swap(l.hits, l.sorted);
-}
-
-// The hits' buffer with room for `room`, keeping the first `count`.
-template <class Method, class T, class Policy>
-void NarrowPhase<Method, T, Policy>::grow_hits(List& list, std::size_t room) {
-  if (list.hits.size() >= room) return;
-  DeviceBuffer<FeatureHit<T>> bigger(std::max(room, 2 * list.hits.size()));
-  if (list.count)
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.hits.data(), list.count * sizeof(FeatureHit<T>),
-                                      cudaMemcpyDeviceToDevice, list.stream));
-  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-  list.hits = std::move(bigger);
-}
-
-// The smallest TOI among a list's hits so far (1 when none), ordered after `stream`'s work.
-template <class Method, class T, class Policy>
-T NarrowPhase<Method, T, Policy>::list_minimum(const List& l, cudaStream_t stream) {
-  if (l.count == 0) return T(1);
-  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(l.stream));
-  toi_.resize_discard(1);
-  const auto tois = thrust::make_transform_iterator(l.hits.data(), detail::HitToi<T>{});
-  std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, tois, toi_.data(), static_cast<std::int64_t>(l.count),
-                                              detail::MinOp<T>{}, T(1), stream));
-  reduce_scratch_.resize_discard(std::max(bytes, reduce_scratch_.size()));
-  LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(reduce_scratch_.data(), bytes, tois, toi_.data(),
-                                              static_cast<std::int64_t>(l.count), detail::MinOp<T>{}, T(1), stream));
-  T list_min = T(1);
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&list_min, toi_.data(), sizeof(T), cudaMemcpyDeviceToHost, stream));
-  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  return list_min;
-}
-
-// Selects the flagged items of in[0, n) into out (appended: the count lands in *count).
-template <class Method, class T, class Policy>
-template <class In, class Out>
-void NarrowPhase<Method, T, Policy>::select_flagged(List& list, In in, const unsigned char* flags, Out out,
-                                                    unsigned long long* count, std::size_t n) {
-  std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, in, flags, out, count, static_cast<std::int64_t>(n), list.stream));
-  list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
-  LWSCCD_CUDA_CHECK(cub::DeviceSelect::Flagged(list.scratch.data(), bytes, in, flags, out, count, static_cast<std::int64_t>(n),
-                                               list.stream));
-}
-
-// Pass 1 of two-pass methods, on the list's stream: the cheap first step (CertifiedCcd: its
-// screen; others: quick_reject) on every pair at once, a thread per pair with a byte of output
-// each, and the survivors counted into host_counts[0] (read after a sync, by compact_screened).
-// One-pass methods test the input pairs directly.
-template <class Method, class T, class Policy>
-template <class P, bool kVertexFace>
-void NarrowPhase<Method, T, Policy>::screen(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* pairs,
-                                            std::size_t n, const CcdParams<T>& params, List& list) {
-  list.num_survivors = n;
-  list.to_test = pairs;
-  if constexpr (kTwoPass) {
-    if (n == 0) return;
-    list.flags.resize_discard(std::max(list.flags.size(), n));
-    const unsigned blocks = static_cast<unsigned>((n + Policy::kBlock - 1) / Policy::kBlock);
-    detail::screen_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, pairs, n, params,
-                                                                                               list.flags.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    const auto ones = thrust::make_transform_iterator(list.flags.data(), detail::FlagToCount{});
-    std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Sum(nullptr, bytes, ones, list.counters.data(), static_cast<std::int64_t>(n), list.stream));
-    list.scratch.resize_discard(std::max(bytes, list.scratch.size()));
-    LWSCCD_CUDA_CHECK(cub::DeviceReduce::Sum(list.scratch.data(), bytes, ones, list.counters.data(),
-                                             static_cast<std::int64_t>(n), list.stream));
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts, list.counters.data(), sizeof(unsigned long long),
-                                      cudaMemcpyDeviceToHost, list.stream));
-  }
-}
-
-// After screen and a sync of the list's stream: the survivors compacted into a list of exactly
-// their number (as 64-bit words: std::pair's assignment is host-only, and a pair of 32-bit ids
-// is 8 bytes, 8-byte aligned), which the refinement or the full test then reads.
-template <class Method, class T, class Policy>
-void NarrowPhase<Method, T, Policy>::compact_screened(List& list) {
-  static_assert(sizeof(Pair) == sizeof(unsigned long long), "lwsccd: a feature pair must be two 32-bit ids");
-  if (!kTwoPass || list.counts.pairs == 0) return;
-  const std::size_t n = list.counts.pairs, screened = static_cast<std::size_t>(list.host_counts[0]);
-  list.survivors.resize_discard(std::max(list.survivors.size(), screened));
-  select_flagged(list, reinterpret_cast<const unsigned long long*>(list.to_test), list.flags.data(), list.survivors.data(),
-                 list.counters.data(), n);
-  list.num_survivors = screened;
-  list.to_test = reinterpret_cast<const Pair*>(list.survivors.data());
-  list.counts.screened = kCertified ? screened : 0;
-  list.refined = 0;
-  list.num_undecided = 0;
-}
-
-// CertifiedCcd: refines the next chunk of the screened pairs on the list's stream: hits appended
-// to the list's hits, undecided pairs to `undecided` (the full test's input); their counts land in
-// host_counts[0] and [3] (read by collect_refined after a sync).
-template <class Method, class T, class Policy>
-template <class P, bool kVertexFace>
-std::size_t NarrowPhase<Method, T, Policy>::refine_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                                         const CcdParams<T>& params, List& list) {
-  const std::size_t m = std::min(chunk_, list.num_survivors - list.refined);
-  if (m == 0) return 0;
-  const Pair* pairs = list.to_test + list.refined;
-  list.staged.resize_discard(std::max(list.staged.size(), m));
-  list.hit_flags.resize_discard(std::max(list.hit_flags.size(), m));
-  list.flags.resize_discard(std::max(list.flags.size(), m));
-  list.pending.resize_discard(std::max(list.pending.size(), m));
-  list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
-  const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-  detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-      mesh, x0, x1, pairs, m, params, list.staged.data(), list.hit_flags.data(), list.flags.data(),
-      list.pending.data());
-  LWSCCD_CUDA_CHECK_LAUNCH();
-  select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
-                 list.counters.data() + 2, m);
-  const unsigned deferred_blocks = static_cast<unsigned>(
-      std::min<std::size_t>((m + Policy::kBlock - 1) / Policy::kBlock, static_cast<std::size_t>(deferred_grid_)));
-  detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<deferred_blocks, Policy::kBlock, 0, list.stream>>>(
-      mesh, x0, x1, pairs, list.pending_index.data(), list.counters.data() + 2, params, list.staged.data(), list.hit_flags.data(),
-      list.flags.data());
-  LWSCCD_CUDA_CHECK_LAUNCH();
-  // Room for every pair of this chunk after those kept so far (grown keeping them). An undecided
-  // query is kept with the time before which the refinement excluded contact (staged toi): the
-  // fallback need not search there.
-  if (list.undecided.size() < list.num_undecided + m) {
-    DeviceBuffer<FeatureHit<T>> bigger(std::max(list.num_undecided + m, 2 * list.undecided.size()));
-    if (list.num_undecided)
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), list.undecided.data(), list.num_undecided * sizeof(FeatureHit<T>),
-                                        cudaMemcpyDeviceToDevice, list.stream));
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-    list.undecided = std::move(bigger);
-  }
-  grow_hits(list, list.count + m);
-  select_flagged(list, list.staged.data(), list.flags.data(), list.undecided.data() + list.num_undecided, list.counters.data(), m);
-  select_flagged(list, list.staged.data(), list.hit_flags.data(), list.hits.data() + list.count, list.counters.data() + 3, m);
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts, list.counters.data(), 4 * sizeof(unsigned long long),
-                                    cudaMemcpyDeviceToHost, list.stream));
-  return m;
-}
-
-template <class Method, class T, class Policy>
-void NarrowPhase<Method, T, Policy>::collect_refined(List& list, std::size_t m) {
-  list.refined += m;
-  list.num_undecided += static_cast<std::size_t>(list.host_counts[0]);
-  list.count += static_cast<std::size_t>(list.host_counts[3]);
-  list.counts.certified_hits += static_cast<std::size_t>(list.host_counts[3]);
-}
-
-// The full test of to_test[begin, begin + m) on the list's stream, hits compacted after the
-// list's earlier ones (hits has room for every survivor).
-template <class Method, class T, class Policy>
-template <class P, bool kVertexFace>
-void NarrowPhase<Method, T, Policy>::launch_chunk(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                                  const CcdParams<T>& params, List& list, std::size_t begin, std::size_t m) {
-  list.staged.resize_discard(std::max(list.staged.size(), m));
-  list.flags.resize_discard(std::max(list.flags.size(), m));
-  auto launch = [&](const auto* items) {
-    if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
-      // A thread per query for a few rounds, then a warp per query still open.
-      list.pending.resize_discard(std::max(list.pending.size(), m));
-      list.pending_index.resize_discard(std::max(list.pending_index.size(), m));
-      const unsigned thread_blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-      detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
-          <<<thread_blocks, Policy::kBlock, 0, list.stream>>>(mesh, x0, x1, items, m, params, list.staged.data(),
-                                                              list.flags.data(), list.pending.data(), list.counters.data() + 1);
-      LWSCCD_CUDA_CHECK_LAUNCH();
-      select_flagged(list, thrust::counting_iterator<unsigned>(0), list.pending.data(), list.pending_index.data(),
-                     list.counters.data() + 2, m);
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(list.host_counts + 2, list.counters.data() + 2, sizeof(unsigned long long),
-                                        cudaMemcpyDeviceToHost, list.stream));
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(list.stream));
-      const unsigned long long open = list.host_counts[2];
-      list.warp_searches += static_cast<std::size_t>(open);
-      if (open) {
-        constexpr int kWarps = Policy::kSearchWarpsPerBlock;
-        const unsigned blocks = static_cast<unsigned>((open + kWarps - 1) / kWarps);
-        detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps><<<blocks, 32 * kWarps, 0, list.stream>>>(
-            mesh, x0, x1, items, list.pending_index.data(), static_cast<std::size_t>(open), params, list.staged.data(),
-            list.flags.data(), list.counters.data() + 1);
-      }
-    } else {
-      const unsigned blocks = static_cast<unsigned>((m + Policy::kBlock - 1) / Policy::kBlock);
-      detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, list.stream>>>(
-          mesh, x0, x1, items, m, params, list.staged.data(), list.flags.data(), list.counters.data() + 1);
-    }
-    LWSCCD_CUDA_CHECK_LAUNCH();
-  };
-  if constexpr (kCertified) launch(list.undecided.data() + begin);
-  else launch(list.to_test + begin);
-  grow_hits(list, list.count + m);  // (one-pass methods: grown keeping the hits)
-  select_flagged(list, list.staged.data(), list.flags.data(), list.hits.data() + list.count, list.counters.data(), m);
+  std::swap(l.hits, l.sorted);  // (only the handles: the sort writes `sorted`, which is now `hits`)
 }
 
 template <class Method, class T, class Policy>
 NarrowPhaseResult<T> NarrowPhase<Method, T, Policy>::download(cudaStream_t stream) const {
   NarrowPhaseResult<T> r;
+  if (joined_ && stream != stream_) {  // the sort was enqueued on the run's stream
+    LWSCCD_CUDA_CHECK(cudaEventRecord(joined_, stream_));
+    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(stream, joined_, 0));
+  }
   auto fetch = [&](const DeviceBuffer<FeatureHit<T>>& buffer, std::size_t count, std::vector<FeatureHit<T>>& dst) {
     dst.resize(count);
     if (count)
