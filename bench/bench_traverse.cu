@@ -22,16 +22,20 @@ struct Row {
   std::string scene, scheduler, bv, start;
   double median_ms, p10_ms, p90_ms;
   std::size_t nodes, pairs, front;
-  double busy_share;  ///< lazy scheduler: busy / (busy + idle) over all blocks, else -1
+  double busy_share = -1;  ///< lazy scheduler: busy / (busy + idle) over all blocks, else -1
+  unsigned long long steals = 0, failed_steals = 0;  ///< lazy scheduler, summed over the blocks (last run)
 };
 
+// The lazy scheduler's per-block activity of the last run, summed into the row.
 template <class Task>
-double busy_share(const gpu::TraversalOutput<Task>& out, bool lazy) {
-  if (!lazy) return -1;
+void add_activity(const gpu::TraversalOutput<Task>& out, bool lazy, Row& row) {
+  if (!lazy) return;
   unsigned long long busy = 0, idle = 0;
-  const auto c = out.download_block_cycles();
-  for (std::size_t i = 0; i + 1 < c.size(); i += 2) busy += c[i], idle += c[i + 1];
-  return busy + idle ? double(busy) / double(busy + idle) : -1;
+  for (const gpu::BlockActivity& a : out.download_block_activity()) {
+    busy += a.busy_cycles, idle += a.idle_cycles;
+    row.steals += a.steals, row.failed_steals += a.failed_steals;
+  }
+  row.busy_share = busy + idle ? double(busy) / double(busy + idle) : -1;
 }
 
 template <class Scheduler, class BV>
@@ -52,8 +56,8 @@ void scene_rows(const char* scheduler, const char* bv_name, const std::string& n
   const auto ms = lwsccd_bench::time_with_events(reps, from_root);
   const bool lazy = std::string(scheduler) == "lazy-steal";
   rows.push_back({name, scheduler, bv_name, "root", lwsccd_bench::median(ms), lwsccd_bench::percentile(ms, 0.1),
-                  lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), out.num_front(),
-                  busy_share(out, lazy)});
+                  lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), out.num_front()});
+  add_activity(out, lazy, rows.back());
   // From the front of the same step (the refit of an unchanged step keeps it valid).
   gpu::DeviceBuffer<NodePair> front(out.num_front());
   LWSCCD_CUDA_CHECK(cudaMemcpy(front.data(), out.front(), out.num_front() * sizeof(NodePair), cudaMemcpyDeviceToDevice));
@@ -62,8 +66,8 @@ void scene_rows(const char* scheduler, const char* bv_name, const std::string& n
   from_front();
   const auto ms_front = lwsccd_bench::time_with_events(reps, from_front);
   rows.push_back({name, scheduler, bv_name, "front", lwsccd_bench::median(ms_front), lwsccd_bench::percentile(ms_front, 0.1),
-                  lwsccd_bench::percentile(ms_front, 0.9), out.stats().items_processed, out.num_results(), out.num_front(),
-                  busy_share(out, lazy)});
+                  lwsccd_bench::percentile(ms_front, 0.9), out.stats().items_processed, out.num_results(), out.num_front()});
+  add_activity(out, lazy, rows.back());
 }
 
 // Karras's independent traversal: one thread per leaf from the root (it keeps no front).
@@ -81,7 +85,7 @@ void independent_rows(const char* bv_name, const std::string& name, const Step& 
   run();
   const auto ms = lwsccd_bench::time_with_events(reps, run);
   rows.push_back({name, "karras", bv_name, "root", lwsccd_bench::median(ms), lwsccd_bench::percentile(ms, 0.1),
-                  lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), 0, -1});
+                  lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), 0});
 }
 
 template <class Scheduler, class BV>
@@ -116,7 +120,7 @@ void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& s
   for (double x : ms) sum += x;
   rows.push_back({"horse-gallop (mean of 46 steps)", scheduler, bv_name, "tracked", sum / ms.size(),
                   lwsccd_bench::percentile(ms, 0.1), lwsccd_bench::percentile(ms, 0.9), nodes / seq.num_steps(),
-                  pairs / seq.num_steps(), front, -1});
+                  pairs / seq.num_steps(), front});
 }
 
 template <class BV>
@@ -151,20 +155,20 @@ int main(int argc, char** argv) {
     all_schedulers<Obbf>("OBB float", scenes, horse, args.reps, rows);
     std::printf("GPU: %s (sm_%d%d); BVTT self-collision traversal (adjacent pairs skipped), CUDA events, median of %d runs\n",
                 prop.name, prop.major, prop.minor, args.reps);
-    std::printf("%-32s %-11s %-11s %-7s %10s %21s %11s %10s %10s %6s\n", "scene", "scheduler", "bv", "start", "median ms",
-                "p10 - p90 ms", "BVTT nodes", "pairs", "front", "busy");
+    std::printf("%-32s %-11s %-11s %-7s %10s %21s %11s %10s %10s %6s %8s %8s\n", "scene", "scheduler", "bv", "start", "median ms",
+                "p10 - p90 ms", "BVTT nodes", "pairs", "front", "busy", "steals", "failed");
     for (const Row& r : rows)
-      std::printf("%-32s %-11s %-11s %-7s %10.3f %10.3f - %8.3f %11zu %10zu %10zu %6.2f\n", r.scene.c_str(),
+      std::printf("%-32s %-11s %-11s %-7s %10.3f %10.3f - %8.3f %11zu %10zu %10zu %6.2f %8llu %8llu\n", r.scene.c_str(),
                   r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms, r.p90_ms, r.nodes, r.pairs,
-                  r.front, r.busy_share);
+                  r.front, r.busy_share, r.steals, r.failed_steals);
     lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
       const Row& r = rows[i];
       std::fprintf(f,
                      "{\"gpu\": \"%s\", \"scene\": \"%s\", \"scheduler\": \"%s\", \"bv\": \"%s\", \"start\": \"%s\", "
                      "\"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, \"bvtt_nodes\": %zu, \"pairs\": %zu, "
-                     "\"front\": %zu, \"busy_share\": %.4f}",
+                     "\"front\": %zu, \"busy_share\": %.4f, \"steals\": %llu, \"failed_steals\": %llu}",
                      prop.name, r.scene.c_str(), r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms,
-                     r.p90_ms, r.nodes, r.pairs, r.front, r.busy_share);
+                     r.p90_ms, r.nodes, r.pairs, r.front, r.busy_share, r.steals, r.failed_steals);
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-traverse: error: %s\n", e.what());

@@ -332,3 +332,39 @@ TEST_CASE("certified screen with a time limit: rejects only pairs whose cubic ke
   }
   CHECK(dropped > 100);  // windows that end well before the contact are screened out
 }
+
+TEST_CASE("certified screen with a time limit: the window's boxes never drop a contact inside it", "[narrow][certified]") {
+  // Edge-edge and vertex-face contacts at tc, far from the origin and at several scales: every
+  // window that reaches tc keeps the pair (the boxes over [0, w] must still overlap there, with
+  // their rounding and the inputs' perturbation covered), and short windows drop it.
+  using V = Vec3<double>;
+  std::size_t dropped = 0, kept = 0;
+  for (const double scale : {1.0, std::ldexp(1.0, 40), std::ldexp(1.0, -40)}) {
+    for (const double offset : {0.0, 1e6}) {
+      const V o{offset * scale, -offset * scale, offset * scale};
+      auto at = [&](double x, double y, double z) { return V{o.x + x * scale, o.y + y * scale, o.z + z * scale}; };
+      for (int k = 1; k <= 24; ++k) {
+        const double tc = std::ldexp(1.0, -k) * 0.75;
+        const EdgeEdgeQuery<double> ee{at(-1, 0, tc), at(1, 0, tc), at(0, -1, 0), at(0, 1, 0),
+                                       at(-1, 0, tc - 1), at(1, 0, tc - 1), at(0, -1, 0), at(0, 1, 0)};
+        const VertexFaceQuery<double> vf{at(0.2, 0.2, tc), at(0, 0, 0), at(1, 0, 0), at(0, 1, 0),
+                                         at(0.2, 0.2, tc - 1), at(0, 0, 0), at(1, 0, 0), at(0, 1, 0)};
+        for (int w = 1; w <= 26; ++w) {
+          CcdParams<double> params;
+          params.time_limit = std::ldexp(1.0, -w);
+          INFO("scale " << scale << ", offset " << offset << ", contact at " << tc << ", window 2^-" << w);
+          const bool ee_rejected = CertifiedCcd::screen(ee, params), vf_rejected = CertifiedCcd::screen(vf, params);
+          if (params.time_limit > tc) {
+            REQUIRE_FALSE(ee_rejected);
+            REQUIRE_FALSE(vf_rejected);
+            kept += 2;
+          } else {
+            dropped += ee_rejected + vf_rejected;
+          }
+        }
+      }
+    }
+  }
+  CHECK(kept > 500);
+  CHECK(dropped > 1000);
+}

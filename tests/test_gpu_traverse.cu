@@ -154,10 +154,14 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, front, self_out, true) == fresh);
   REQUIRE(gpu_pairs<TinyStatic>(task, front, self_out, true) == fresh);
   REQUIRE(gpu_pairs<TinyLazy>(task, front, self_out, true) == fresh);
-  // Every block of the lazy scheduler reports its busy and idle cycles.
-  const auto cycles = self_out.download_block_cycles();
+  // Every block of the lazy scheduler reports its activity; a block leaves only after a search
+  // for work found nothing anywhere, so each counts at least one failed steal.
+  const auto activity = self_out.download_block_activity();
   unsigned long long busy = 0;
-  for (std::size_t i = 0; i < cycles.size(); i += 2) busy += cycles[i];
+  for (const gpu::BlockActivity& a : activity) {
+    busy += a.busy_cycles;
+    CHECK(a.failed_steals >= 1);
+  }
   CHECK(busy > 0);
 }
 

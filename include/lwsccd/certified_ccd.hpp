@@ -332,6 +332,28 @@ LWSCCD_HD bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& pad) 
   return boxes_apart(first, 4, second, 4, pad);
 }
 
+/// True when, over the window [0, w] (w a power of two <= 1/2), the features' boxes are apart by
+/// more than `pad` per axis: each point's path up to w lies between its position at 0 and at w.
+/// The positions at w are computed (x0 + w (x1 - x0): w's product is exact, the two roundings
+/// move a point by at most 3 u m for w <= 1/2); a perturbation of the inputs by e moves them by at
+/// most e m. So pad = 20 e m (+ underflow's share) covers both sides' errors twice over (e >= u).
+template <class W>
+LWSCCD_HD Vec3<W> position_at(const Vec3<W>& x0, const Vec3<W>& x1, W w) {
+  return {fadd(x0.x, fmul(w, fsub(x1.x, x0.x))), fadd(x0.y, fmul(w, fsub(x1.y, x0.y))), fadd(x0.z, fmul(w, fsub(x1.z, x0.z)))};
+}
+template <class W>
+LWSCCD_HD bool window_boxes_apart(const VertexFaceQuery<W>& q, W w, const Vec3<W>& pad) {
+  const Vec3<W> vertex[2] = {q.p0, position_at(q.p0, q.p1, w)};
+  const Vec3<W> face[6] = {q.a0, q.b0, q.c0, position_at(q.a0, q.a1, w), position_at(q.b0, q.b1, w), position_at(q.c0, q.c1, w)};
+  return boxes_apart(vertex, 2, face, 6, pad);
+}
+template <class W>
+LWSCCD_HD bool window_boxes_apart(const EdgeEdgeQuery<W>& q, W w, const Vec3<W>& pad) {
+  const Vec3<W> first[4] = {q.a0, q.b0, position_at(q.a0, q.a1, w), position_at(q.b0, q.b1, w)};
+  const Vec3<W> second[4] = {q.c0, q.d0, position_at(q.c0, q.c1, w), position_at(q.d0, q.d1, w)};
+  return boxes_apart(first, 4, second, 4, pad);
+}
+
 /// Where the certified path computes: float queries in double (the cubic's coefficients carry
 /// about 16 u of error, which in float is the size of a 1e-6 step's change), others as given.
 template <class T>
@@ -356,6 +378,15 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   const Vec3<W> m = coordinate_magnitude(q);
   // Swept boxes apart: no arithmetic but the pad, so it goes first.
   if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
+  // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
+  // [0, w] that covers it, which are far smaller than the whole step's when w is short.
+  if (params.time_limit <= T(0.5)) {
+    W w = W(0.5);
+    for (int level = 1; level < 30 && w / 2 >= W(params.time_limit); ++level) w /= 2;
+    const W tiny = W(4) * std::numeric_limits<W>::denorm_min();
+    const Vec3<W> pad = vscale(m, W(20) * perturbation);
+    if (window_boxes_apart(q, w, Vec3<W>{fadd(pad.x, tiny), fadd(pad.y, tiny), fadd(pad.z, tiny)})) return true;
+  }
   W b[4];
   const W k = W(Policy::kCoefficientBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
   const W screen = fadd(fmul(k, screening_bernstein(q, b, m, perturbation)), slack);

@@ -74,6 +74,14 @@ struct LazyStealScheduler {
   static constexpr bool kIsLazySteal = true;
 };
 
+/// LazyStealScheduler: what one persistent block did in a launch (clock64 cycles of its SM).
+struct BlockActivity {
+  unsigned long long busy_cycles = 0;    ///< processing items (rounds, batches moved to its deque)
+  unsigned long long idle_cycles = 0;    ///< looking for work: its own deque, steals, waiting for others
+  unsigned long long steals = 0;         ///< batches taken from another block's deque
+  unsigned long long failed_steals = 0;  ///< searches that found nothing to take (or lost the race for it)
+};
+
 /// Owning device outputs of a traversal (reused across calls; they only grow).
 template <class Task>
 class TraversalOutput {
@@ -86,9 +94,9 @@ class TraversalOutput {
   const result_type* results() const { return results_.data(); }
   const item_type* front() const { return front_.data(); }
   const TraversalStats& stats() const { return stats_; }
-  /// LazyStealScheduler: per block, cycles spent processing and cycles spent looking for work.
-  std::vector<unsigned long long> download_block_cycles(cudaStream_t stream = nullptr) const {
-    return prefix(block_cycles_, block_cycles_.size(), stream);
+  /// LazyStealScheduler: what each persistent block did in the last launch.
+  std::vector<BlockActivity> download_block_activity(cudaStream_t stream = nullptr) const {
+    return prefix(block_activity_, block_activity_.size(), stream);
   }
   std::vector<result_type> download_results(cudaStream_t stream = nullptr) const { return prefix(results_, num_results_, stream); }
   std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(front_, num_front_, stream); }
@@ -102,7 +110,7 @@ class TraversalOutput {
   DeviceBuffer<item_type> front_, work_, next_, stacks_, stacks_alt_;
   DeviceBuffer<int> sizes_, sizes_alt_, locks_;
   DeviceBuffer<unsigned long long> deque_ends_;    ///< per block: top, bottom (monotonic)
-  DeviceBuffer<unsigned long long> block_cycles_;  ///< per block: busy, idle (LazyStealScheduler)
+  DeviceBuffer<BlockActivity> block_activity_;  ///< per block (LazyStealScheduler)
   DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
   std::size_t num_results_ = 0, num_front_ = 0;
   TraversalStats stats_;

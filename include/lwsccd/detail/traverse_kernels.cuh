@@ -1,6 +1,7 @@
 // lwsccd — kernels and host loops of traverse.cuh.
 #pragma once
 
+#include <cub/block/block_reduce.cuh>
 #include <cub/block/block_scan.cuh>
 #include <cuda/atomic>
 
@@ -461,6 +462,10 @@ void run_balanced(const Task& task, const typename Task::item_type* seeds, std::
 // deadlock either. The lock is taken with an acquire exchange and released with a release store,
 // which orders the items written or read inside the critical section for the next holder.
 
+struct LargerOf {
+  __device__ unsigned long long operator()(unsigned long long a, unsigned long long b) const { return a < b ? b : a; }
+};
+
 __device__ inline void lock_deque(int* lock) {
   cuda::atomic_ref<int, cuda::thread_scope_device> l(*lock);
   while (l.exchange(1, cuda::memory_order_acquire) != 0) __nanosleep(64);
@@ -485,7 +490,7 @@ template <class Task, class Policy>
 __global__ void __launch_bounds__(Policy::kBlockThreads)
     lazy_steal_kernel(Task task, typename Task::item_type* deques, unsigned long long* ends, int* locks, int capacity,
                       unsigned long long* pending, Outputs<Task> out, typename Task::item_type* hand_back,
-                      unsigned long long* cycles) {
+                      BlockActivity* activity) {
   using Item = typename Task::item_type;
   constexpr int kThreads = Policy::kBlockThreads;
   constexpr int kShared = Policy::kSharedStack;
@@ -495,13 +500,16 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
   static_assert(kPushAbove + kThreads * kK <= kShared, "lwsccd: kSharedStack must hold kPushThreshold plus one round of children");
   static_assert(kPop <= kPushAbove, "lwsccd: kPopSize must not exceed kPushThreshold");
   using Scan = cub::BlockScan<int, kThreads>;
+  using Reduce = cub::BlockReduce<unsigned long long, kThreads>;
   __shared__ Item s_items[kShared];
   __shared__ typename Scan::TempStorage scan_storage;
+  __shared__ typename Reduce::TempStorage reduce_storage;
   __shared__ int s_size, take, action, count, source, moved;
   __shared__ unsigned long long from, out_base;
-  const int t = threadIdx.x, me = blockIdx.x;
+  const int t = threadIdx.x, me = blockIdx.x, blocks = static_cast<int>(gridDim.x);
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(*pending);
   long long busy = 0, idle = 0;
+  unsigned long long steals = 0, failed_steals = 0;
   if (t == 0) s_size = 0;
   __syncthreads();
   while (true) {
@@ -519,17 +527,29 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
           action = 1;
         } else {
           unlock_deque(&locks[me]);
-          int best = -1;
-          unsigned long long best_size = 0;
-          for (int v = 0; v < static_cast<int>(gridDim.x); ++v) {  // every deque's size at once
-            if (v == me) continue;
-            const unsigned long long vt = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v]).load(
-                cuda::memory_order_relaxed);
-            const unsigned long long vb = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v + 1]).load(
-                cuda::memory_order_relaxed);
-            if (vb > vt && vb - vt > best_size) best_size = vb - vt, best = v;
-          }
-          if (best >= 0) {
+        }
+      }
+      __syncthreads();
+      if (action == 0) {
+        // The lazy steal reads every deque's size at once: the whole block reads them (a thread
+        // alone would wait on hundreds of loads one after another) and picks the fullest, ties to
+        // the nearest after this block (so that thieves spread over equal victims).
+        unsigned long long key = 0;
+        for (int v = t; v < blocks; v += kThreads) {
+          if (v == me) continue;
+          const unsigned long long vt =
+              cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v]).load(cuda::memory_order_relaxed);
+          const unsigned long long vb =
+              cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v + 1]).load(cuda::memory_order_relaxed);
+          if (vb <= vt) continue;
+          const unsigned long long distance = static_cast<unsigned long long>((v - me + blocks) % blocks);
+          const unsigned long long candidate = ((vb - vt) << 24) | (0xFFFFFFull - distance);
+          key = candidate > key ? candidate : key;
+        }
+        const unsigned long long best_key = Reduce(reduce_storage).Reduce(key, LargerOf{});
+        if (t == 0) {
+          if (best_key != 0) {
+            const int best = static_cast<int>((me + static_cast<int>(0xFFFFFFull - (best_key & 0xFFFFFFull))) % blocks);
             lock_deque(&locks[best]);
             const unsigned long long vt = ends[2 * best], vb = ends[2 * best + 1];
             if (vb > vt) {  // half of the oldest items (the largest subtrees), at most a pop's worth
@@ -538,11 +558,15 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
               ends[2 * best] = vt + count;
               source = best;
               action = 2;
+              ++steals;
             } else {
               unlock_deque(&locks[best]);
             }
           }
-          if (action == 0) action = live.load(cuda::memory_order_acquire) == 0 ? 3 : 4;
+          if (action == 0) {
+            ++failed_steals;
+            action = live.load(cuda::memory_order_acquire) == 0 ? 3 : 4;
+          }
         }
       }
       __syncthreads();
@@ -608,10 +632,8 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
     busy += clock64() - start;
     __syncthreads();
   }
-  if (t == 0) {
-    cycles[2 * me] = static_cast<unsigned long long>(busy);
-    cycles[2 * me + 1] = static_cast<unsigned long long>(idle);
-  }
+  if (t == 0)
+    activity[me] = {static_cast<unsigned long long>(busy), static_cast<unsigned long long>(idle), steals, failed_steals};
 }
 
 template <class Task, class Policy>
@@ -622,7 +644,7 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
   int capacity = Policy::kDequeCapacity;
   ensure(out.locks_, blocks);
   ensure(out.deque_ends_, 2 * static_cast<std::size_t>(blocks));
-  ensure(out.block_cycles_, 2 * static_cast<std::size_t>(blocks));
+  ensure(out.block_activity_, static_cast<std::size_t>(blocks));
   // A few items for every block to start with (a fresh traversal starts from one root item).
   std::size_t n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kBlockThreads, out,
                                        record_front, stream);
@@ -639,7 +661,7 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     LWSCCD_CUDA_CHECK_LAUNCH();
     lazy_steal_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
         task, out.stacks_.data(), out.deque_ends_.data(), out.locks_.data(), capacity,
-        out.counters_.data() + kCounters - 1, outputs_of(out, record_front), out.next_.data(), out.block_cycles_.data());
+        out.counters_.data() + kCounters - 1, outputs_of(out, record_front), out.next_.data(), out.block_activity_.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
     const auto c = read_counters(out, stream);
     n = static_cast<std::size_t>(c[kAppended]);
