@@ -54,7 +54,7 @@ void scene_rows(const char* scheduler, const char* bv_name, const std::string& n
   auto from_root = [&] { gpu::traverse<Scheduler>(task, root.data(), 1, out, true); };
   from_root();
   const auto ms = lwsccd_bench::time_with_events(reps, from_root);
-  const bool lazy = std::string(scheduler) == "lazy-steal";
+  const bool lazy = std::string(scheduler).rfind("lazy", 0) == 0;
   rows.push_back({name, scheduler, bv_name, "root", lwsccd_bench::median(ms), lwsccd_bench::percentile(ms, 0.1),
                   lwsccd_bench::percentile(ms, 0.9), out.stats().items_processed, out.num_results(), out.num_front()});
   add_activity(out, lazy, rows.back());
@@ -123,6 +123,17 @@ void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& s
                   pairs / seq.num_steps(), front});
 }
 
+// Variants of the lazy scheduler's occupancy and batch knobs (AABB only: the knobs do not depend
+// on the BV), beside its defaults.
+template <class BV>
+void lazy_variants(const char* bv_name, const std::string& name, const Step& step, int reps, std::vector<Row>& rows) {
+  if (std::string(bv_name) != "AABB float") return;
+  // The defaults before 2026-11-23 (128 threads, 2 blocks per SM, batches of 256), and two neighbours.
+  scene_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<256, 2048, 8192, 256, 512, 4, 8>, BV>("lazy-256t-4sm", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 512>, BV>("lazy-seeds512", bv_name, name, step, reps, rows);
+}
+
 template <class BV>
 void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string, Step>>& scenes, const Sequence& horse,
                     int reps, std::vector<Row>& rows) {
@@ -130,11 +141,15 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
     scene_rows<gpu::StaticTaskList<>, BV>("static", bv_name, name, step, reps, rows);
     scene_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, name, step, reps, rows);
     scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
+    lazy_variants<BV>(bv_name, name, step, reps, rows);
     independent_rows<BV>(bv_name, name, step, reps, rows);
   }
   sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
   sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
   sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);
+  if (std::string(bv_name) == "AABB float") {
+    sequence_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, horse, rows);
+  }
 }
 
 }  // namespace

@@ -61,15 +61,22 @@ struct GProximityBalancer {
 /// stack per block, a deque per block in global memory that the owner fills and drains in
 /// batches, and, when a block runs dry, a lazy steal: it reads every deque's size at once and
 /// takes half of the fullest one's oldest items.
-template <int BlockThreads = 128, int SharedStack = 1024, int DequeCapacity = 8192, int PopSize = 256,
-          int PushThreshold = 512>
+///
+/// Defaults measured on an H100 (lwsccd-bench-traverse, docs/TRAVERSAL.md): 512-thread blocks, two
+/// per SM, batches of 512, a start from the root expanded to only 8 items per block. Blocks of 128
+/// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
+template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
+          int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
   static constexpr int kDequeCapacity = DequeCapacity;  ///< items per block deque (global memory)
   static constexpr int kPopSize = PopSize;              ///< items moved from a deque into shared memory at once
   static constexpr int kPushThreshold = PushThreshold;  ///< shared stack size above which a batch goes to the deque
-  static constexpr int kBlocksPerSm = 2;
+  static constexpr int kBlocksPerSm = BlocksPerSm;      ///< persistent blocks per SM (occupancy hides memory latency)
+  /// A start from few seeds (the root) first expands them breadth first to about this many items
+  /// per block (each level a launch and a host sync); stealing spreads the rest.
+  static constexpr int kSeedsPerBlock = SeedsPerBlock;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };

@@ -646,7 +646,7 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
   ensure(out.deque_ends_, 2 * static_cast<std::size_t>(blocks));
   ensure(out.block_activity_, static_cast<std::size_t>(blocks));
   // A few items for every block to start with (a fresh traversal starts from one root item).
-  std::size_t n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kBlockThreads, out,
+  std::size_t n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out,
                                        record_front, stream);
   while (n > 0) {
     while ((n + blocks - 1) / blocks > static_cast<std::size_t>(capacity) / 2) capacity *= 2;  // seeds fit
