@@ -20,6 +20,7 @@
 #include <fstream>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -60,7 +61,8 @@ const char* mode_name(lwsccd::CcdMode m) {
 }
 
 void measure(const Scenario& sc, const std::string& sweep, const ccd_app::PolicyChoice& policies, const std::string& device,
-             int reps, std::vector<Row>& rows, lwsccd::CcdMode mode = lwsccd::CcdMode::contacts) {
+             int reps, std::vector<Row>& rows, lwsccd::CcdMode mode = lwsccd::CcdMode::contacts, bool resident = false) {
+  const std::size_t first_row = rows.size();
   lwsccd::PipelineParams params;
   params.mode = mode;
   auto pipeline = device == "gpu" ? ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies)
@@ -103,7 +105,24 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
   };
   rows.push_back(make_row("first", 0, 1));
   if (outcomes.size() > 1) rows.push_back(make_row("steady", 1, outcomes.size()));
-  for (std::size_t k = rows.size() - (outcomes.size() > 1 ? 2 : 1); k < rows.size(); ++k) {
+  // Device-resident steps (GPU): a fresh pipeline over the same steps, positions copied to the
+  // device before each (not timed) and contacts left there; its steady steps' medians.
+  if (resident && device == "gpu" && steps > 1) {
+    auto on_device = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+    const std::vector<ccd_app::StepOutcome> host_outcomes = std::move(outcomes);
+    outcomes.clear();
+    for (std::size_t i = 0; i < steps; ++i) {
+      const lwsccd::Step step = sc.step(i);
+      const std::optional<lwsccd::StepStats> stats = on_device->step_on_device(step.x0, step.x1);
+      ccd_app::StepOutcome o;
+      if (stats) o.stats = *stats;
+      outcomes.push_back(std::move(o));
+    }
+    Row r = make_row("device", 1, outcomes.size());
+    r.has_truth = false;  // (the contacts stayed on the device)
+    rows.push_back(r);
+  }
+  for (std::size_t k = first_row; k < rows.size(); ++k) {
     const Row& r = rows[k];
     std::printf("%-10s %-24s %9d %-4s %-10s %-18s %-6s %-6s %9.2f %8.3f %8.3f %8.3f %9.2f %10zu %9zu %8zu %9.3g %8.1f", r.sweep.c_str(),
                 r.scene.c_str(), r.triangles, r.policies.bv.c_str(), device == "gpu" ? r.policies.scheduler.c_str() : "cpu",
@@ -226,11 +245,12 @@ int main(int argc, char** argv) {
     }
     if (sweep == "default") {
       if (have_data) {
-        for (const auto& name : truth_scenes) measure(data_scenario(name), "default", ccd_app::PolicyChoice{}, device, args.reps, rows);
-        measure(horse_scenario(), "default", ccd_app::PolicyChoice{}, device, args.reps, rows);
+        for (const auto& name : truth_scenes)
+          measure(data_scenario(name), "default", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true);
+        measure(horse_scenario(), "default", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true);
       }
       std::shared_ptr<lwsccd::ClothBallSimulation> sim;
-      measure(builtin_scenario(100000, sim), "default", ccd_app::PolicyChoice{}, device, args.reps, rows);
+      measure(builtin_scenario(100000, sim), "default", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true);
     }
     if (sweep == "all" || sweep == "scaling") {
       for (const std::size_t n : sizes) {
@@ -247,13 +267,13 @@ int main(int argc, char** argv) {
                    "\"total_ms\": %.4f, \"mean_total_ms\": %.4f, \"refit_ms\": %.4f, \"traverse_ms\": %.4f, \"features_ms\": %.4f, \"narrow_ms\": %.4f, "
                    "\"bvtt_nodes\": %zu, \"front\": %zu, \"triangle_pairs\": %zu, \"feature_pairs\": %zu, \"contacts\": %zu, "
                    "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
-                   "\"peak_device_bytes\": %zu",
+                   "\"peak_device_bytes\": %zu, \"reruns\": %zu",
                    device == "gpu" ? gpu.c_str() : "CPU", r.sweep.c_str(), r.scene.c_str(), r.triangles, r.policies.bv.c_str(),
                    device == "gpu" ? r.policies.scheduler.c_str() : "cpu-work-stealing", r.policies.method.c_str(),
                    r.policies.precision.c_str(), mode_name(r.mode), r.step.c_str(), r.steps_measured, r.total, r.mean_total, r.refit, r.traverse, r.features,
                    r.narrow, r.last.bvtt_nodes, r.last.front_size, r.last.triangle_pairs,
                    r.last.feature_pairs_vf + r.last.feature_pairs_ee, r.last.hits_vf + r.last.hits_ee, r.last.gave_up,
-                   r.last.narrow_survivors, r.last.narrow_warp_searches, r.earliest_toi, r.last.peak_device_bytes);
+                   r.last.narrow_survivors, r.last.narrow_warp_searches, r.earliest_toi, r.last.peak_device_bytes, r.last.reruns);
       if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.truth.false_negatives,
                                   r.truth.false_positives);
       const lwsccd::NarrowPhaseCounts& v = r.last.narrow_vf;

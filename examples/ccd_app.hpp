@@ -4,6 +4,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -33,6 +34,11 @@ class AnyPipeline {
  public:
   virtual ~AnyPipeline() = default;
   virtual StepOutcome step(const std::vector<lwsccd::Vec3d>& x0, const std::vector<lwsccd::Vec3d>& x1) = 0;
+  /// GPU only: the step from positions copied to the device beforehand (not timed), contacts left
+  /// there (gpu::CcdPipeline::step_on_device); nothing for the CPU backend.
+  virtual std::optional<lwsccd::StepStats> step_on_device(const std::vector<lwsccd::Vec3d>&, const std::vector<lwsccd::Vec3d>&) {
+    return std::nullopt;
+  }
 };
 
 template <class T>

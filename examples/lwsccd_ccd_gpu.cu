@@ -6,6 +6,29 @@
 
 namespace ccd_app {
 
+/// PipelineAdapter for gpu::CcdPipeline, which can also leave a step's contacts on the device.
+template <class Pipeline>
+class GpuPipelineAdapter final : public AnyPipeline {
+ public:
+  template <class... Args>
+  explicit GpuPipelineAdapter(Args&&... args) : pipeline_(std::forward<Args>(args)...) {}
+  StepOutcome step(const std::vector<lwsccd::Vec3d>& x0, const std::vector<lwsccd::Vec3d>& x1) override {
+    auto r = pipeline_.step(x0, x1);
+    return {r.stats, to_double(std::move(r.contacts))};
+  }
+  std::optional<lwsccd::StepStats> step_on_device(const std::vector<lwsccd::Vec3d>& x0,
+                                                  const std::vector<lwsccd::Vec3d>& x1) override {
+    x0_.upload(x0);
+    x1_.upload(x1);
+    LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());  // the copies are not part of the step's time
+    return pipeline_.step_on_device(x0_.data(), x1_.data()).stats;
+  }
+
+ private:
+  Pipeline pipeline_;
+  lwsccd::gpu::DeviceBuffer<lwsccd::Vec3d> x0_, x1_;
+};
+
 std::string gpu_name() {
   int devices = 0;
   if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) {
@@ -26,7 +49,7 @@ std::unique_ptr<AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::Tri
     using T = typename decltype(scalar)::type;
     auto make = [&](auto scheduler) -> std::unique_ptr<AnyPipeline> {
       using Pipeline = lwsccd::gpu::CcdPipeline<BV, typename decltype(scheduler)::type, Method, T>;
-      return std::make_unique<PipelineAdapter<Pipeline>>(mesh, layout, params);
+      return std::make_unique<GpuPipelineAdapter<Pipeline>>(mesh, layout, params);
     };
     if (choice.scheduler == "static") return make(Tag<lwsccd::gpu::StaticTaskList<>>{});
     if (choice.scheduler == "gproximity") return make(Tag<lwsccd::gpu::GProximityBalancer<>>{});

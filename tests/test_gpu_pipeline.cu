@@ -193,6 +193,27 @@ TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from devi
   require_same_contacts(gpu_pipeline.step_from_device(x0.data(), x1.data()), c);
   CHECK_THROWS_AS(fresh.step_from_device(scene.step.x0.data(), x1.data()), InputError);
   CHECK_THROWS_AS(fresh.step_from_device(x0.data(), nullptr), InputError);
+  // Contacts left on the device: the same pairs, times and counts once copied.
+  for (int repeat = 0; repeat < 2; ++repeat) {
+    const DeviceStepResult<double> d = gpu_pipeline.step_on_device(x0.data(), x1.data());
+    NarrowPhaseResult<double> copied;
+    copied.vf.resize(d.contacts.num_vf);
+    copied.ee.resize(d.contacts.num_ee);
+    LWSCCD_CUDA_CHECK(cudaMemcpy(copied.vf.data(), d.contacts.vf, copied.vf.size() * sizeof(FeatureHit<double>),
+                                 cudaMemcpyDeviceToHost));
+    LWSCCD_CUDA_CHECK(cudaMemcpy(copied.ee.data(), d.contacts.ee, copied.ee.size() * sizeof(FeatureHit<double>),
+                                 cudaMemcpyDeviceToHost));
+    copied.earliest_toi = d.contacts.earliest_toi;
+    copied.gave_up = d.contacts.gave_up;
+    copied.vf_counts = d.contacts.vf_counts;
+    copied.ee_counts = d.contacts.ee_counts;
+    lwsccd_test::require_same_contacts(copied, c.contacts);
+    lwsccd_test::require_same_counts(d.contacts.vf_counts, c.contacts.vf_counts);
+    lwsccd_test::require_same_counts(d.contacts.ee_counts, c.contacts.ee_counts);
+    CHECK(d.stats.hits_vf == c.stats.hits_vf);
+    CHECK(d.stats.feature_pairs_vf + d.stats.feature_pairs_ee == c.stats.feature_pairs_vf + c.stats.feature_pairs_ee);
+  }
+  CHECK_THROWS_AS(fresh.step_on_device(scene.step.x0.data(), x1.data()), InputError);
 }
 
 TEST_CASE("GPU pipeline over horse-gallop: front tracking equals fresh traversals and the CPU pipeline at every step",

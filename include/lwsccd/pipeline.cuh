@@ -86,6 +86,29 @@ class CcdPipeline {
     return run_step(start);
   }
 
+  /// As step_from_device, with the contacts left in device memory (sorted by pair, valid until the
+  /// next step): nothing crosses to the host but the counters the step reads once.
+  DeviceStepResult<T> step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) {
+    reset_peak_memory();
+    const auto start = std::chrono::steady_clock::now();
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
+    step_->set_positions_from_device(device_x0, device_x1);
+    DeviceStepResult<T> r;
+    run_stages(r.stats);
+    const bool pairs = params_.mode != CcdMode::earliest;
+    r.contacts.vf = narrow_.vf_hits();
+    r.contacts.ee = narrow_.ee_hits();
+    r.contacts.num_vf = pairs ? narrow_.num_vf_hits() : 0;
+    r.contacts.num_ee = pairs ? narrow_.num_ee_hits() : 0;
+    r.contacts.earliest_toi = narrow_.earliest_toi();
+    r.contacts.gave_up = narrow_.gave_up();
+    r.contacts.vf_counts = narrow_.counts(0);
+    r.contacts.ee_counts = narrow_.counts(1);
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));  // the hits' sort is done
+    finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, r.contacts.gave_up, start);
+    return r;
+  }
+
   const TriangleMesh& mesh() const { return *mesh_; }
   const BodyLayout& layout() const { return layout_; }
   const PipelineParams& params() const { return params_; }
@@ -93,16 +116,38 @@ class CcdPipeline {
  private:
   StepResult<T> run_step(std::chrono::steady_clock::time_point start) {
     StepResult<T> r;
+    run_stages(r.stats);
+    r.contacts = narrow_.download();
+    finish_stats(r.stats, r.contacts.vf.size(), r.contacts.ee.size(), r.contacts.gave_up, start);
+    return r;
+  }
+
+  void finish_stats(StepStats& stats, std::size_t hits_vf, std::size_t hits_ee, std::size_t gave_up,
+                    std::chrono::steady_clock::time_point start) {
+    stats.hits_vf = hits_vf;
+    stats.hits_ee = hits_ee;
+    stats.gave_up = gave_up;
+    stats.narrow_survivors = narrow_.survivors();
+    stats.narrow_warp_searches = narrow_.warp_searches();
+    stats.narrow_vf = narrow_.counts(0);
+    stats.narrow_ee = narrow_.counts(1);
+    stats.peak_device_bytes = memory_stats().peak;
+    stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  }
+
+  // Every stage of a step on the device; the narrow phase's hits stay there (sorted on the
+  // default stream once collected).
+  void run_stages(StepStats& stats) {
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
     if (!built_) {
       bvh_.build(*step_);
-      built_ = r.stats.rebuilt = true;
+      built_ = stats.rebuilt = true;
     } else {
-      r.stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
+      stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
     }
     if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
-    traverse_step(r.stats);
+    traverse_step(stats);
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[2]));
     // The feature pairs: the first step waits for their numbers (to size their buffers); later
     // steps reuse the room earlier ones needed and leave the numbers on the device.
@@ -122,25 +167,14 @@ class CcdPipeline {
       LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[4]));
       LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[4]));
       if (emitter_.collect() && narrow_.collect()) break;
-      ++r.stats.reruns;
+      ++stats.reruns;
     }
-    r.stats.refit_ms = elapsed(mark_[0], mark_[1]);
-    r.stats.traverse_ms = elapsed(mark_[1], mark_[2]);
-    r.stats.features_ms = elapsed(mark_[2], mark_[3]);
-    r.stats.narrow_ms = elapsed(mark_[3], mark_[4]);
-    r.stats.feature_pairs_vf = emitter_.num_vf();
-    r.stats.feature_pairs_ee = emitter_.num_ee();
-    r.contacts = narrow_.download();
-    r.stats.hits_vf = r.contacts.vf.size();
-    r.stats.hits_ee = r.contacts.ee.size();
-    r.stats.gave_up = r.contacts.gave_up;
-    r.stats.narrow_survivors = narrow_.survivors();
-    r.stats.narrow_warp_searches = narrow_.warp_searches();
-    r.stats.narrow_vf = narrow_.counts(0);
-    r.stats.narrow_ee = narrow_.counts(1);
-    r.stats.peak_device_bytes = memory_stats().peak;
-    r.stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return r;
+    stats.refit_ms = elapsed(mark_[0], mark_[1]);
+    stats.traverse_ms = elapsed(mark_[1], mark_[2]);
+    stats.features_ms = elapsed(mark_[2], mark_[3]);
+    stats.narrow_ms = elapsed(mark_[3], mark_[4]);
+    stats.feature_pairs_vf = emitter_.num_vf();
+    stats.feature_pairs_ee = emitter_.num_ee();
   }
 
   // LeafFilter::node_body for the current tree (after a build: topology only).

@@ -92,6 +92,24 @@ struct StepResult {
   StepStats stats;
 };
 
+/// A step's contacts left in device memory (gpu::CcdPipeline::step_on_device): the same pairs and
+/// times as NarrowPhaseResult, sorted by pair, valid until the pipeline's next step.
+template <class T>
+struct DeviceContacts {
+  const FeatureHit<T>* vf = nullptr;  ///< num_vf vertex-face hits (device memory)
+  const FeatureHit<T>* ee = nullptr;  ///< num_ee edge-edge hits (device memory)
+  std::size_t num_vf = 0, num_ee = 0;  ///< 0 in mode `earliest`
+  T earliest_toi = T(1);
+  std::size_t gave_up = 0;
+  NarrowPhaseCounts vf_counts, ee_counts;
+};
+
+template <class T>
+struct DeviceStepResult {
+  DeviceContacts<T> contacts;
+  StepStats stats;
+};
+
 namespace cpu {
 
 /// The pipeline on the CPU backend (all cores).
