@@ -59,7 +59,7 @@ lwsccd::NarrowPhaseResult<double> to_double(lwsccd::NarrowPhaseResult<T>&& r) {
 
 /// Wraps any pipeline type with step(x0, x1) -> StepResult<T>.
 template <class Pipeline>
-class PipelineAdapter final : public AnyPipeline {
+class PipelineAdapter : public AnyPipeline {
  public:
   template <class... Args>
   explicit PipelineAdapter(Args&&... args) : pipeline_(std::forward<Args>(args)...) {}
@@ -68,7 +68,7 @@ class PipelineAdapter final : public AnyPipeline {
     return {r.stats, to_double(std::move(r.contacts))};
   }
 
- private:
+ protected:
   Pipeline pipeline_;
 };
 

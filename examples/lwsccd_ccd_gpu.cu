@@ -8,24 +8,18 @@ namespace ccd_app {
 
 /// PipelineAdapter for gpu::CcdPipeline, which can also leave a step's contacts on the device.
 template <class Pipeline>
-class GpuPipelineAdapter final : public AnyPipeline {
+class GpuPipelineAdapter final : public PipelineAdapter<Pipeline> {
  public:
-  template <class... Args>
-  explicit GpuPipelineAdapter(Args&&... args) : pipeline_(std::forward<Args>(args)...) {}
-  StepOutcome step(const std::vector<lwsccd::Vec3d>& x0, const std::vector<lwsccd::Vec3d>& x1) override {
-    auto r = pipeline_.step(x0, x1);
-    return {r.stats, to_double(std::move(r.contacts))};
-  }
+  using PipelineAdapter<Pipeline>::PipelineAdapter;
   std::optional<lwsccd::StepStats> step_on_device(const std::vector<lwsccd::Vec3d>& x0,
                                                   const std::vector<lwsccd::Vec3d>& x1) override {
     x0_.upload(x0);
     x1_.upload(x1);
     LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());  // the copies are not part of the step's time
-    return pipeline_.step_on_device(x0_.data(), x1_.data()).stats;
+    return this->pipeline_.step_on_device(x0_.data(), x1_.data()).stats;
   }
 
  private:
-  Pipeline pipeline_;
   lwsccd::gpu::DeviceBuffer<lwsccd::Vec3d> x0_, x1_;
 };
 
