@@ -131,7 +131,9 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   // The defaults before 2026-11-23 (128 threads, 2 blocks per SM, batches of 256), and two neighbours.
   scene_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<256, 2048, 8192, 256, 512, 4, 8>, BV>("lazy-256t-4sm", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 512>, BV>("lazy-seeds512", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 0>, BV>("lazy-seeds0", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 1>, BV>("lazy-seeds1", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 256, 256, 2, 1>, BV>("lazy-seeds1-p256", bv_name, name, step, reps, rows);
 }
 
 template <class BV>

@@ -97,6 +97,17 @@ class Bvh {
   DeviceBuffer<unsigned char> scratch_;  ///< centres | scene box | CUB temporary storage
   std::size_t temp_offset_ = 0;          ///< where the CUB part of scratch_ starts
   mutable DeviceBuffer<double> cost_;
+  /// Pinned target of the small reads (cost, root box, status flag): copies that do not block.
+  struct Readback {
+    double cost;
+    BV root;
+    int status;
+  };
+  mutable PinnedBuffer<Readback> readback_{1};
+  // Enqueues the cost's reduction and the copies of cost and root box into readback_.
+  void enqueue_cost(cudaStream_t stream) const;
+  double cost_from_readback() const;
+  void throw_if_flagged(int flag, cudaStream_t stream);
 };
 
 }  // namespace lwsccd::gpu

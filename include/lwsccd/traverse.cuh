@@ -119,6 +119,8 @@ class TraversalOutput {
   DeviceBuffer<unsigned long long> deque_ends_;    ///< per block: top, bottom (monotonic)
   DeviceBuffer<BlockActivity> block_activity_;  ///< per block (LazyStealScheduler)
   DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
+  PinnedBuffer<unsigned long long> host_counters_;  ///< their last reading (pinned: the copy does not block)
+  std::uint64_t counter_reads_ = 0;                 ///< readings so far (traverse() reuses a final one)
   std::size_t num_results_ = 0, num_front_ = 0;
   TraversalStats stats_;
 

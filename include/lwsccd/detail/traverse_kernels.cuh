@@ -324,13 +324,17 @@ inline int resident_blocks(int blocks_per_sm) {
   return std::max(1, sms * blocks_per_sm);
 }
 
+// Reads the counters (one synchronisation; pinned target). The reading stays in host_counters_,
+// so that traverse() need not read again what the scheduler's last read saw.
 template <class Task>
-std::vector<unsigned long long> read_counters(const TraversalOutput<Task>& out, cudaStream_t stream) {
-  std::vector<unsigned long long> c(kCounters);
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(c.data(), out.counters_.data(), kCounters * sizeof(unsigned long long),
+std::vector<unsigned long long> read_counters(TraversalOutput<Task>& out, cudaStream_t stream) {
+  if (out.host_counters_.size() < static_cast<std::size_t>(kCounters))
+    out.host_counters_ = PinnedBuffer<unsigned long long>(kCounters);
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.host_counters_.data(), out.counters_.data(), kCounters * sizeof(unsigned long long),
                                     cudaMemcpyDeviceToHost, stream));
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  return c;
+  ++out.counter_reads_;
+  return std::vector<unsigned long long>(out.host_counters_.data(), out.host_counters_.data() + kCounters);
 }
 
 template <class Task>
@@ -476,7 +480,8 @@ __device__ inline void unlock_deque(int* lock) {
 
 template <class Item>
 __global__ void seed_deques_kernel(const Item* seeds, std::size_t n, Item* deques, unsigned long long* ends,
-                                   int capacity) {
+                                   int capacity, unsigned long long* pending) {
+  if (blockIdx.x == 0 && threadIdx.x == 0) *pending = n;  // the live items: the seeds
   const std::size_t begin = n * blockIdx.x / gridDim.x, end = n * (blockIdx.x + 1) / gridDim.x;
   for (std::size_t i = begin + threadIdx.x; i < end; i += blockDim.x)
     deques[static_cast<std::size_t>(blockIdx.x) * capacity + (i - begin)] = seeds[i];
@@ -654,10 +659,8 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     ensure(out.next_, static_cast<std::size_t>(blocks) * Policy::kSharedStack * 4 + n);
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.locks_.data(), 0, blocks * sizeof(int), stream));
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, 4 * sizeof(unsigned long long), stream));
-    const unsigned long long live = n;
-    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.counters_.data() + kCounters - 1, &live, sizeof live, cudaMemcpyHostToDevice, stream));
     seed_deques_kernel<Item><<<blocks, 128, 0, stream>>>(out.work_.data(), n, out.stacks_.data(), out.deque_ends_.data(),
-                                                         capacity);
+                                                         capacity, out.counters_.data() + kCounters - 1);
     LWSCCD_CUDA_CHECK_LAUNCH();
     lazy_steal_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
         task, out.stacks_.data(), out.deque_ends_.data(), out.locks_.data(), capacity,
@@ -691,11 +694,16 @@ void traverse(const Task& task, const typename Task::item_type* seeds, std::size
   for (int attempt = 0;; ++attempt) {
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
     out.stats_.items_processed = 0;
+    const std::uint64_t reads = out.counter_reads_;
     if constexpr (Scheduler::kIsStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
     else if constexpr (detail::is_lazy_steal<Scheduler>::value)
       detail::run_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
     else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
-    const auto c = detail::read_counters(out, stream);
+    // Every scheduler's last device operation is a reading of the counters (when it made one):
+    // that reading is final, and another would only cost a synchronisation.
+    const auto c = out.counter_reads_ != reads
+                       ? std::vector<unsigned long long>(out.host_counters_.data(), out.host_counters_.data() + detail::kCounters)
+                       : detail::read_counters(out, stream);
     out.stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
     const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
     const std::size_t front = record_front ? static_cast<std::size_t>(c[detail::kFront]) : 0;
