@@ -10,6 +10,7 @@
 #include <fstream>
 #include <limits>
 #include <stdexcept>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -301,18 +302,36 @@ TEST_CASE("load_ply reports a bad ascii number with its line", "[io]") {
              Contains(path) && Contains("line 13") && Contains("bad number '0.2x'") && Contains("vertex 2"));
 }
 
-TEST_CASE("load_ply rejects non-triangle faces naming the count", "[io]") {
+TEST_CASE("load_ply triangulates faces of more than 3 vertices and rejects fewer than 3", "[io]") {
   TempDir dir("ply-quad");
   const std::string path = dir.file("quad.ply");
-  ByteWriter body(false);
-  for (const Vec3d& p : tetra_positions) body.put(p.x).put(p.y).put(p.z);
-  body.put(std::uint8_t{3}).put(0).put(1).put(2);
-  body.put(std::uint8_t{4}).put(0).put(1).put(2).put(3);
-  std::string header = tetra_ply_header("binary_little_endian", "double");
-  header.replace(header.find("element face 4"), 14, "element face 2");
-  write_file(path, header + body.bytes());
+  auto write_faces = [&](const std::vector<std::vector<int>>& faces) {
+    ByteWriter body(false);
+    for (const Vec3d& p : tetra_positions) body.put(p.x).put(p.y).put(p.z);
+    for (const auto& f : faces) {
+      body.put(static_cast<std::uint8_t>(f.size()));
+      for (int v : f) body.put(v);
+    }
+    std::string header = tetra_ply_header("binary_little_endian", "double");
+    const std::string count = "element face " + std::to_string(faces.size());
+    header.replace(header.find("element face 4"), 14, count);
+    write_file(path, header + body.bytes());
+  };
+  write_faces({{0, 1, 2}, {0, 1, 2, 3}});
+  const Frame frame = load_ply(path);
+  REQUIRE(frame.faces.size() == 3);  // the triangle, then the quad's two
+  CHECK(frame.face_source == std::vector<index_t>{0, 1, 1});
+  CHECK(frame.polygon_offsets == std::vector<index_t>{0, 3, 7});
+  std::set<index_t> corners;
+  for (int t = 1; t < 3; ++t)
+    for (int k = 0; k < 3; ++k) corners.insert(frame.faces[t].v[k]);
+  CHECK(corners == std::set<index_t>{0, 1, 2, 3});
+  write_faces({{0, 1, 2}, {0, 1}});
   CHECK_THAT(input_error_message([&] { load_ply(path); }),
-             Contains(path) && Contains("face 1") && Contains("4 vertices") && Contains("only triangles"));
+             Contains(path) && Contains("face 1") && Contains("2 vertices") && Contains("at least 3"));
+  write_faces({{0, 1, 2}, {0, 1, 2, 1}});
+  CHECK_THAT(input_error_message([&] { load_ply(path); }),
+             Contains(path) && Contains("face 1") && Contains("4 vertices") && Contains("repeats vertex 1"));
 }
 
 TEST_CASE("load_ply rejects NaN and infinite coordinates naming the vertex", "[io]") {
@@ -463,14 +482,100 @@ TEST_CASE("load_obj rejects NaN and infinite coordinates naming the line", "[io]
              Contains(path) && Contains("line 3") && Contains("NaN or infinite"));
 }
 
-TEST_CASE("load_obj rejects non-triangle faces naming the line and the count", "[io]") {
+namespace {
+// Twice the signed area of triangle t of `frame` seen along +z.
+double twice_area_z(const Frame& frame, std::size_t t) {
+  const Vec3d& a = frame.positions[frame.faces[t].v[0]];
+  const Vec3d& b = frame.positions[frame.faces[t].v[1]];
+  const Vec3d& c = frame.positions[frame.faces[t].v[2]];
+  return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+}
+}  // namespace
+
+TEST_CASE("load_obj triangulates convex and non-convex polygons, keeping their winding", "[io]") {
+  TempDir dir("obj-polygons");
+  const std::string path = dir.file("polygons.obj");
+  // A unit square (1-4), a regular-ish pentagon (5-9), an L-shaped hexagon of area 3 (10-15),
+  // the L given clockwise (seen from +z) to check that the winding is kept.
+  write_file(path,
+             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+             "v 3 0 0\nv 4 0.5 0\nv 3.8 1.5 0\nv 2.2 1.5 0\nv 2 0.5 0\n"
+             "v 5 0 0\nv 7 0 0\nv 7 1 0\nv 6 1 0\nv 6 2 0\nv 5 2 0\n"
+             "f 1 2 3 4\nf 5 6 7 8 9\nf 10 15 14 13 12 11\nf 1 2 4\n");
+  const Frame frame = load_obj(path);
+  REQUIRE(frame.faces.size() == 2 + 3 + 4 + 1);
+  CHECK(frame.face_source == std::vector<index_t>{0, 0, 1, 1, 1, 2, 2, 2, 2, 3});
+  double square = 0, pentagon = 0, l_shape = 0;
+  for (std::size_t t = 0; t < frame.faces.size(); ++t) {
+    const double a = twice_area_z(frame, t);
+    const index_t f = frame.face_source[t];
+    if (f == 2) {
+      CHECK(a < 0);  // clockwise kept
+      l_shape -= a / 2;
+      // Non-convex: every triangle lies inside the L (its centroid is not in the notch x > 6, y > 1).
+      const Vec3d& p = frame.positions[frame.faces[t].v[0]];
+      const Vec3d& q = frame.positions[frame.faces[t].v[1]];
+      const Vec3d& r = frame.positions[frame.faces[t].v[2]];
+      const double cx = (p.x + q.x + r.x) / 3, cy = (p.y + q.y + r.y) / 3;
+      CHECK_FALSE((cx > 6 && cy > 1));
+    } else {
+      CHECK(a > 0);
+      if (f == 0) square += a / 2;
+      if (f == 1) pentagon += a / 2;
+    }
+  }
+  CHECK(square == Approx(1.0));
+  CHECK(pentagon == Approx(2.3));  // shoelace
+  CHECK(l_shape == Approx(3.0));
+  // Every vertex of the L is used, and no triangle is degenerate.
+  std::set<index_t> used;
+  for (std::size_t t = 5; t < 9; ++t) {
+    CHECK(twice_area_z(frame, t) != 0);
+    for (int k = 0; k < 3; ++k) used.insert(frame.faces[t].v[k]);
+  }
+  CHECK(used == std::set<index_t>{9, 10, 11, 12, 13, 14});
+}
+
+TEST_CASE("load_obj rejects faces of fewer than 3 vertices and degenerate polygons naming the line", "[io]") {
   TempDir dir("obj-quad");
   const std::string path = dir.file("quad.obj");
-  write_file(path, "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 2 3 4\n");
-  CHECK_THAT(input_error_message([&] { load_obj(path); }),
-             Contains(path) && Contains("line 6") && Contains("4 vertices") && Contains("only triangles"));
   write_file(path, "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2\n");
-  CHECK_THAT(input_error_message([&] { load_obj(path); }), Contains(path) && Contains("line 4") && Contains("2 vertices"));
+  CHECK_THAT(input_error_message([&] { load_obj(path); }),
+             Contains(path) && Contains("line 4") && Contains("2 vertices") && Contains("at least 3"));
+  write_file(path, "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 2 3 2\n");
+  CHECK_THAT(input_error_message([&] { load_obj(path); }),
+             Contains(path) && Contains("line 6") && Contains("4 vertices") && Contains("repeats vertex 1"));
+  write_file(path, "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3 4\n");  // collinear
+  CHECK_THAT(input_error_message([&] { load_obj(path); }), Contains(path) && Contains("line 5") && Contains("no area"));
+  write_file(path, "v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\nf 1 2 3 4\n");  // a bow tie: its halves cancel
+  CHECK_THAT(input_error_message([&] { load_obj(path); }), Contains(path) && Contains("line 5") && Contains("no area"));
+}
+
+TEST_CASE("frames with polygons pair by the files' faces; their steps map triangles back", "[io]") {
+  TempDir dir("obj-polygon-frames");
+  // An L-shaped hexagon whose reflex corner moves: the ear clipping of the two frames may differ,
+  // the step keeps the first frame's triangles.
+  const std::string a = dir.file("0001.obj"), b = dir.file("0002.obj"), c = dir.file("0003.obj");
+  write_file(a, "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\nf 1 2 3 4 5 6\n");
+  write_file(b, "v 0 0 0.1\nv 2 0 0.1\nv 2 1 0.1\nv 1.9 1.9 0.1\nv 1 2 0.1\nv 0 2 0.1\nf 1 2 3 4 5 6\n");
+  write_file(c, "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\nf 1 2 3 4 5\nf 1 5 6\n");
+  const Step step = load_step(a, b);
+  CHECK(step.mesh->num_faces() == 4);
+  CHECK(step.face_source == std::vector<index_t>{0, 0, 0, 0});
+  const Frame first = load_obj(a);
+  REQUIRE(step.mesh->faces().size() == first.faces.size());
+  for (std::size_t t = 0; t < first.faces.size(); ++t)
+    for (int k = 0; k < 3; ++k) CHECK(step.mesh->faces()[t].v[k] == first.faces[t].v[k]);
+  CHECK_THAT(input_error_message([&] { load_step(a, c); }), Contains(c) && Contains("same topology"));
+  Frame triangles_only = first;  // the same triangles, given as triangles: not the same files' faces
+  triangles_only.face_source.clear();
+  triangles_only.polygon_offsets.clear();
+  triangles_only.polygon_vertices.clear();
+  CHECK_THAT(input_error_message([&] { make_step(triangles_only, load_obj(b)); }), Contains("same topology"));
+  std::remove(c.c_str());
+  const Sequence seq = load_sequence(dir.path());
+  REQUIRE(seq.num_steps() == 1);
+  CHECK(seq.step(0).face_source == step.face_source);
 }
 
 TEST_CASE("load_obj rejects an empty mesh and a missing file", "[io]") {

@@ -447,8 +447,7 @@ inline void read_ply_vertices(PlyBodyReader& reader, const PlyElement& element, 
   }
 }
 
-inline void read_ply_faces(PlyBodyReader& reader, const PlyElement& element, const std::string& path,
-                           std::vector<Face>& faces) {
+inline void read_ply_faces(PlyBodyReader& reader, const PlyElement& element, const std::string& path, Frame& frame) {
   int indices = find_property(element, "vertex_indices");
   if (indices < 0) indices = find_property(element, "vertex_index");
   if (indices < 0) throw InputError(path, "header", "face element has no 'vertex_indices' list property");
@@ -457,7 +456,9 @@ inline void read_ply_faces(PlyBodyReader& reader, const PlyElement& element, con
   if (!ply_type_is_integer(index_property.type))
     throw InputError(path, "header", "face property '" + index_property.name + "' has a non-integer item type");
 
-  faces.resize(element.count);
+  frame.polygon_offsets.assign(1, 0);
+  frame.polygon_offsets.reserve(element.count + 1);
+  frame.polygon_vertices.reserve(3 * element.count);
   for (std::size_t f = 0; f < element.count; ++f) {
     reader.enter(element, f);
     for (std::size_t i = 0; i < element.properties.size(); ++i) {
@@ -471,10 +472,10 @@ inline void read_ply_faces(PlyBodyReader& reader, const PlyElement& element, con
         for (std::size_t j = 0; j < n; ++j) reader.read(property.type);
         continue;
       }
-      if (n != 3)
-        throw InputError(path, reader.where(),
-                         "face has " + std::to_string(n) + " vertices; only triangles are supported");
-      for (int k = 0; k < 3; ++k) {
+      if (n < 3) throw InputError(path, reader.where(), "face has " + std::to_string(n) + " vertices (at least 3 needed)");
+      if (n > static_cast<std::size_t>(std::numeric_limits<index_t>::max()) - frame.polygon_vertices.size())
+        throw InputError(path, reader.where(), "too many face vertices");
+      for (std::size_t k = 0; k < n; ++k) {
         const double index = reader.read(property.type);
         if (index != std::floor(index))
           throw InputError(path, reader.where(), "vertex index is not an integer");
@@ -483,9 +484,10 @@ inline void read_ply_faces(PlyBodyReader& reader, const PlyElement& element, con
         if (index > static_cast<double>(std::numeric_limits<index_t>::max()))
           throw InputError(path, reader.where(), "vertex index " + std::to_string(static_cast<long long>(index)) +
                                                      " is too large");
-        faces[f].v[k] = static_cast<index_t>(index);
+        frame.polygon_vertices.push_back(static_cast<index_t>(index));
       }
     }
+    frame.polygon_offsets.push_back(static_cast<index_t>(frame.polygon_vertices.size()));
   }
 }
 
@@ -516,11 +518,107 @@ inline void skip_ply_element(PlyBodyReader& reader, const PlyElement& element, c
 }
 
 // Indices that name no vertex, reported with the face that holds them.
+// ---------------------------------------------------------------------------------------------
+// Polygons
+
+// Triangulates one polygon (vertex ids `ids`, n >= 3, in the file's order) into `out`, keeping its
+// winding. Returns an empty string, or why it cannot: a repeated vertex, no area (Newell's normal
+// is zero: collinear or coincident corners), no ear left (self-intersecting in its best-fit plane).
+// A convex polygon becomes a fan from its first corner; any other, ear clipping in the plane
+// normal to its largest Newell component, O(n^2) per ear.
+inline std::string triangulate_polygon(const std::vector<Vec3d>& positions, const index_t* ids, int n, std::vector<Face>& out) {
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j)
+      if (ids[i] == ids[j]) return "repeats vertex " + std::to_string(ids[i]);
+  if (n == 3) {
+    out.push_back(Face{{ids[0], ids[1], ids[2]}});
+    return "";
+  }
+  Vec3d normal{0, 0, 0};  // Newell: twice the vector area
+  for (int i = 0; i < n; ++i) {
+    const Vec3d& a = positions[static_cast<std::size_t>(ids[i])];
+    const Vec3d& b = positions[static_cast<std::size_t>(ids[(i + 1) % n])];
+    normal.x += (a.y - b.y) * (a.z + b.z);
+    normal.y += (a.z - b.z) * (a.x + b.x);
+    normal.z += (a.x - b.x) * (a.y + b.y);
+  }
+  const double nx = std::fabs(normal.x), ny = std::fabs(normal.y), nz = std::fabs(normal.z);
+  if (!(nx > 0 || ny > 0 || nz > 0)) return "has no area (its corners are collinear or coincide)";
+  // 2D coordinates in the plane of the largest normal component, turned so that the polygon
+  // winds counter-clockwise there.
+  const int drop = nx >= ny && nx >= nz ? 0 : (ny >= nz ? 1 : 2);
+  const double sign = normal[drop] > 0 ? 1.0 : -1.0;
+  std::vector<double> u(static_cast<std::size_t>(n)), v(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    const Vec3d& a = positions[static_cast<std::size_t>(ids[i])];
+    const double c[3] = {a.x, a.y, a.z};
+    u[i] = c[(drop + 1) % 3];
+    v[i] = sign * c[(drop + 2) % 3];
+  }
+  auto turn = [&](int a, int b, int c) { return (u[b] - u[a]) * (v[c] - v[a]) - (v[b] - v[a]) * (u[c] - u[a]); };
+  bool convex = true;
+  for (int i = 0; i < n && convex; ++i) convex = turn(i, (i + 1) % n, (i + 2) % n) >= 0;
+  if (convex) {
+    for (int i = 1; i + 1 < n; ++i) out.push_back(Face{{ids[0], ids[i], ids[i + 1]}});
+    return "";
+  }
+  std::vector<int> left(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) left[i] = i;
+  auto inside_or_on = [&](int p, int a, int b, int c) { return turn(a, b, p) >= 0 && turn(b, c, p) >= 0 && turn(c, a, p) >= 0; };
+  while (left.size() > 3) {
+    const int m = static_cast<int>(left.size());
+    bool clipped = false;
+    for (int k = 0; k < m && !clipped; ++k) {
+      const int a = left[(k + m - 1) % m], b = left[k], c = left[(k + 1) % m];
+      if (!(turn(a, b, c) > 0)) continue;  // reflex or flat corner: not an ear
+      bool empty = true;
+      for (int j = 0; j < m && empty; ++j) {
+        const int p = left[j];
+        if (p == a || p == b || p == c) continue;
+        empty = !inside_or_on(p, a, b, c);
+      }
+      if (!empty) continue;
+      out.push_back(Face{{ids[a], ids[b], ids[c]}});
+      left.erase(left.begin() + k);
+      clipped = true;
+    }
+    if (!clipped) return "cannot be triangulated (it intersects itself in its plane)";
+  }
+  out.push_back(Face{{ids[left[0]], ids[left[1]], ids[left[2]]}});
+  return "";
+}
+
+// Turns the file's faces (polygon_offsets / polygon_vertices, indices already checked) into
+// triangles. Where every face was a triangle the polygon arrays are dropped (Frame's contract).
+// `where(f)` names face f in messages (its line, or "face f").
+template <class Where>
+void triangulate_frame(Frame& frame, Where&& where) {
+  const std::size_t num_polygons = frame.polygon_offsets.empty() ? 0 : frame.polygon_offsets.size() - 1;
+  bool only_triangles = true;
+  for (std::size_t f = 0; f < num_polygons; ++f) only_triangles = only_triangles && frame.polygon_offsets[f + 1] - frame.polygon_offsets[f] == 3;
+  frame.faces.clear();
+  frame.faces.reserve(num_polygons);
+  frame.face_source.clear();
+  for (std::size_t f = 0; f < num_polygons; ++f) {
+    const index_t begin = frame.polygon_offsets[f];
+    const int n = static_cast<int>(frame.polygon_offsets[f + 1] - begin);
+    const std::size_t before = frame.faces.size();
+    const std::string problem = triangulate_polygon(frame.positions, frame.polygon_vertices.data() + begin, n, frame.faces);
+    if (!problem.empty()) throw InputError(frame.source, where(f), "face of " + std::to_string(n) + " vertices " + problem);
+    if (!only_triangles) frame.face_source.insert(frame.face_source.end(), frame.faces.size() - before, static_cast<index_t>(f));
+  }
+  if (only_triangles) {
+    frame.polygon_offsets.clear();
+    frame.polygon_vertices.clear();
+  }
+}
+
 inline void check_face_indices(const Frame& frame) {
   const auto num_vertices = static_cast<index_t>(frame.positions.size());
-  for (std::size_t f = 0; f < frame.faces.size(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const index_t v = frame.faces[f].v[k];
+  const std::size_t num_polygons = frame.polygon_offsets.empty() ? 0 : frame.polygon_offsets.size() - 1;
+  for (std::size_t f = 0; f < num_polygons; ++f) {
+    for (index_t k = frame.polygon_offsets[f]; k < frame.polygon_offsets[f + 1]; ++k) {
+      const index_t v = frame.polygon_vertices[static_cast<std::size_t>(k)];
       if (v < 0 || v >= num_vertices)
         throw InputError(frame.source, "face " + std::to_string(f),
                          "vertex index " + std::to_string(v) + " out of range [0, " + std::to_string(num_vertices) + ")");
@@ -561,11 +659,13 @@ inline Frame load_ply(const std::string& path) {
   detail::PlyBodyReader reader(bytes, header, path);
   for (const auto& element : header.elements) {
     if (&element == vertex_element) detail::read_ply_vertices(reader, element, path, frame.positions);
-    else if (&element == face_element) detail::read_ply_faces(reader, element, path, frame.faces);
+    else if (&element == face_element) detail::read_ply_faces(reader, element, path, frame);
     else detail::skip_ply_element(reader, element, path);
   }
-  detail::check_frame_not_empty(frame);
+  if (frame.positions.empty()) throw InputError(frame.source, "", "mesh has no vertices");
   detail::check_face_indices(frame);
+  detail::triangulate_frame(frame, [](std::size_t f) { return "face " + std::to_string(f); });
+  detail::check_frame_not_empty(frame);
   return frame;
 }
 
@@ -605,7 +705,7 @@ inline Frame load_obj(const std::string& path) {
                                             detail::coordinates_text(xyz[0], xyz[1], xyz[2]));
       frame.positions.push_back(position);  // any further values (w, colors) are ignored
     } else if (keyword_length == 1 && token[0] == 'f') {
-      Face face{{0, 0, 0}};
+      if (frame.polygon_offsets.empty()) frame.polygon_offsets.push_back(0);
       int corners = 0;
       while (detail::next_obj_token(cursor, line_end, token, token_end)) {
         // Only the position index matters: "a", "a/b", "a//c", "a/b/c".
@@ -626,27 +726,29 @@ inline Frame load_obj(const std::string& path) {
         }
         if (index > std::numeric_limits<index_t>::max())
           throw InputError(path, where(), "vertex index " + std::string(token, slash) + " is too large");
-        if (corners < 3) face.v[corners] = static_cast<index_t>(index);
+        frame.polygon_vertices.push_back(static_cast<index_t>(index));
         ++corners;
       }
-      if (corners != 3)
-        throw InputError(path, where(), "face has " + std::to_string(corners) + " vertices; only triangles are supported");
-      frame.faces.push_back(face);
+      if (corners < 3) throw InputError(path, where(), "face has " + std::to_string(corners) + " vertices (at least 3 needed)");
+      frame.polygon_offsets.push_back(static_cast<index_t>(frame.polygon_vertices.size()));
       face_lines.push_back(line_number);
     }
     // Everything else (vn, vt, o, g, s, usemtl, mtllib, l, ...) does not affect the geometry.
   }
 
-  detail::check_frame_not_empty(frame);
+  if (frame.positions.empty()) throw InputError(frame.source, "", "mesh has no vertices");
   const auto num_vertices = static_cast<index_t>(frame.positions.size());
-  for (std::size_t f = 0; f < frame.faces.size(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      if (frame.faces[f].v[k] >= num_vertices)
+  for (std::size_t f = 0; f + 1 < frame.polygon_offsets.size(); ++f) {
+    for (index_t k = frame.polygon_offsets[f]; k < frame.polygon_offsets[f + 1]; ++k) {
+      const index_t v = frame.polygon_vertices[static_cast<std::size_t>(k)];
+      if (v >= num_vertices)
         throw InputError(path, "line " + std::to_string(face_lines[f]),
-                         "vertex index " + std::to_string(frame.faces[f].v[k] + 1) + " out of range (the file has " +
+                         "vertex index " + std::to_string(v + 1) + " out of range (the file has " +
                              std::to_string(num_vertices) + " vertices)");
     }
   }
+  detail::triangulate_frame(frame, [&](std::size_t f) { return "line " + std::to_string(face_lines[f]); });
+  detail::check_frame_not_empty(frame);
   return frame;
 }
 
@@ -665,6 +767,15 @@ inline void check_same_topology(const Frame& reference, const Frame& other) {
     throw InputError(other.source, "",
                      "has " + std::to_string(other.positions.size()) + " vertices but " + reference.source + " has " +
                          std::to_string(reference.positions.size()));
+  // Files with polygons compare by their own faces (a polygon may triangulate differently in
+  // another frame; the step keeps the first frame's triangles).
+  if (!reference.polygon_offsets.empty() || !other.polygon_offsets.empty()) {
+    if (reference.polygon_offsets == other.polygon_offsets && reference.polygon_vertices == other.polygon_vertices) return;
+    throw InputError(other.source, "",
+                     "has other faces than " + reference.source + " (" + std::to_string(other.polygon_offsets.size() ? other.polygon_offsets.size() - 1 : other.faces.size()) +
+                         " against " + std::to_string(reference.polygon_offsets.size() ? reference.polygon_offsets.size() - 1 : reference.faces.size()) +
+                         " in the files, or the same number with other vertices); the frames must have the same topology");
+  }
   if (other.faces.size() != reference.faces.size())
     throw InputError(other.source, "",
                      "has " + std::to_string(other.faces.size()) + " faces but " + reference.source + " has " +
@@ -690,6 +801,7 @@ inline Step make_step(const Frame& t0, const Frame& t1) {
   step.x0 = t0.positions;
   step.x1 = t1.positions;
   step.name = detail::file_stem(t0.source) + "->" + detail::file_stem(t1.source);
+  step.face_source = t0.face_source;
   return step;
 }
 
@@ -698,9 +810,12 @@ inline Step load_step(const std::string& path_t0, const std::string& path_t1) {
 }
 
 inline Sequence::Sequence(std::shared_ptr<const TriangleMesh> mesh, std::vector<std::vector<Vec3d>> frames,
-                          std::vector<std::string> frame_names)
-    : mesh_(std::move(mesh)), frames_(std::move(frames)), names_(std::move(frame_names)) {
+                          std::vector<std::string> frame_names, std::vector<index_t> face_source)
+    : mesh_(std::move(mesh)), frames_(std::move(frames)), names_(std::move(frame_names)), face_source_(std::move(face_source)) {
   if (!mesh_) throw InputError("sequence", "", "no mesh");
+  if (!face_source_.empty() && face_source_.size() != static_cast<std::size_t>(mesh_->num_faces()))
+    throw InputError("sequence", "", "face_source has " + std::to_string(face_source_.size()) + " entries for " +
+                                         std::to_string(mesh_->num_faces()) + " triangles");
   if (names_.size() != frames_.size())
     throw InputError("sequence", "", std::to_string(frames_.size()) + " frames but " + std::to_string(names_.size()) + " names");
   for (std::size_t i = 0; i < frames_.size(); ++i) validate_positions(*mesh_, frames_[i], names_[i]);
@@ -715,6 +830,7 @@ inline Step Sequence::step(std::size_t i) const {
   step.x0 = frames_[i];
   step.x1 = frames_[i + 1];
   step.name = names_[i] + "->" + names_[i + 1];
+  step.face_source = face_source_;
   return step;
 }
 
@@ -734,7 +850,7 @@ inline Sequence load_sequence(const std::string& folder) {
     frames.push_back(std::move(frame.positions));
     names.push_back(detail::file_stem(paths[i]));
   }
-  return Sequence(std::move(mesh), std::move(frames), std::move(names));
+  return Sequence(std::move(mesh), std::move(frames), std::move(names), std::move(first.face_source));
 }
 
 }  // namespace lwsccd
