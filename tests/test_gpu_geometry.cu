@@ -44,7 +44,7 @@ __global__ void fit_swept_kernel(const Vec3d* p0, const Vec3d* p1, int n, BV* ou
 template <class BV>
 __global__ void overlap_kernel(const BV* bvs, int n, int* out) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i + 1 < n) out[i] = bv_traits<BV>::overlap(bvs[i], bvs[i + 1]) ? 1 : 0;
+  if (i < n) out[i] = i + 1 < n && bv_traits<BV>::overlap(bvs[i], bvs[i + 1]) ? 1 : 0;  // every element written
 }
 
 __global__ void morton_kernel(const Vec3f* pts, int n, Aabbf scene, std::uint32_t* m30, std::uint64_t* m63) {

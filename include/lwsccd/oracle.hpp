@@ -19,6 +19,9 @@ namespace lwsccd {
 struct TrianglePair {
   index_t a, b;
   bool adjacent;  ///< the triangles share a vertex (their adjacent features are culled)
+  /// Explicit and zeroed, so that a copy of a pair never carries uninitialised bytes (what
+  /// compute-sanitizer's initcheck flags in every download of the traversal's results).
+  unsigned char padding[3] = {0, 0, 0};
   friend bool operator==(const TrianglePair& x, const TrianglePair& y) {
     return x.a == y.a && x.b == y.b && x.adjacent == y.adjacent;
   }

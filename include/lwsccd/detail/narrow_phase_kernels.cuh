@@ -606,8 +606,10 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
     l.counts.certified_hits = static_cast<std::size_t>(c[detail::kCertifiedHits]);
-    l.counts.fallbacks = l.num_full;
-    l.counts.certified_misses = pairs - l.counts.certified_hits - l.num_full;
+    // As the CPU backend counts (NarrowPhaseCounts): a method without the certified path answers
+    // every pair by its own test, its quick rejections included, so every pair is a fallback.
+    l.counts.fallbacks = kCertified ? l.num_full : pairs;
+    l.counts.certified_misses = kCertified ? pairs - l.counts.certified_hits - l.num_full : 0;
     gave_up_ += static_cast<std::size_t>(c[detail::kGaveUp]);
     const T list_min = static_cast<T>(detail::time_of_bits(c[detail::kEarliestBits]));
     earliest_ = list_min < earliest_ ? list_min : earliest_;

@@ -1,0 +1,113 @@
+// The differential check of one fuzz scene: a pipeline's answer against the oracle composed by
+// hand (brute-force feature pairs, culled by their boxes, through cpu::test_feature_pairs with the
+// same method and precision). AABB pipelines must give it exactly (pairs, TOIs bit for bit,
+// counts); OBB pipelines cull more triangle pairs, so their hits are a subset with the same TOIs,
+// and each oracle hit they lack must come from a triangle pair whose OBBs are apart.
+#pragma once
+
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+
+#include "lwsccd/bvh.hpp"
+#include "lwsccd/narrow_phase.hpp"
+#include "lwsccd/pipeline.hpp"
+#include "lwsccd/representative.hpp"
+#include "contact_compare.hpp"
+#include "fuzz_scenes.hpp"
+
+namespace lwsccd_test {
+
+/// Scenes and first seed of a fuzz run: LWSCCD_FUZZ_SCENES / LWSCCD_FUZZ_SEED, else the defaults.
+inline std::uint64_t fuzz_setting(const char* name, std::uint64_t fallback) {
+  const char* text = std::getenv(name);
+  return text && *text ? std::strtoull(text, nullptr, 10) : fallback;
+}
+
+/// The mode a scene runs in: mostly contacts, sometimes earliest or set (from its seed).
+inline lwsccd::CcdMode fuzz_mode(std::uint64_t seed) {
+  const std::uint64_t r = (seed * 0xD1B54A32D192ED03ull) >> 61;
+  return r == 0 ? lwsccd::CcdMode::earliest : r == 1 ? lwsccd::CcdMode::set : lwsccd::CcdMode::contacts;
+}
+
+template <class Method, class T>
+lwsccd::NarrowPhaseResult<T> fuzz_oracle(const FuzzScene& s, lwsccd::CcdMode mode) {
+  using namespace lwsccd;
+  const RepresentativeTriangles rep(*s.mesh, s.layout);
+  const FeaturePairs pairs = brute_force_feature_pairs(rep, feature_boxes(*s.mesh, s.x0, s.x1, s.min_separation / 2));
+  CcdParams<T> params;
+  params.min_separation = static_cast<T>(s.min_separation);
+  params.mode = mode;
+  NarrowPhaseResult<T> r = cpu::test_feature_pairs<Method, T>(*s.mesh, s.x0, s.x1, pairs, params);
+  std::sort(r.vf.begin(), r.vf.end());
+  std::sort(r.ee.begin(), r.ee.end());
+  return r;
+}
+
+inline lwsccd::PipelineParams fuzz_params(const FuzzScene& s, lwsccd::CcdMode mode) {
+  lwsccd::PipelineParams p;
+  p.min_separation = s.min_separation;
+  p.mode = mode;
+  return p;
+}
+
+// The swept OBB of every face as the CPU BVH fits its leaves (same leaf margin as a pipeline's).
+inline std::vector<lwsccd::Obbf> face_obbs(const FuzzScene& s) {
+  lwsccd::cpu::Bvh<lwsccd::Obbf> bvh(*s.mesh, s.x0, s.x1);
+  bvh.set_leaf_margin(s.min_separation / 2);
+  bvh.refit(s.x0, s.x1);
+  const lwsccd::BvhView<lwsccd::Obbf> view = bvh.view();
+  std::vector<lwsccd::Obbf> boxes(static_cast<std::size_t>(view.num_leaves));
+  for (lwsccd::index_t k = 0; k < view.num_leaves; ++k) boxes[view.leaf_primitive[k]] = view.bvs[view.leaf_node(k)];
+  return boxes;
+}
+
+// An OBB pipeline culls triangle pairs whose swept OBBs are apart, so its hits are a subset of the
+// oracle's with the same TOIs. Each oracle hit it lacks must be explained: the faces representing
+// its two features (the triangle pair that would have produced it) have disjoint OBBs, which
+// proves that no contact was lost. (Orphan pairs share a vertex: their OBBs always overlap.)
+template <class T>
+void require_obb_subset(const std::vector<lwsccd::FeatureHit<T>>& hits, const std::vector<lwsccd::FeatureHit<T>>& all,
+                        const std::vector<lwsccd::Obbf>& obbs, bool vertex_face, const lwsccd::RepresentativeTriangles& rep) {
+  using lwsccd::index_t;
+  std::size_t j = 0;
+  auto explain_missing = [&](const lwsccd::FeatureHit<T>& lost) {
+    const index_t a = vertex_face ? rep.vertex_owner(lost.first) : rep.edge_owner(lost.first);
+    const index_t b = vertex_face ? lost.second : rep.edge_owner(lost.second);
+    INFO("oracle hit (" << lost.first << ", " << lost.second << ") missing from the OBB pipeline; faces " << a << ", " << b);
+    REQUIRE_FALSE(lwsccd::Obbf::overlap(obbs[a], obbs[b]));
+  };
+  for (const auto& h : hits) {
+    while (j < all.size() && all[j] < h) explain_missing(all[j++]);
+    REQUIRE(j < all.size());
+    REQUIRE(all[j].first == h.first);
+    REQUIRE(all[j].second == h.second);
+    REQUIRE(std::memcmp(&all[j].toi, &h.toi, sizeof(T)) == 0);
+    ++j;
+  }
+  while (j < all.size()) explain_missing(all[j++]);
+}
+
+/// One pipeline's answer against the oracle: AABB pipelines exactly (pairs, TOIs, counts), OBB
+/// pipelines as require_obb_subset says.
+template <class BV, class T>
+void require_fuzz_agreement(const lwsccd::StepResult<T>& got, const lwsccd::NarrowPhaseResult<T>& oracle, const FuzzScene& s) {
+  if (std::is_same<BV, lwsccd::Aabbf>::value) {
+    require_same_contacts(got.contacts, oracle);
+    require_same_counts(got.contacts.vf_counts, oracle.vf_counts);
+    require_same_counts(got.contacts.ee_counts, oracle.ee_counts);
+  } else {
+    const lwsccd::RepresentativeTriangles rep(*s.mesh, s.layout);
+    const std::vector<lwsccd::Obbf> obbs = face_obbs(s);
+    require_obb_subset(got.contacts.vf, oracle.vf, obbs, true, rep);
+    require_obb_subset(got.contacts.ee, oracle.ee, obbs, false, rep);
+    REQUIRE(got.contacts.vf_counts.pairs <= oracle.vf_counts.pairs);
+    REQUIRE(got.contacts.ee_counts.pairs <= oracle.ee_counts.pairs);
+    REQUIRE(got.contacts.earliest_toi >= oracle.earliest_toi);
+  }
+}
+
+}  // namespace lwsccd_test
