@@ -113,7 +113,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     outcomes.clear();
     for (std::size_t i = 0; i < steps; ++i) {
       const lwsccd::Step step = sc.step(i);
-      const std::optional<lwsccd::StepStats> stats = on_device->step_on_device(step.x0, step.x1);
+      const std::optional<lwsccd::StepStats> stats = ccd_app::device_resident_step(*on_device, step.x0, step.x1);
       ccd_app::StepOutcome o;
       if (stats) o.stats = *stats;
       outcomes.push_back(std::move(o));

@@ -4,12 +4,13 @@
 #   2. configures and builds everything (every CUDA translation unit too when nvcc is found;
 #      GPU tests then run, or report "Skipped" where no GPU is present);
 #   3. runs CTest (tests on ../shared/data report "Skipped" where that folder is absent);
-#   4. installs the package and builds examples/minimal as an outside project against it.
+#   4. installs the package and builds examples/minimal as an outside project against it;
+#   5. builds the Python package (pip install . in a virtual environment) and runs its pytest suite.
 # Environment: LWSCCD_BUILD_DIR (default build-tests), extra CMake arguments in LWSCCD_CMAKE_ARGS.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-packages=(cmake g++ make catch2 libeigen3-dev ccache)
+packages=(cmake g++ make catch2 libeigen3-dev ccache python3 python3-venv python3-pip)
 missing=()
 for p in "${packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
@@ -37,4 +38,9 @@ cmake --install "$build" --prefix "$prefix" >/dev/null
 cmake -S examples/minimal -B "$build/outside-minimal" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$build/outside-minimal" -j"$jobs"
 "$build/outside-minimal/lwsccd_minimal"
+echo "== Python package: pip install . (virtual environment $build/venv) and pytest"
+python3 -m venv "$build/venv"
+"$build/venv/bin/python" -m pip install -q --upgrade pip
+"$build/venv/bin/python" -m pip install -q ".[test]"
+LWSCCD_CCD_PROGRAM="$PWD/$build/examples/lwsccd-ccd" "$build/venv/bin/python" -m pytest -rs -q python/tests
 echo "== all tests passed"

@@ -1,0 +1,350 @@
+// lwsccd's Python extension (_lwsccd): the pipelines behind AnyPipeline (policies by name), the
+// mesh loaders and the built-in simulation, with NumPy arrays in and out. The public Python API
+// (python/lwsccd/__init__.py) validates arrays and builds the structured results on top of this;
+// the GPU backend is in gpu_backend.cu, compiled in when LWSCCD_PYTHON_WITH_GPU is defined.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "gpu_backend.hpp"
+#include "lwsccd/any_pipeline.hpp"
+#include "lwsccd/dataset.hpp"
+#include "lwsccd/io.hpp"
+#include "lwsccd/simulation.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace {
+
+using HostPositions = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+using HostFaces = nb::ndarray<const std::int64_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+
+// A NumPy array that owns a copy of `values` (shape given; the product must equal values.size()).
+template <class T>
+nb::ndarray<nb::numpy, T> numpy_array(std::vector<T>&& values, std::initializer_list<size_t> shape) {
+  auto* owned = new std::vector<T>(std::move(values));
+  nb::capsule owner(owned, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
+  return nb::ndarray<nb::numpy, T>(owned->data(), shape, owner);
+}
+
+std::vector<lwsccd::Vec3d> to_points(const HostPositions& a) {
+  std::vector<lwsccd::Vec3d> points(a.shape(0));
+  if (!points.empty()) std::memcpy(points.data(), a.data(), points.size() * sizeof(lwsccd::Vec3d));
+  return points;
+}
+
+nb::ndarray<nb::numpy, double> points_array(const std::vector<lwsccd::Vec3d>& points) {
+  std::vector<double> flat(points.size() * 3);
+  if (!points.empty()) std::memcpy(flat.data(), points.data(), flat.size() * sizeof(double));
+  return numpy_array(std::move(flat), {points.size(), 3});
+}
+
+nb::ndarray<nb::numpy, std::int64_t> faces_array(const lwsccd::TriangleMesh& mesh) {
+  std::vector<std::int64_t> flat;
+  flat.reserve(mesh.faces().size() * 3);
+  for (const lwsccd::Face& f : mesh.faces())
+    for (int k = 0; k < 3; ++k) flat.push_back(f.v[k]);
+  return numpy_array(std::move(flat), {mesh.faces().size(), 3});
+}
+
+nb::dict counts_dict(const lwsccd::NarrowPhaseCounts& c) {
+  nb::dict d;
+  d["pairs"] = c.pairs;
+  d["certified_hits"] = c.certified_hits;
+  d["certified_misses"] = c.certified_misses;
+  d["fallbacks"] = c.fallbacks;
+  d["screened"] = c.screened;
+  return d;
+}
+
+nb::dict stats_dict(const lwsccd::StepStats& s) {
+  nb::dict d;
+  d["refit_ms"] = s.refit_ms;
+  d["traverse_ms"] = s.traverse_ms;
+  d["features_ms"] = s.features_ms;
+  d["narrow_ms"] = s.narrow_ms;
+  d["total_ms"] = s.total_ms;
+  d["bvtt_nodes"] = s.bvtt_nodes;
+  d["front_size"] = s.front_size;
+  d["triangle_pairs"] = s.triangle_pairs;
+  d["feature_pairs_vf"] = s.feature_pairs_vf;
+  d["feature_pairs_ee"] = s.feature_pairs_ee;
+  d["hits_vf"] = s.hits_vf;
+  d["hits_ee"] = s.hits_ee;
+  d["gave_up"] = s.gave_up;
+  d["narrow_survivors"] = s.narrow_survivors;
+  d["narrow_warp_searches"] = s.narrow_warp_searches;
+  d["narrow_vf"] = counts_dict(s.narrow_vf);
+  d["narrow_ee"] = counts_dict(s.narrow_ee);
+  d["peak_device_bytes"] = s.peak_device_bytes;
+  d["reruns"] = s.reruns;
+  d["rebuilt"] = s.rebuilt;
+  d["restarted_from_root"] = s.restarted_from_root;
+  return d;
+}
+
+// One contact as Python sees it: VERTEX_FACE_DTYPE / EDGE_EDGE_DTYPE of the package (two int64
+// element indices, a float64 TOI, 24 bytes); the records are handed over as bytes and viewed with
+// that dtype, so building the structured arrays costs no further pass.
+struct ContactRecord {
+  std::int64_t first, second;
+  double toi;
+};
+static_assert(sizeof(ContactRecord) == 24, "the package's structured dtypes have 24-byte records");
+
+// A step's contacts for Python: vertex-face pairs as (vertex, face), edge-edge pairs as (edge,
+// edge), each with its TOI (feature ids of the library turned into element indices).
+nb::dict outcome_dict(const lwsccd::TriangleMesh& mesh, lwsccd::StepOutcome&& outcome) {
+  const std::int64_t v = mesh.num_vertices(), e = mesh.num_edges();
+  auto records = [](const std::vector<lwsccd::FeatureHit<double>>& hits, std::int64_t first_base, std::int64_t second_base) {
+    std::vector<std::uint8_t> bytes(hits.size() * sizeof(ContactRecord));
+    auto* out = reinterpret_cast<ContactRecord*>(bytes.data());
+    for (std::size_t i = 0; i < hits.size(); ++i)
+      out[i] = {static_cast<std::int64_t>(hits[i].first) - first_base, static_cast<std::int64_t>(hits[i].second) - second_base,
+                hits[i].toi};
+    const std::size_t n = bytes.size();
+    return numpy_array(std::move(bytes), {n});
+  };
+  nb::dict d;
+  d["vf"] = records(outcome.contacts.vf, 0, v + e);
+  d["ee"] = records(outcome.contacts.ee, v, v);
+  d["earliest_toi"] = outcome.contacts.earliest_toi;
+  d["gave_up"] = outcome.contacts.gave_up;
+  d["stats"] = stats_dict(outcome.stats);
+  return d;
+}
+
+// A device array owned by Python (freed by free_device_array when the last reference goes).
+template <class T>
+nb::ndarray<T> device_array(T* data, std::initializer_list<size_t> shape) {
+  nb::capsule owner(data, [](void* p) noexcept { lwsccd_python::free_device_array(p); });
+  int device = 0;
+  return nb::ndarray<T>(data, shape, owner, {}, nb::dtype<T>(), nb::device::cuda::value, device);
+}
+
+// A step's device contacts as new device arrays (DLPack-capable): vf_pairs / ee_pairs (n x 2
+// int64 element indices) and vf_toi / ee_toi (float64).
+nb::dict device_contacts(const lwsccd::TriangleMesh& mesh, const lwsccd::AnyDeviceContacts& c) {
+  const std::int64_t v = mesh.num_vertices(), e = mesh.num_edges();
+  nb::dict d;
+  auto put = [&](const void* hits, std::size_t n, std::int64_t first_base, std::int64_t second_base, const char* pairs_key,
+                 const char* toi_key) {
+    const lwsccd_python::DeviceHitArrays a = lwsccd_python::copy_device_hits(hits, n, c.toi_is_double, first_base, second_base);
+    d[pairs_key] = device_array(a.pairs, {n, 2});
+    d[toi_key] = device_array(a.toi, {n});
+  };
+  put(c.vf, c.num_vf, 0, v + e, "vf_pairs", "vf_toi");
+  put(c.ee, c.num_ee, v, v, "ee_pairs", "ee_toi");
+  return d;
+}
+
+lwsccd::CcdMode parse_mode(const std::string& mode) {
+  if (mode == "contacts") return lwsccd::CcdMode::contacts;
+  if (mode == "earliest") return lwsccd::CcdMode::earliest;
+  if (mode == "set") return lwsccd::CcdMode::set;
+  throw lwsccd::InputError("lwsccd.Pipeline", "mode", "unknown '" + mode + "' (accepted: contacts, earliest, set)");
+}
+
+// The extension's pipeline: an AnyPipeline of either backend and the mesh it was made for.
+class Pipeline {
+ public:
+  Pipeline(std::int64_t num_vertices, const HostFaces& faces, std::vector<std::int64_t> face_body,
+           std::vector<bool> body_self_collides, const std::string& bv, const std::string& scheduler,
+           const std::string& method, const std::string& precision, const std::string& mode, double min_separation,
+           double tolerance, int max_iterations, bool front_tracking, double rebuild_factor, double front_growth_limit,
+           std::size_t device_memory_budget, const std::string& device) {
+    if (num_vertices < 1 || num_vertices > 0x7fffffff)
+      throw lwsccd::InputError("lwsccd.Pipeline", "num_vertices", "must be in [1, 2^31), got " + std::to_string(num_vertices));
+    std::vector<lwsccd::Face> mesh_faces(faces.shape(0));
+    const std::int64_t* f = faces.data();
+    for (std::size_t i = 0; i < mesh_faces.size(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const std::int64_t index = f[3 * i + k];
+        if (index < 0 || index >= num_vertices)
+          throw lwsccd::InputError("lwsccd.Pipeline", "face " + std::to_string(i),
+                                   "vertex index " + std::to_string(index) + " outside [0, " + std::to_string(num_vertices) + ")");
+        mesh_faces[i].v[k] = static_cast<lwsccd::index_t>(index);
+      }
+    mesh_ = std::make_shared<const lwsccd::TriangleMesh>(static_cast<lwsccd::index_t>(num_vertices), std::move(mesh_faces),
+                                                         "lwsccd.Pipeline faces");
+    lwsccd::BodyLayout layout;
+    if (!face_body.empty()) {
+      if (face_body.size() != mesh_->faces().size())
+        throw lwsccd::InputError("lwsccd.Pipeline", "bodies", std::to_string(face_body.size()) + " entries for " +
+                                 std::to_string(mesh_->faces().size()) + " faces");
+      for (std::size_t i = 0; i < face_body.size(); ++i) {
+        if (face_body[i] < 0 || face_body[i] > 0x7fffffff)
+          throw lwsccd::InputError("lwsccd.Pipeline", "bodies[" + std::to_string(i) + "]",
+                                   std::to_string(face_body[i]) + " is not a body id (0 or more)");
+        layout.face_body.push_back(static_cast<lwsccd::index_t>(face_body[i]));
+      }
+      layout.body_self_collides = std::move(body_self_collides);
+    }
+    lwsccd::PipelineParams params;
+    params.mode = parse_mode(mode);
+    params.min_separation = min_separation;
+    params.tolerance = tolerance;
+    params.max_iterations = max_iterations;
+    params.front_tracking = front_tracking;
+    params.rebuild_factor = rebuild_factor;
+    params.front_growth_limit = front_growth_limit;
+    params.device_memory_budget = device_memory_budget;
+    const lwsccd::PolicyChoice choice{bv, scheduler, method, precision};
+    lwsccd::validate(choice);
+    if (device == "gpu") pipeline_ = lwsccd_python::make_gpu_pipeline(mesh_, layout, params, choice);
+    else if (device == "cpu") pipeline_ = lwsccd::cpu::make_any_pipeline(mesh_, layout, params, choice);
+    else throw lwsccd::InputError("lwsccd.Pipeline", "device", "unknown '" + device + "' (accepted: auto, gpu, cpu)");
+  }
+
+  nb::dict step(const HostPositions& x0, const HostPositions& x1) {
+    check_count(x0.shape(0), "x0");
+    check_count(x1.shape(0), "x1");
+    std::vector<lwsccd::Vec3d> p0 = to_points(x0), p1 = to_points(x1);
+    lwsccd::StepOutcome outcome;
+    {
+      nb::gil_scoped_release unlocked;
+      outcome = pipeline_->step(p0, p1);
+    }
+    return outcome_dict(*mesh_, std::move(outcome));
+  }
+
+  // Positions in device memory, by address (the Python side took them from
+  // __cuda_array_interface__ or DLPack and checked shape, dtype and layout).
+  nb::dict step_from_device(std::uintptr_t x0, std::uintptr_t x1) {
+    lwsccd::StepOutcome outcome;
+    {
+      nb::gil_scoped_release unlocked;
+      outcome = pipeline_->step_from_device(reinterpret_cast<const lwsccd::Vec3d*>(x0), reinterpret_cast<const lwsccd::Vec3d*>(x1));
+    }
+    return outcome_dict(*mesh_, std::move(outcome));
+  }
+
+  // As step_from_device, with the contacts copied into new device arrays (DLPack-capable).
+  nb::dict step_on_device(std::uintptr_t x0, std::uintptr_t x1) {
+    lwsccd::AnyDeviceContacts contacts;
+    {
+      nb::gil_scoped_release unlocked;
+      contacts = pipeline_->step_on_device(reinterpret_cast<const lwsccd::Vec3d*>(x0), reinterpret_cast<const lwsccd::Vec3d*>(x1));
+    }
+    nb::dict d = device_contacts(*mesh_, contacts);
+    d["earliest_toi"] = contacts.earliest_toi;
+    d["gave_up"] = contacts.gave_up;
+    d["stats"] = stats_dict(contacts.stats);
+    return d;
+  }
+
+  const lwsccd::TriangleMesh& mesh() const { return *mesh_; }
+  std::string backend() const { return pipeline_->backend(); }
+
+ private:
+  void check_count(std::size_t n, const char* name) const {
+    if (n != static_cast<std::size_t>(mesh_->num_vertices()))
+      throw lwsccd::InputError("lwsccd.Pipeline.step", name, std::to_string(n) + " points for a mesh of " +
+                                                                   std::to_string(mesh_->num_vertices()) + " vertices");
+  }
+
+  std::shared_ptr<const lwsccd::TriangleMesh> mesh_;
+  std::unique_ptr<lwsccd::AnyPipeline> pipeline_;
+};
+
+nb::dict frame_dict(const lwsccd::Frame& frame) {
+  nb::dict d;
+  d["vertices"] = points_array(frame.positions);
+  std::vector<std::int64_t> faces;
+  for (const lwsccd::Face& f : frame.faces)
+    for (int k = 0; k < 3; ++k) faces.push_back(f.v[k]);
+  d["faces"] = numpy_array(std::move(faces), {frame.faces.size(), 3});
+  std::vector<std::int64_t> source(frame.face_source.begin(), frame.face_source.end());
+  d["face_source"] = numpy_array(std::move(source), {frame.face_source.size()});
+  d["source"] = frame.source;
+  return d;
+}
+
+nb::dict step_dict(const lwsccd::Step& step) {
+  nb::dict d;
+  d["faces"] = faces_array(*step.mesh);
+  d["x0"] = points_array(step.x0);
+  d["x1"] = points_array(step.x1);
+  return d;
+}
+
+}  // namespace
+
+NB_MODULE(_lwsccd, m) {
+  m.doc() = "lwsccd's compiled core; use the lwsccd package's API instead.";
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const lwsccd::InputError& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const lwsccd::Error& e) {
+      PyErr_SetString(PyExc_RuntimeError, e.what());
+    }
+  });
+
+  nb::class_<Pipeline>(m, "Pipeline")
+      .def(nb::init<std::int64_t, const HostFaces&, std::vector<std::int64_t>, std::vector<bool>, const std::string&,
+                    const std::string&, const std::string&, const std::string&, const std::string&, double, double, int, bool,
+                    double, double, std::size_t, const std::string&>(),
+           "num_vertices"_a, "faces"_a, "face_body"_a, "body_self_collides"_a, "bv"_a, "scheduler"_a, "method"_a,
+           "precision"_a, "mode"_a, "min_separation"_a, "tolerance"_a, "max_iterations"_a, "front_tracking"_a,
+           "rebuild_factor"_a, "front_growth_limit"_a, "device_memory_budget"_a, "device"_a)
+      .def("step", &Pipeline::step, "x0"_a, "x1"_a)
+      .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a)
+      .def("step_on_device", &Pipeline::step_on_device, "x0"_a, "x1"_a)
+      .def_prop_ro("backend", &Pipeline::backend)
+      .def_prop_ro("num_vertices", [](const Pipeline& p) { return p.mesh().num_vertices(); })
+      .def_prop_ro("faces", [](const Pipeline& p) { return faces_array(p.mesh()); }, nb::rv_policy::move)
+      .def_prop_ro("edges", [](const Pipeline& p) {
+        std::vector<std::int64_t> flat;
+        for (const lwsccd::Edge& e : p.mesh().edges()) flat.push_back(e.v[0]), flat.push_back(e.v[1]);
+        return numpy_array(std::move(flat), {p.mesh().edges().size(), 2});
+      }, nb::rv_policy::move);
+
+  m.def("gpu_name", &lwsccd_python::gpu_name);
+  m.def("synchronize_stream", &lwsccd_python::synchronize_stream, "stream"_a);
+  // The device address of a DLPack CUDA array of (n, 3) float64, C-contiguous (nanobind checks).
+  m.def("dlpack_address", [](nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cuda> a) {
+    return reinterpret_cast<std::uintptr_t>(a.data());
+  }, "array"_a);
+  m.def("built_with_gpu", [] { return lwsccd_python::kBuiltWithGpu; });
+  m.def("load_frame", [](const std::string& path) { return frame_dict(lwsccd::load_frame(path)); }, "path"_a);
+  m.def("load_step", [](const std::string& t0, const std::string& t1) { return step_dict(lwsccd::load_step(t0, t1)); },
+        "path_t0"_a, "path_t1"_a);
+  m.def("load_scene", [](const std::string& folder) {
+    const lwsccd::Scene scene = lwsccd::load_scene(folder);
+    nb::dict d = step_dict(scene.step);
+    d["name"] = scene.name;
+    return d;
+  }, "folder"_a);
+  m.def("load_sequence", [](const std::string& folder) {
+    const lwsccd::Sequence sequence = lwsccd::load_sequence(folder);
+    nb::dict d;
+    d["faces"] = faces_array(*sequence.mesh());
+    nb::list frames;
+    for (std::size_t i = 0; i < sequence.num_frames(); ++i) frames.append(points_array(sequence.frame(i)));
+    d["frames"] = frames;
+    return d;
+  }, "folder"_a);
+
+  nb::class_<lwsccd::ClothBallSimulation>(m, "ClothBallSimulation")
+      .def(nb::init<std::size_t>(), "target_triangles"_a)
+      .def("next_step", [](lwsccd::ClothBallSimulation& s) { return step_dict(s.next_step()); })
+      .def("advance", &lwsccd::ClothBallSimulation::advance, "frames"_a)
+      .def_prop_ro("faces", [](const lwsccd::ClothBallSimulation& s) { return faces_array(*s.mesh()); }, nb::rv_policy::move)
+      .def_prop_ro("face_body", [](const lwsccd::ClothBallSimulation& s) {
+        std::vector<std::int64_t> body(s.layout().face_body.begin(), s.layout().face_body.end());
+        const std::size_t n = body.size();
+        return numpy_array(std::move(body), {n});
+      }, nb::rv_policy::move)
+      .def_prop_ro("body_self_collides", [](const lwsccd::ClothBallSimulation& s) { return s.layout().body_self_collides; });
+}

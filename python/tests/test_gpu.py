@@ -1,0 +1,104 @@
+"""The GPU backend from Python (skipped without one): GPU == CPU pair for pair, TOIs bit for bit;
+positions from CUDA arrays (PyTorch, CuPy: __cuda_array_interface__ and DLPack) read in place;
+contacts left on the device equal the host ones."""
+import numpy as np
+import pytest
+
+import lwsccd
+
+pytestmark = pytest.mark.skipif(
+    not lwsccd.gpu_available(),
+    reason="SKIPPED: no GPU backend in this build or no CUDA device" if lwsccd.built_with_gpu()
+    else "SKIPPED: this build of lwsccd has no GPU backend",
+)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    sim = lwsccd.ClothBallSimulation(20000)
+    return sim, [sim.next_step() for _ in range(3)]
+
+
+def pipelines(sim, **kw):
+    make = lambda device: lwsccd.Pipeline(sim.faces, bodies=sim.face_body, self_collides=sim.body_self_collides,
+                                          device=device, **kw)
+    return make("gpu"), make("cpu")
+
+
+def same(a, b):
+    assert np.array_equal(a.vertex_face, b.vertex_face) and np.array_equal(a.edge_edge, b.edge_edge)
+    assert a.earliest_toi == b.earliest_toi and a.gave_up == b.gave_up
+
+
+@pytest.mark.parametrize("policy", [{}, dict(bv="obb", scheduler="static"), dict(precision="float"), dict(mode="earliest"),
+                                    dict(method="filtered-inclusion", scheduler="gproximity")])
+def test_gpu_equals_cpu(scene, policy):
+    sim, steps = scene
+    gpu, cpu = pipelines(sim, **policy)
+    assert gpu.device == "gpu" and cpu.device == "cpu"
+    contacts = 0
+    for x0, x1 in steps:
+        g, c = gpu.step(x0, x1), cpu.step(x0, x1)
+        same(g, c)
+        contacts += g.num_contacts
+    assert contacts > 0 or policy.get("mode") == "earliest"
+
+
+def device_array_modules():
+    mods = []
+    try:
+        import torch
+        if torch.cuda.is_available():
+            mods.append(("torch", lambda a: torch.from_numpy(a).cuda(), torch))
+    except ImportError:
+        pass
+    try:
+        import cupy
+        mods.append(("cupy", lambda a: cupy.asarray(a), cupy))
+    except ImportError:
+        pass
+    return mods
+
+
+@pytest.mark.parametrize("name,to_device,module", device_array_modules() or [pytest.param(None, None, None, marks=pytest.mark.skip(
+    reason="SKIPPED: neither PyTorch with CUDA nor CuPy is installed"))])
+def test_device_positions_and_device_results(scene, name, to_device, module):
+    sim, steps = scene
+    gpu, cpu = pipelines(sim)
+    resident, _ = pipelines(sim)
+    for x0, x1 in steps:
+        expected = cpu.step(x0, x1)
+        d0, d1 = to_device(x0), to_device(x1)
+        same(gpu.step(d0, d1), expected)  # __cuda_array_interface__ (both libraries have it)
+        r = resident.step(d0, d1, on_device=True)
+        assert isinstance(r, lwsccd.DeviceStepResult) and r.earliest_toi == expected.earliest_toi
+        pairs = np.asarray(module.from_dlpack(r.vf_pairs).cpu().numpy() if name == "torch" else module.asnumpy(module.from_dlpack(r.vf_pairs)))
+        toi = np.asarray(module.from_dlpack(r.vf_toi).cpu().numpy() if name == "torch" else module.asnumpy(module.from_dlpack(r.vf_toi)))
+        assert np.array_equal(pairs[:, 0], expected.vertex_face["vertex"]) and np.array_equal(pairs[:, 1], expected.vertex_face["face"])
+        assert np.array_equal(toi, expected.vertex_face["toi"])
+        eep = module.from_dlpack(r.ee_pairs)
+        eep = eep.cpu().numpy() if name == "torch" else module.asnumpy(eep)
+        assert np.array_equal(eep[:, 0], expected.edge_edge["edge_a"])
+
+
+def test_dlpack_only_input(scene):
+    torch = pytest.importorskip("torch")
+    if not torch.cuda.is_available():
+        pytest.skip("SKIPPED: PyTorch without CUDA")
+    sim, steps = scene
+    gpu, cpu = pipelines(sim)
+
+    class DlpackOnly:  # what JAX gives: DLPack, no __cuda_array_interface__
+        def __init__(self, t):
+            self.t, self.shape, self.dtype = t, tuple(t.shape), t.dtype
+
+        def __dlpack__(self, **kw):
+            return self.t.__dlpack__(**kw)
+
+        def __dlpack_device__(self):
+            return self.t.__dlpack_device__()
+
+    x0, x1 = steps[0]
+    same(gpu.step(DlpackOnly(torch.from_numpy(x0).cuda()), DlpackOnly(torch.from_numpy(x1).cuda())), cpu.step(x0, x1))
+    with pytest.raises(TypeError, match="float64"):
+        gpu.step(torch.from_numpy(x0).float().cuda(), torch.from_numpy(x1).float().cuda())

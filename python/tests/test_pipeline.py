@@ -1,0 +1,96 @@
+"""The Python package on the CPU backend: contacts, modes, bodies, and agreement with the C++
+main program on the real scenes."""
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+import lwsccd
+
+
+@pytest.fixture(scope="module")
+def cloth_steps():
+    sim = lwsccd.ClothBallSimulation(3000)
+    steps = [sim.next_step() for _ in range(3)]
+    return sim, steps
+
+
+def cpu_pipeline(sim, **kw):
+    return lwsccd.Pipeline(sim.faces, bodies=sim.face_body, self_collides=sim.body_self_collides, device="cpu", **kw)
+
+
+def test_contacts_are_sorted_structured_and_consistent(cloth_steps):
+    sim, steps = cloth_steps
+    ccd = cpu_pipeline(sim)
+    total = 0
+    for x0, x1 in steps:
+        r = ccd.step(x0, x1)
+        assert r.vertex_face.dtype == lwsccd.VERTEX_FACE_DTYPE and r.edge_edge.dtype == lwsccd.EDGE_EDGE_DTYPE
+        vf, ee = r.vertex_face, r.edge_edge
+        assert np.all((vf["toi"] >= 0) & (vf["toi"] <= 1)) and np.all((ee["toi"] >= 0) & (ee["toi"] <= 1))
+        assert np.all(np.diff(vf["vertex"] * len(ccd.faces) + vf["face"]) > 0), "vertex-face pairs sorted, no repeats"
+        assert np.all(ee["edge_a"] < ee["edge_b"])
+        # A vertex is never tested against a face it belongs to; edges in a pair share no vertex.
+        assert not np.any(ccd.faces[vf["face"]] == vf["vertex"][:, None])
+        ea, eb = ccd.edges[ee["edge_a"]], ccd.edges[ee["edge_b"]]
+        assert not np.any((ea[:, :, None] == eb[:, None, :]).any(axis=(1, 2)))
+        tois = np.concatenate([vf["toi"], ee["toi"]])
+        assert r.earliest_toi == (tois.min() if len(tois) else 1.0)
+        assert r.stats["hits_vf"] == len(vf) and r.stats["hits_ee"] == len(ee)
+        assert r.num_contacts == len(vf) + len(ee)
+        total += r.num_contacts
+    assert total > 0, "the built-in scene collides"
+
+
+def test_rigid_ball_has_no_self_pairs(cloth_steps):
+    sim, steps = cloth_steps
+    ccd = cpu_pipeline(sim)
+    ball_faces = np.flatnonzero(sim.face_body == 1)
+    ball_vertices = np.unique(sim.faces[ball_faces])
+    for x0, x1 in steps:
+        vf = ccd.step(x0, x1).vertex_face
+        inside = np.isin(vf["vertex"], ball_vertices) & np.isin(vf["face"], ball_faces)
+        assert not inside.any()
+
+
+def test_modes_agree(cloth_steps):
+    sim, steps = cloth_steps
+    contacts, earliest, pair_set = cpu_pipeline(sim), cpu_pipeline(sim, mode="earliest"), cpu_pipeline(sim, mode="set")
+    for x0, x1 in steps:
+        c, e, s = contacts.step(x0, x1), earliest.step(x0, x1), pair_set.step(x0, x1)
+        assert len(e.vertex_face) == 0 and len(e.edge_edge) == 0
+        assert e.earliest_toi == c.earliest_toi
+        for a, b in ((s.vertex_face, c.vertex_face), (s.edge_edge, c.edge_edge)):
+            names = a.dtype.names[:2]
+            assert np.array_equal(a[list(names)], b[list(names)]), "mode set finds the same pairs"
+            assert np.all(a["toi"] <= b["toi"]), "with lower bounds of their TOIs"
+
+
+def test_obb_finds_a_subset_with_the_same_tois(cloth_steps):
+    # OBBs cull more triangle pairs than AABBs; the narrow phase is the same, so every pair an
+    # OBB pipeline reports is the AABB pipeline's, with the same TOI.
+    sim, steps = cloth_steps
+    aabb, obb = cpu_pipeline(sim), cpu_pipeline(sim, bv="obb")
+    for x0, x1 in steps:
+        a, o = aabb.step(x0, x1), obb.step(x0, x1)
+        for big, small in ((a.vertex_face, o.vertex_face), (a.edge_edge, o.edge_edge)):
+            lookup = {(int(p), int(q)): t for p, q, t in big.tolist()}
+            for p, q, t in small.tolist():
+                assert lookup[(p, q)] == t
+
+
+def test_main_program_agrees_on_real_scenes(data_dir, ccd_program):
+    for scene in ("cloth-funnel", "armadillo-rollers"):
+        folder = data_dir / "scenes" / scene
+        out = subprocess.run([ccd_program, str(folder), "--device", "cpu", "--json"], capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        expected = json.loads(out.stdout)["steps"][0]
+        faces, x0, x1 = lwsccd.load_scene(str(folder))
+        r = lwsccd.Pipeline(faces, num_vertices=len(x0), device="cpu").step(x0, x1)
+        assert len(r.vertex_face) == expected["vf_hits"]
+        assert len(r.edge_edge) == expected["ee_hits"]
+        assert r.earliest_toi == expected["earliest_toi"]
+        assert r.stats["triangle_pairs"] == expected["triangle_pairs"]
+        assert r.stats["feature_pairs_vf"] == expected["vf_pairs"]
+        assert r.stats["feature_pairs_ee"] == expected["ee_pairs"]

@@ -1,0 +1,50 @@
+// Policies chosen by name (any_pipeline.hpp): the run-time dispatch gives the pipeline the
+// compile-time policies would, names are validated, and the CPU backend refuses device positions.
+#include <catch2/catch.hpp>
+
+#include "lwsccd/any_pipeline.hpp"
+#include "contact_compare.hpp"
+#include "scene_fixtures.hpp"
+
+using namespace lwsccd;
+
+namespace {
+
+template <class BV, class Method, class T>
+void require_same_as_direct(const PolicyChoice& choice) {
+  const auto m = lwsccd_test::folded_cloth(14, 3);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  PipelineParams params;
+  auto any = cpu::make_any_pipeline(mesh, BodyLayout{}, params, choice);
+  cpu::CcdPipeline<BV, Method, T> direct(mesh, params);
+  const StepOutcome got = any->step(m.x0, m.x1);
+  const NarrowPhaseResult<double> expected = lwsccd::detail::to_double(direct.step(m.x0, m.x1).contacts);
+  lwsccd_test::require_same_contacts(got.contacts, expected);
+  lwsccd_test::require_same_counts(got.contacts.vf_counts, expected.vf_counts);
+  CHECK(got.contacts.vf.size() + got.contacts.ee.size() > 0);
+  CHECK(any->backend() == "cpu");
+  CHECK(any->mesh().num_faces() == mesh->num_faces());
+}
+
+}  // namespace
+
+TEST_CASE("AnyPipeline: policies by name equal the compile-time pipeline", "[any_pipeline]") {
+  require_same_as_direct<Aabbf, CertifiedCcd, double>(PolicyChoice{});
+  require_same_as_direct<Obbf, Filtered<InclusionCcd>, float>(PolicyChoice{"obb", "lazy", "filtered-inclusion", "float"});
+  require_same_as_direct<Aabbf, CertifiedCcd, float>(PolicyChoice{"aabb", "static", "certified", "float"});
+}
+
+TEST_CASE("AnyPipeline: unknown names and device positions on the CPU are clear errors", "[any_pipeline]") {
+  CHECK_THROWS_WITH(validate(PolicyChoice{"sphere", "lazy", "certified", "double"}),
+                    Catch::Contains("bv") && Catch::Contains("'sphere'") && Catch::Contains("aabb, obb"));
+  CHECK_THROWS_AS(validate(PolicyChoice{"aabb", "fifo", "certified", "double"}), InputError);
+  CHECK_THROWS_AS(validate(PolicyChoice{"aabb", "lazy", "exact", "double"}), InputError);
+  CHECK_THROWS_WITH(validate(PolicyChoice{"aabb", "lazy", "certified", "half"}), Catch::Contains("float"));
+  const auto m = lwsccd_test::folded_cloth(4, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  CHECK_THROWS_AS(cpu::make_any_pipeline(mesh, BodyLayout{}, PipelineParams{}, PolicyChoice{"obb", "lazy", "cubic", "quad"}),
+                  InputError);
+  auto any = cpu::make_any_pipeline(mesh, BodyLayout{}, PipelineParams{}, PolicyChoice{});
+  CHECK_THROWS_WITH(any->step_from_device(m.x0.data(), m.x1.data()), Catch::Contains("host positions"));
+  CHECK_THROWS_AS(any->step_on_device(m.x0.data(), m.x1.data()), InputError);
+}
