@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "ccd_app.hpp"
+#include "lwsccd/render.hpp"
 #include "lwsccd/simulation.hpp"
 
 namespace {
@@ -30,6 +31,8 @@ struct Options {
   lwsccd::PipelineParams params;
   bool check = false;
   bool json = false;
+  std::string render;  // PNG path ("" : no picture)
+  int render_width = 800, render_height = 600;
 };
 
 void print_usage(std::FILE* out) {
@@ -71,6 +74,9 @@ void print_usage(std::FILE* out) {
                "\n"
                "output\n"
                "  --json           machine-readable output on stdout\n"
+               "  --render F.png   a picture of each step at its earliest contact, colliding triangles\n"
+               "                   in red (several steps: F_000.png, F_001.png, ...; CPU ray casting)\n"
+               "  --render-size WxH  the picture's size (default 800x600)\n"
                "  -h, --help       this text\n"
                "\n"
                "Exit status: 0 done; 1 bad input or error; 2 a ground-truth contact was missed (or --check\n"
@@ -142,6 +148,15 @@ Options parse(int argc, char** argv) {
       o.check = true;
     } else if (a == "--json") {
       o.json = true;
+    } else if (a == "--render") {
+      o.render = value();
+      if (o.render.size() < 5 || o.render.compare(o.render.size() - 4, 4, ".png") != 0)
+        throw lwsccd::InputError("command line", a, "expects a file name ending in .png, got '" + o.render + "'");
+    } else if (a == "--render-size") {
+      const std::string size = value();
+      if (std::sscanf(size.c_str(), "%dx%d", &o.render_width, &o.render_height) != 2 || o.render_width < 1 ||
+          o.render_height < 1 || o.render_width > 16384 || o.render_height > 16384)
+        throw lwsccd::InputError("command line", a, "expects WxH in 1..16384, e.g. 1280x720, got '" + size + "'");
     } else if (!a.empty() && a[0] == '-') {
       throw lwsccd::InputError("command line", a, "unknown option (see --help)");
     } else {
@@ -363,6 +378,16 @@ int main(int argc, char** argv) {
       if (o.check) {
         r.checked = true;
         r.check_differences = oracle_differences(step, src.layout, o, r.outcome.contacts);
+      }
+      if (!o.render.empty()) {
+        std::string path = o.render;
+        if (src.num_steps > 1) {
+          char index[16];
+          std::snprintf(index, sizeof index, "_%03zu", i);
+          path.insert(path.size() - 4, index);
+        }
+        lwsccd::cpu::render_contacts(path, *step.mesh, step.x0, step.x1, r.outcome.contacts, o.render_width, o.render_height);
+        std::fprintf(stderr, "lwsccd-ccd: wrote %s (t = %.6g)\n", path.c_str(), std::min(1.0, r.outcome.contacts.earliest_toi));
       }
       reports.push_back(std::move(r));
       if (progress) print_progress(i + 1, src.num_steps);

@@ -15,51 +15,14 @@
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/ray_task.hpp"
+#include "lwsccd/render.hpp"
 #include "lwsccd/scenes.hpp"
 #include "lwsccd/traverse.cuh"
 #include "lwsccd/traverse.hpp"
-#include "png_writer.hpp"
 
 using namespace lwsccd;
 
 namespace {
-
-struct View {
-  int width = 800, height = 600;
-  Vec3f eye, forward, right, up;
-  Vec3f light;
-};
-
-View make_view(const std::vector<Vec3f>& x, int width, int height) {
-  Aabbf box = Aabbf::empty();
-  for (const auto& p : x) box.expand(p);
-  const Vec3f c = box.center(), e = box.extent();
-  const float r = 0.5f * norm(e);
-  View v;
-  v.width = width;
-  v.height = height;
-  v.eye = c + Vec3f{0.9f * r, -1.6f * r, 1.1f * r};
-  v.forward = c - v.eye;
-  v.forward *= 1.0f / norm(v.forward);
-  v.right = cross(v.forward, Vec3f{0, 0, 1});
-  v.right *= 1.0f / norm(v.right);
-  v.up = cross(v.right, v.forward);
-  v.light = c + Vec3f{-2.0f * r, -1.0f * r, 4.0f * r};
-  return v;
-}
-
-std::vector<Ray> primary_rays(const View& v) {
-  std::vector<Ray> rays;
-  const float aspect = float(v.width) / float(v.height);
-  for (int j = 0; j < v.height; ++j)
-    for (int i = 0; i < v.width; ++i) {
-      const float sx = (2.0f * (i + 0.5f) / v.width - 1.0f) * 0.6f * aspect, sy = (1.0f - 2.0f * (j + 0.5f) / v.height) * 0.6f;
-      Vec3f d = v.forward + v.right * sx + v.up * sy;
-      d *= 1.0f / norm(d);
-      rays.push_back({v.eye, d, 1e30f});
-    }
-  return rays;
-}
 
 // Casts rays with Scheduler on the GPU, or on the CPU backend when `gpu` is false.
 template <class Scheduler>
@@ -67,14 +30,9 @@ std::vector<std::uint64_t> cast(bool gpu, const BvhView<Aabbf>& gpu_bvh, const B
                                 const gpu::DeviceBuffer<Face>* d_faces, const gpu::DeviceBuffer<Vec3f>* d_x,
                                 const TriangleMesh& mesh, const std::vector<Vec3f>& x, const std::vector<Ray>& rays,
                                 bool any_hit) {
+  if (!gpu) return cpu::cast_rays(cpu_bvh, mesh, x, rays, any_hit);
   std::vector<RayNode> seeds;
   for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
-  if (!gpu) {
-    std::vector<std::uint64_t> best(rays.size(), kNoHit);
-    RayCastTask task{cpu_bvh, mesh.faces().data(), x.data(), rays.data(), best.data(), any_hit};
-    cpu::traverse(task, seeds, false, cpu::WorkStealingScheduler{});
-    return best;
-  }
   gpu::DeviceBuffer<Ray> d_rays;
   d_rays.upload(rays);
   gpu::DeviceBuffer<std::uint64_t> best;
@@ -88,45 +46,13 @@ std::vector<std::uint64_t> cast(bool gpu, const BvhView<Aabbf>& gpu_bvh, const B
 }
 
 template <class Scheduler>
-std::vector<unsigned char> render(bool gpu, const View& view, const BvhView<Aabbf>& gpu_bvh, const BvhView<Aabbf>& cpu_bvh,
+std::vector<unsigned char> render(bool gpu, const RenderView& view, const BvhView<Aabbf>& gpu_bvh, const BvhView<Aabbf>& cpu_bvh,
                                   const gpu::DeviceBuffer<Face>* d_faces, const gpu::DeviceBuffer<Vec3f>* d_x,
                                   const TriangleMesh& mesh, const std::vector<Vec3f>& x) {
   const std::vector<Ray> rays = primary_rays(view);
   const auto hits = cast<Scheduler>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, rays, false);
-  // One shadow ray per hit, toward the light, started a little off the surface.
-  std::vector<Ray> shadows;
-  std::vector<std::size_t> owner;
-  std::vector<Vec3f> normal(rays.size());
-  for (std::size_t r = 0; r < rays.size(); ++r) {
-    if (hits[r] == kNoHit) continue;
-    const Face f = mesh.face(hit_triangle(hits[r]));
-    Vec3f n = cross(x[f.v[1]] - x[f.v[0]], x[f.v[2]] - x[f.v[0]]);
-    n *= 1.0f / norm(n);
-    if (dot(n, rays[r].direction) > 0) n = -n;
-    normal[r] = n;
-    const Vec3f p = rays[r].origin + rays[r].direction * hit_t(hits[r]) + n * 1e-4f;
-    Vec3f to_light = view.light - p;
-    const float dist = norm(to_light);
-    shadows.push_back({p, to_light * (1.0f / dist), dist});
-    owner.push_back(r);
-  }
-  const auto blocked = cast<Scheduler>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, shadows, true);
-  std::vector<unsigned char> rgb(rays.size() * 3);
-  for (std::size_t r = 0; r < rays.size(); ++r) {  // background: a vertical gradient
-    const float g = 0.75f - 0.35f * float(r / view.width) / view.height;
-    rgb[3 * r] = static_cast<unsigned char>(255 * g * 0.85f);
-    rgb[3 * r + 1] = static_cast<unsigned char>(255 * g * 0.9f);
-    rgb[3 * r + 2] = static_cast<unsigned char>(255 * g);
-  }
-  for (std::size_t s = 0; s < shadows.size(); ++s) {
-    const std::size_t r = owner[s];
-    const float lambert = std::max(0.0f, dot(normal[r], shadows[s].direction));
-    const float light = 0.18f + 0.82f * lambert * (blocked[s] == kNoHit ? 1.0f : 0.25f);
-    rgb[3 * r] = static_cast<unsigned char>(255 * std::min(1.0f, light * 0.95f));
-    rgb[3 * r + 1] = static_cast<unsigned char>(255 * std::min(1.0f, light * 0.72f));
-    rgb[3 * r + 2] = static_cast<unsigned char>(255 * std::min(1.0f, light * 0.45f));
-  }
-  return rgb;
+  const ShadowRays shadows = shadow_rays(view, mesh, x, rays, hits);
+  return shade(view, shadows, cast<Scheduler>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, shadows.rays, true));
 }
 
 }  // namespace
@@ -185,7 +111,7 @@ int main(int argc, char** argv) {
       d_faces.upload(mesh->faces());
       d_x.upload(x);
     }
-    const View view = make_view(x, width, height);
+    const RenderView view = frame_view(x, width, height);
     std::printf("%d triangles, %dx%d, %s\n", mesh->num_faces(), width, height, gpu ? "GPU" : "CPU backend (no GPU)");
     std::vector<unsigned char> image;
     auto run = [&](const std::string& name) {

@@ -8,6 +8,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
@@ -108,6 +109,29 @@ void require_fuzz_agreement(const lwsccd::StepResult<T>& got, const lwsccd::Narr
     REQUIRE(got.contacts.ee_counts.pairs <= oracle.ee_counts.pairs);
     REQUIRE(got.contacts.earliest_toi >= oracle.earliest_toi);
   }
+}
+
+/// The fuzz run: scenes LWSCCD_FUZZ_SEED .. + LWSCCD_FUZZ_SCENES (default 1 .. 40), each with its
+/// mode, through check_scene(scene, mode) (which compares every configuration with the oracle).
+/// Failures name the seed that reruns the scene alone; long runs print progress every 500 scenes.
+template <class CheckScene>
+void run_fuzz(const char* backend, const char* configurations, CheckScene&& check_scene) {
+  const std::uint64_t first = fuzz_setting("LWSCCD_FUZZ_SEED", 1);
+  const std::uint64_t scenes = fuzz_setting("LWSCCD_FUZZ_SCENES", 40);
+  std::size_t triangles = 0;
+  for (std::uint64_t seed = first; seed < first + scenes; ++seed) {
+    const FuzzScene s = make_fuzz_scene(seed);
+    const lwsccd::CcdMode mode = fuzz_mode(seed);
+    INFO(s.what << ", mode " << static_cast<int>(mode) << " (rerun: LWSCCD_FUZZ_SEED=" << seed << " LWSCCD_FUZZ_SCENES=1)");
+    check_scene(s, mode);
+    triangles += static_cast<std::size_t>(s.mesh->num_faces());
+    if ((seed - first + 1) % 500 == 0) {
+      std::printf("fuzz (%s): %llu scenes done\n", backend, static_cast<unsigned long long>(seed - first + 1));
+      std::fflush(stdout);
+    }
+  }
+  std::printf("fuzz (%s): %llu scenes from seed %llu (%zu triangles), %s each: no disagreement\n", backend,
+              static_cast<unsigned long long>(scenes), static_cast<unsigned long long>(first), triangles, configurations);
 }
 
 }  // namespace lwsccd_test

@@ -2,8 +2,6 @@
 // fixed seed; LWSCCD_FUZZ_SEED / LWSCCD_FUZZ_SCENES choose others, reproducibly).
 #include <catch2/catch.hpp>
 
-#include <cstdio>
-
 #include "lwsccd/pipeline.hpp"
 #include "fuzz_check.hpp"
 
@@ -27,19 +25,10 @@ void check_cpu_all_bvs(const lwsccd_test::FuzzScene& s, CcdMode mode) {
 }  // namespace
 
 TEST_CASE("fuzz: random scenes through every CPU BV x method x precision equal the oracle", "[.fuzz]") {
-  const std::uint64_t first = lwsccd_test::fuzz_setting("LWSCCD_FUZZ_SEED", 1);
-  const std::uint64_t scenes = lwsccd_test::fuzz_setting("LWSCCD_FUZZ_SCENES", 40);
-  std::size_t triangles = 0;
-  for (std::uint64_t seed = first; seed < first + scenes; ++seed) {
-    const lwsccd_test::FuzzScene s = lwsccd_test::make_fuzz_scene(seed);
-    const CcdMode mode = lwsccd_test::fuzz_mode(seed);
-    INFO(s.what << ", mode " << static_cast<int>(mode) << " (rerun: LWSCCD_FUZZ_SEED=" << seed << " LWSCCD_FUZZ_SCENES=1)");
+  lwsccd_test::run_fuzz("CPU", "2 BVs x 2 methods x 2 precisions", [](const lwsccd_test::FuzzScene& s, CcdMode mode) {
     check_cpu_all_bvs<CertifiedCcd, double>(s, mode);
     check_cpu_all_bvs<CertifiedCcd, float>(s, mode);
     check_cpu_all_bvs<Filtered<InclusionCcd>, double>(s, mode);
     check_cpu_all_bvs<Filtered<InclusionCcd>, float>(s, mode);
-    triangles += static_cast<std::size_t>(s.mesh->num_faces());
-  }
-  std::printf("fuzz (CPU): %llu scenes from seed %llu (%zu triangles), 2 BVs x 2 methods x 2 precisions each: no disagreement\n",
-              static_cast<unsigned long long>(scenes), static_cast<unsigned long long>(first), triangles);
+  });
 }

@@ -4,8 +4,6 @@
 // oracle of fuzz_check.hpp.
 #include <catch2/catch.hpp>
 
-#include <cstdio>
-
 #include "lwsccd/pipeline.cuh"
 #include "fuzz_check.hpp"
 
@@ -36,23 +34,10 @@ void check_gpu_all(const lwsccd_test::FuzzScene& s, CcdMode mode) {
 }  // namespace
 
 TEST_CASE("fuzz: random scenes through every GPU scheduler x BV x method x precision equal the oracle", "[.fuzz][gpu]") {
-  const std::uint64_t first = lwsccd_test::fuzz_setting("LWSCCD_FUZZ_SEED", 1);
-  const std::uint64_t scenes = lwsccd_test::fuzz_setting("LWSCCD_FUZZ_SCENES", 40);
-  std::size_t triangles = 0;
-  for (std::uint64_t seed = first; seed < first + scenes; ++seed) {
-    const lwsccd_test::FuzzScene s = lwsccd_test::make_fuzz_scene(seed);
-    const CcdMode mode = lwsccd_test::fuzz_mode(seed);
-    INFO(s.what << ", mode " << static_cast<int>(mode) << " (rerun: LWSCCD_FUZZ_SEED=" << seed << " LWSCCD_FUZZ_SCENES=1)");
+  lwsccd_test::run_fuzz("GPU", "3 schedulers x 2 BVs x 2 methods x 2 precisions", [](const lwsccd_test::FuzzScene& s, CcdMode mode) {
     check_gpu_all<CertifiedCcd, double>(s, mode);
     check_gpu_all<CertifiedCcd, float>(s, mode);
     check_gpu_all<Filtered<InclusionCcd>, double>(s, mode);
     check_gpu_all<Filtered<InclusionCcd>, float>(s, mode);
-    triangles += static_cast<std::size_t>(s.mesh->num_faces());
-    if ((seed - first + 1) % 500 == 0) {  // progress, for long runs under a time limit
-      std::printf("fuzz (GPU): %llu scenes done\n", static_cast<unsigned long long>(seed - first + 1));
-      std::fflush(stdout);
-    }
-  }
-  std::printf("fuzz (GPU): %llu scenes from seed %llu (%zu triangles), 3 schedulers x 2 BVs x 2 methods x 2 precisions each: no disagreement\n",
-              static_cast<unsigned long long>(scenes), static_cast<unsigned long long>(first), triangles);
+  });
 }

@@ -103,7 +103,11 @@ class Bvh {
     BV root;
     int status;
   };
-  mutable PinnedBuffer<Readback> readback_{1};
+  mutable PinnedBuffer<Readback> readback_;  // allocated on first use
+  Readback& readback() const {
+    readback_.ensure(1);
+    return readback_[0];
+  }
   // Enqueues the cost's reduction and the copies of cost and root box into readback_.
   void enqueue_cost(cudaStream_t stream) const;
   double cost_from_readback() const;

@@ -154,6 +154,11 @@ class PinnedBuffer {
     std::swap(size_, o.size_);
     return *this;
   }
+  /// Allocates (zeroed) when it holds fewer than n elements. Owners allocate on first use, so that
+  /// constructing them needs no CUDA device (a program may build one and fall back to the CPU).
+  void ensure(std::size_t n) {
+    if (size_ < n) *this = PinnedBuffer(n);
+  }
   T* data() { return ptr_; }
   const T* data() const { return ptr_; }
   T& operator[](std::size_t i) { return ptr_[i]; }

@@ -192,6 +192,7 @@ class FeatureEmitter {
                                         cudaMemcpyDeviceToDevice, stream));
       write(stream);
     }
+    host_total_.ensure(1);
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(host_total_.data(), total_.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream));
   }
 
@@ -271,7 +272,7 @@ class FeatureEmitter {
   DeviceBuffer<unsigned short> masks_;          ///< per item: its emission mask
   DeviceBuffer<unsigned long long> block_totals_;  ///< per block: packed counts, then their inclusive scan
   DeviceBuffer<unsigned long long> total_{1};     ///< the last run's packed totals (read by the narrow phase)
-  PinnedBuffer<unsigned long long> host_total_{1};
+  PinnedBuffer<unsigned long long> host_total_;  // allocated on first use
   const TrianglePair* candidates_ = nullptr;
   std::size_t num_candidates_ = 0, blocks_ = 0;
   std::size_t vf_room_ = 0, ee_room_ = 0;         ///< room of vf_, ee_ (grown by collect())

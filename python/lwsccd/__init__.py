@@ -129,6 +129,17 @@ def _host_positions(x: Any, name: str, num_vertices: int) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
+def _to_host(x: Any) -> Any:
+    """A CUDA array's contents on the host (PyTorch, CuPy); other arrays unchanged."""
+    if hasattr(x, "__cuda_array_interface__") or (hasattr(x, "__dlpack_device__") and int(x.__dlpack_device__()[0]) == 2):
+        if hasattr(x, "get"):  # CuPy
+            return x.get()
+        if hasattr(x, "cpu"):  # PyTorch
+            return x.cpu().numpy()
+        return np.from_dlpack(x)
+    return x
+
+
 def _cuda_address(x: Any, name: str, num_vertices: int) -> Optional[int]:
     """The device address of a CUDA array (float64, C-contiguous, (num_vertices, 3)), or None
     when x is not a CUDA array."""
@@ -299,6 +310,36 @@ class Pipeline:
             int(d["gave_up"]),
             d["stats"],
         )
+
+    def render(self, path: str, x0: Any, x1: Any, result: Optional[StepResult] = None, *,
+               size: Tuple[int, int] = (800, 600)) -> str:
+        """Writes a PNG picture of a step: the mesh at the step's earliest contact (t = 1 when
+        nothing collides) with the triangles of its contacts in red, ray cast on the CPU by the
+        library's own ray caster (no other dependency).
+
+        Args:
+            path: the PNG file to write (its folder must exist).
+            x0, x1: the step's positions (host arrays; CUDA arrays are copied to the host).
+            result: the StepResult of ``step(x0, x1)``; stepped now when None (which advances the
+                pipeline's front like any step).
+            size: (width, height) in pixels.
+
+        Returns the path. Raises ValueError for bad sizes or arrays, RuntimeError when the file
+        cannot be written.
+        """
+        n = self.num_vertices
+        h0, h1 = (np.asarray(_to_host(x)) for x in (x0, x1))
+        h0, h1 = _host_positions(h0, "x0", n), _host_positions(h1, "x1", n)
+        if result is None:
+            result = self.step(h0, h1)
+        if not isinstance(result, StepResult):
+            raise TypeError("lwsccd.Pipeline.render: result must be a StepResult (of step(x0, x1) on the host)")
+        width, height = (int(v) for v in size)
+        self._core.render(os.fspath(path), h0, h1,
+                          np.ascontiguousarray(result.vertex_face, dtype=VERTEX_FACE_DTYPE).view(np.uint8),
+                          np.ascontiguousarray(result.edge_edge, dtype=EDGE_EDGE_DTYPE).view(np.uint8),
+                          float(result.earliest_toi), width, height)
+        return os.fspath(path)
 
     def __repr__(self) -> str:
         return f"lwsccd.Pipeline({len(self.faces)} faces, {self.num_vertices} vertices, device={self.device!r}, mode={self.mode!r})"

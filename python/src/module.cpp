@@ -18,6 +18,7 @@
 #include "lwsccd/any_pipeline.hpp"
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/io.hpp"
+#include "lwsccd/render.hpp"
 #include "lwsccd/simulation.hpp"
 
 namespace nb = nanobind;
@@ -242,6 +243,36 @@ class Pipeline {
     return d;
   }
 
+  // The picture of a step (lwsccd::cpu::render_contacts): the contacts come back as the records
+  // step() made (bytes), turned into the library's feature ids again.
+  void render(const std::string& path, const HostPositions& x0, const HostPositions& x1,
+              const nb::ndarray<const std::uint8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>& vf,
+              const nb::ndarray<const std::uint8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>& ee, double earliest_toi,
+              int width, int height) {
+    check_count(x0.shape(0), "x0");
+    check_count(x1.shape(0), "x1");
+    const std::int64_t v = mesh_->num_vertices(), e = mesh_->num_edges();
+    lwsccd::NarrowPhaseResult<double> contacts;
+    auto hits = [&](const auto& bytes, std::int64_t first_base, std::int64_t second_base, std::vector<lwsccd::FeatureHit<double>>& out,
+                    std::int64_t first_limit, std::int64_t second_limit, const char* name) {
+      if (bytes.shape(0) % sizeof(ContactRecord) != 0)
+        throw lwsccd::InputError("lwsccd.Pipeline.render", name, "is not an array of contact records");
+      const auto* r = reinterpret_cast<const ContactRecord*>(bytes.data());
+      for (std::size_t i = 0; i < bytes.shape(0) / sizeof(ContactRecord); ++i) {
+        if (r[i].first < 0 || r[i].first >= first_limit || r[i].second < 0 || r[i].second >= second_limit)
+          throw lwsccd::InputError("lwsccd.Pipeline.render", name, "contact " + std::to_string(i) + " is not of this mesh");
+        out.push_back({static_cast<lwsccd::index_t>(r[i].first + first_base), static_cast<lwsccd::index_t>(r[i].second + second_base),
+                       r[i].toi});
+      }
+    };
+    hits(vf, 0, v + e, contacts.vf, v, mesh_->num_faces(), "vertex_face");
+    hits(ee, v, v, contacts.ee, e, e, "edge_edge");
+    contacts.earliest_toi = earliest_toi;
+    const std::vector<lwsccd::Vec3d> p0 = to_points(x0), p1 = to_points(x1);
+    nb::gil_scoped_release unlocked;
+    lwsccd::cpu::render_contacts(path, *mesh_, p0, p1, contacts, width, height);
+  }
+
   const lwsccd::TriangleMesh& mesh() const { return *mesh_; }
   std::string backend() const { return pipeline_->backend(); }
 
@@ -301,6 +332,7 @@ NB_MODULE(_lwsccd, m) {
       .def("step", &Pipeline::step, "x0"_a, "x1"_a)
       .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a)
       .def("step_on_device", &Pipeline::step_on_device, "x0"_a, "x1"_a)
+      .def("render", &Pipeline::render, "path"_a, "x0"_a, "x1"_a, "vf"_a, "ee"_a, "earliest_toi"_a, "width"_a, "height"_a)
       .def_prop_ro("backend", &Pipeline::backend)
       .def_prop_ro("num_vertices", [](const Pipeline& p) { return p.mesh().num_vertices(); })
       .def_prop_ro("faces", [](const Pipeline& p) { return faces_array(p.mesh()); }, nb::rv_policy::move)

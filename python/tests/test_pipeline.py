@@ -94,3 +94,42 @@ def test_main_program_agrees_on_real_scenes(data_dir, ccd_program):
         assert r.stats["triangle_pairs"] == expected["triangle_pairs"]
         assert r.stats["feature_pairs_vf"] == expected["vf_pairs"]
         assert r.stats["feature_pairs_ee"] == expected["ee_pairs"]
+
+
+def read_png_rgb(path):
+    """The RGB pixels of a PNG the library wrote (8-bit RGB, filter 0 scanlines)."""
+    import zlib
+
+    data = open(path, "rb").read()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    idat, pos = b"", 8
+    while pos < len(data):
+        length, kind = int.from_bytes(data[pos:pos + 4], "big"), data[pos + 4:pos + 8]
+        if kind == b"IDAT":
+            idat += data[pos + 8:pos + 8 + length]
+        pos += 12 + length
+    raw = np.frombuffer(zlib.decompress(idat), dtype=np.uint8).reshape(height, 1 + width * 3)
+    assert np.all(raw[:, 0] == 0)
+    return raw[:, 1:].reshape(height, width, 3).astype(int)
+
+
+def red_pixels(rgb):
+    return int(((rgb[:, :, 0] > 150) & (rgb[:, :, 1] < 80) & (rgb[:, :, 2] < 80)).sum())
+
+
+def test_render_draws_the_contacts_in_red(cloth_steps, tmp_path):
+    sim, steps = cloth_steps
+    ccd = cpu_pipeline(sim)
+    x0, x1 = steps[-1]
+    r = ccd.step(x0, x1)
+    assert r.num_contacts > 0
+    picture = read_png_rgb(ccd.render(str(tmp_path / "step.png"), x0, x1, r, size=(160, 120)))
+    assert picture.shape == (120, 160, 3)
+    assert red_pixels(picture) > 0, "colliding triangles are drawn in red"
+    still = read_png_rgb(ccd.render(str(tmp_path / "still.png"), x0, x0, size=(160, 120)))  # no motion, no contact
+    assert red_pixels(still) == 0 and len(np.unique(still.reshape(-1, 3), axis=0)) > 10
+    with pytest.raises(ValueError, match="size"):
+        ccd.render(str(tmp_path / "bad.png"), x0, x1, r, size=(0, 10))
+    with pytest.raises(RuntimeError, match="cannot write"):
+        ccd.render(str(tmp_path / "missing-folder" / "x.png"), x0, x1, r, size=(16, 12))

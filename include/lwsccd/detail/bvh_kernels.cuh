@@ -228,10 +228,10 @@ void Bvh<BV>::build(const DeviceStep<P>& step, cudaStream_t stream) {
   // Zero once here; each bottom-up pass leaves the counters at zero again.
   LWSCCD_CUDA_CHECK(cudaMemsetAsync(arrivals_.data(), 0, sizeof(int) * internal, stream));
   refit(step, stream);
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback_[0].status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
   enqueue_cost(stream);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  throw_if_flagged(readback_[0].status, stream);
+  throw_if_flagged(readback().status, stream);
   cost_at_build_ = cost_from_readback();
   ++generation_;
 }
@@ -255,10 +255,10 @@ template <class P>
 bool Bvh<BV>::refit_or_rebuild(const DeviceStep<P>& step, const RebuildPolicy& policy, cudaStream_t stream) {
   refit(step, stream);
   // One synchronisation for both reads (status flag, then the cost), into pinned memory.
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback_[0].status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
   enqueue_cost(stream);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  throw_if_flagged(readback_[0].status, stream);
+  throw_if_flagged(readback().status, stream);
   if (!policy.should_rebuild(cost_from_readback(), cost_at_build_)) return false;
   build(step, stream);
   return true;
@@ -266,7 +266,7 @@ bool Bvh<BV>::refit_or_rebuild(const DeviceStep<P>& step, const RebuildPolicy& p
 
 template <class BV>
 void Bvh<BV>::enqueue_cost(cudaStream_t stream) const {
-  readback_[0].cost = 0;
+  readback().cost = 0;
   if (num_leaves_ < 2) return;
   const auto areas = thrust::make_transform_iterator(thrust::counting_iterator<index_t>(0),
                                                      detail::InternalSurfaceArea<BV>{bvs_.data()});
@@ -275,15 +275,15 @@ void Bvh<BV>::enqueue_cost(cudaStream_t stream) const {
   // The scratch's temporary part was sized for this pass at build time.
   LWSCCD_CUDA_CHECK(cub::DeviceReduce::Sum(const_cast<unsigned char*>(scratch_.data()) + temp_offset_, bytes, areas,
                                            cost_.data(), num_leaves_ - 1, stream));
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback_[0].cost, cost_.data(), sizeof(double), cudaMemcpyDeviceToHost, stream));
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback_[0].root, bvs_.data(), sizeof(BV), cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().cost, cost_.data(), sizeof(double), cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().root, bvs_.data(), sizeof(BV), cudaMemcpyDeviceToHost, stream));
 }
 
 template <class BV>
 double Bvh<BV>::cost_from_readback() const {
   if (num_leaves_ < 2) return 0.0;
-  const double root_area = static_cast<double>(bv_traits<BV>::surface_area(readback_[0].root));
-  return root_area > 0 ? readback_[0].cost / root_area : 0.0;
+  const double root_area = static_cast<double>(bv_traits<BV>::surface_area(readback().root));
+  return root_area > 0 ? readback().cost / root_area : 0.0;
 }
 
 template <class BV>
@@ -303,9 +303,9 @@ void Bvh<BV>::throw_if_flagged(int flag, cudaStream_t stream) {
 
 template <class BV>
 void Bvh<BV>::check_status(cudaStream_t stream) {
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback_[0].status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  throw_if_flagged(readback_[0].status, stream);
+  throw_if_flagged(readback().status, stream);
 }
 
 template <class BV>

@@ -1,4 +1,5 @@
-// A minimal PNG writer (8-bit RGB, zlib "stored" blocks: no compression, no dependency).
+// lwsccd — a minimal PNG writer (8-bit RGB, zlib "stored" blocks: no compression, no dependency),
+// for the pictures of render.hpp and the ray-tracing example.
 #pragma once
 
 #include <cstdint>
@@ -6,7 +7,7 @@
 #include <string>
 #include <vector>
 
-namespace png {
+namespace lwsccd::png {
 
 inline std::uint32_t crc32(const unsigned char* data, std::size_t n, std::uint32_t crc = 0xffffffffu) {
   for (std::size_t i = 0; i < n; ++i) {
@@ -67,4 +68,4 @@ inline bool write_rgb(const std::string& path, int width, int height, const std:
   return std::fclose(f) == 0;
 }
 
-}  // namespace png
+}  // namespace lwsccd::png
