@@ -68,6 +68,10 @@ void print_usage(std::FILE* out) {
                "  --tolerance T    time resolution of the times of impact (default 1e-6)\n"
                "  --max-iterations N  narrow-phase work bound per pair; past it a pair counts as a\n"
                "                   contact (default 16384)\n"
+               "  --memory-budget B  GPU: device memory the pipeline may hold, e.g. 4G, 512M (default: no\n"
+               "                   limit); a step that needs more runs in parts that fit (same contacts)\n"
+               "  --part-pairs N   run each step in parts of at most N candidate triangle pairs (both\n"
+               "                   devices; same contacts, less memory at once)\n"
                "  --no-front-tracking  traverse from the root every step\n"
                "  --check          also run the CPU oracle (sort-and-sweep, every candidate pair) and\n"
                "                   compare contacts pair for pair (slow on large scenes)\n"
@@ -97,6 +101,17 @@ double parse_number(const std::string& option, const std::string& text) {
   const double v = std::strtod(text.c_str(), &end);
   if (text.empty() || *end != '\0') throw lwsccd::InputError("command line", option, "expected a number, got '" + text + "'");
   return v;
+}
+
+// A byte count: a number with an optional K, M or G (binary multiples).
+std::size_t parse_bytes(const std::string& option, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  const std::string unit = end ? std::string(end) : std::string();
+  const double scale = unit.empty() ? 1.0 : unit == "K" ? 1024.0 : unit == "M" ? 1048576.0 : unit == "G" ? 1073741824.0 : -1.0;
+  if (text.empty() || scale < 0 || !(v > 0) || v * scale > 1e15)
+    throw lwsccd::InputError("command line", option, "expected a positive size such as 4G, 512M or 1000000, got '" + text + "'");
+  return static_cast<std::size_t>(v * scale);
 }
 
 std::string parse_choice(const std::string& option, const std::string& text, const std::vector<std::string>& allowed) {
@@ -140,6 +155,10 @@ Options parse(int argc, char** argv) {
       o.params.min_separation = parse_number(a, value());
     } else if (a == "--tolerance") {
       o.params.tolerance = parse_number(a, value());
+    } else if (a == "--memory-budget") {
+      o.params.device_memory_budget = parse_bytes(a, value());
+    } else if (a == "--part-pairs") {
+      o.params.part_pairs = static_cast<std::size_t>(parse_integer(a, value(), 1, 1LL << 40));
     } else if (a == "--max-iterations") {
       o.params.max_iterations = static_cast<int>(parse_integer(a, value(), 1, 1 << 30));
     } else if (a == "--no-front-tracking") {
@@ -305,6 +324,9 @@ void print_table(const StepSource& src, const std::string& backend, const Option
                   s.narrow_warp_searches);
     if (s.gave_up) std::printf("  %zu contacts from the method's work bound (conservative answers)\n", s.gave_up);
     if (s.peak_device_bytes) std::printf("  peak device memory %.1f MiB\n", double(s.peak_device_bytes) / (1 << 20));
+    if (s.narrow_parts)
+      std::printf("  in parts: %zu traversal parts, %zu narrow-phase parts\n", s.traversal_parts,
+                  s.narrow_parts);
     if (r.has_truth)
       std::printf("  ground truth: %zu true contacts; %zu false negatives, %zu false positives\n", r.truth.true_contacts,
                   r.truth.false_negatives, r.truth.false_positives);
@@ -334,11 +356,11 @@ void print_json(const StepSource& src, const std::string& backend, const Options
                 "\"narrow\": %.4f}, \"rebuilt\": %s, \"restarted_from_root\": %s, \"bvtt_nodes\": %zu, \"front\": %zu, "
                 "\"triangle_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, \"vf_hits\": %zu, \"ee_hits\": %zu, "
                 "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
-                "\"peak_device_bytes\": %zu, \"certified\": {\"vf\": [%zu, %zu, %zu, %zu], \"ee\": [%zu, %zu, %zu, %zu]}",
+                "\"peak_device_bytes\": %zu, \"traversal_parts\": %zu, \"narrow_parts\": %zu, \"certified\": {\"vf\": [%zu, %zu, %zu, %zu], \"ee\": [%zu, %zu, %zu, %zu]}",
                 r.name.c_str(), s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.rebuilt ? "true" : "false",
                 s.restarted_from_root ? "true" : "false", s.bvtt_nodes, s.front_size, s.triangle_pairs, s.feature_pairs_vf,
                 s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, s.narrow_survivors, s.narrow_warp_searches,
-                r.outcome.contacts.earliest_toi, s.peak_device_bytes, s.narrow_vf.certified_hits, s.narrow_vf.certified_misses,
+                r.outcome.contacts.earliest_toi, s.peak_device_bytes, s.traversal_parts, s.narrow_parts, s.narrow_vf.certified_hits, s.narrow_vf.certified_misses,
                 s.narrow_vf.fallbacks, s.narrow_vf.screened, s.narrow_ee.certified_hits, s.narrow_ee.certified_misses,
                 s.narrow_ee.fallbacks, s.narrow_ee.screened);
     if (r.has_truth)

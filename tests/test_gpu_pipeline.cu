@@ -10,6 +10,7 @@
 #include "lwsccd/pipeline.hpp"
 #include "lwsccd/representative.cuh"
 #include "lwsccd/scenes.hpp"
+#include "lwsccd/simulation.hpp"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"
@@ -261,4 +262,114 @@ TEST_CASE("GPU pipeline with a minimum separation equals the CPU pipeline (boxes
   CHECK(c.stats.hits_vf + c.stats.hits_ee > c0.stats.hits_vf + c0.stats.hits_ee);
   std::printf("folded cloth, min separation 0.01: %zu + %zu pairs closer (contact only: %zu + %zu)\n", c.stats.hits_vf,
               c.stats.hits_ee, c0.stats.hits_vf, c0.stats.hits_ee);
+}
+
+namespace {
+
+// A pipeline under a budget that forces its steps into parts against one without a budget: the
+// same pairs and TOIs bit for bit, the same counts, step after step (the kept front included).
+template <class Scheduler>
+void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>& mesh, const BodyLayout& layout,
+                                       const std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>>& steps, CcdMode mode) {
+  PipelineParams params;
+  params.mode = mode;
+  std::vector<StepResult<double>> expected;
+  std::size_t resident = 0, held = 0;
+  {
+    gpu::CcdPipeline<Aabbf, Scheduler> whole(mesh, layout, params);
+    for (const auto& s : steps) expected.push_back(whole.step(s.first, s.second));
+    resident = whole.resident_bytes();
+    held = whole.device_bytes();
+  }
+  // Half of what the unstreamed steps held beyond the resident data.
+  params.device_memory_budget = resident + (held - resident) / 2;
+  gpu::CcdPipeline<Aabbf, Scheduler> streamed(mesh, layout, params);
+  std::size_t parts = 0;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    INFO("step " << i << ", mode " << static_cast<int>(mode) << ", budget " << params.device_memory_budget);
+    const auto r = streamed.step(steps[i].first, steps[i].second);
+    lwsccd_test::require_same_contacts(r.contacts, expected[i].contacts);
+    REQUIRE(r.contacts.earliest_toi == expected[i].contacts.earliest_toi);
+    REQUIRE(r.stats.triangle_pairs == expected[i].stats.triangle_pairs);
+    REQUIRE(r.stats.feature_pairs_vf == expected[i].stats.feature_pairs_vf);
+    REQUIRE(r.stats.feature_pairs_ee == expected[i].stats.feature_pairs_ee);
+    if (mode == CcdMode::contacts) {
+      lwsccd_test::require_same_counts(r.contacts.vf_counts, expected[i].contacts.vf_counts);
+      lwsccd_test::require_same_counts(r.contacts.ee_counts, expected[i].contacts.ee_counts);
+    }
+    CHECK(streamed.device_bytes() <= params.device_memory_budget);
+    parts = std::max(parts, r.stats.narrow_parts);
+    std::printf("streamed step %zu (mode %d): %zu traversal parts, %zu narrow parts, %zu triangle pairs, %zu contacts, "
+                "held %.1f of %.1f MiB (unstreamed %.1f)\n",
+                i, static_cast<int>(mode), r.stats.traversal_parts, r.stats.narrow_parts, r.stats.triangle_pairs,
+                r.contacts.vf.size() + r.contacts.ee.size(), streamed.device_bytes() / 1048576.0,
+                params.device_memory_budget / 1048576.0, held / 1048576.0);
+  }
+  REQUIRE(parts > 2);  // the budget did split the steps
+}
+
+}  // namespace
+
+TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts and answers as without one",
+          "[gpu][pipeline][streaming]") {
+  // Schedulers with small lists of their own, so that what a step needs is mostly what grows with
+  // its pairs (the part a budget can split).
+  using SmallLazy = gpu::LazyStealScheduler<128, 1024, 1024, 256, 512, 1>;
+  using SmallStatic = gpu::StaticTaskList<128, 1024, 2048, 64>;
+  const MultiBodyStep scene = make_cloth_ball_scene(150000);
+  // The same positions three times: the first step starts from the root, the others from the
+  // kept front.
+  const std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>> repeated(3, {scene.step.x0, scene.step.x1});
+  for (const CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set})
+    require_streaming_changes_nothing<SmallLazy>(scene.step.mesh, scene.layout, repeated, mode);
+  require_streaming_changes_nothing<SmallStatic>(scene.step.mesh, scene.layout, repeated, CcdMode::contacts);
+  // Consecutive steps of the built-in simulation (the front moves with the cloth).
+  ClothBallSimulation simulation(150000);
+  simulation.advance(30);
+  std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>> sequence;
+  for (int s = 0; s < 4; ++s) {
+    const Step step = simulation.next_step();
+    sequence.push_back({step.x0, step.x1});
+  }
+  require_streaming_changes_nothing<SmallLazy>(simulation.mesh(), simulation.layout(), sequence, CcdMode::contacts);
+}
+
+TEST_CASE("GPU pipeline in parts (part_pairs) equals the CPU pipeline in parts and whole, step after step",
+          "[gpu][pipeline][streaming]") {
+  ClothBallSimulation simulation(12000);
+  simulation.advance(30);
+  PipelineParams params;
+  params.part_pairs = 500;
+  gpu::CcdPipeline<> gpu_parts(simulation.mesh(), simulation.layout(), params);
+  cpu::CcdPipeline<> cpu_parts(simulation.mesh(), simulation.layout(), params);
+  cpu::CcdPipeline<> cpu_whole(simulation.mesh(), simulation.layout());
+  for (int s = 0; s < 4; ++s) {
+    INFO("step " << s);
+    const Step step = simulation.next_step();
+    const auto g = gpu_parts.step(step.x0, step.x1);
+    const auto c = cpu_parts.step(step.x0, step.x1);
+    require_same_contacts(g, cpu_whole.step(step.x0, step.x1));
+    require_same_contacts(g, c);
+    CHECK(g.stats.front_size == c.stats.front_size);
+    REQUIRE(g.stats.narrow_parts > g.stats.triangle_pairs / 500);
+    REQUIRE(g.stats.traversal_parts > 1);
+  }
+}
+
+TEST_CASE("GPU pipeline: a device-memory budget below the mesh's own data is refused with the numbers",
+          "[gpu][pipeline][streaming]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(20000);
+  PipelineParams params;
+  params.device_memory_budget = 1 << 20;
+  gpu::CcdPipeline<> pipeline(scene.step.mesh, scene.layout, params);
+  try {
+    pipeline.step(scene.step.x0, scene.step.x1);
+    FAIL("a 1 MiB budget was accepted");
+  } catch (const InputError& e) {
+    CHECK(std::string(e.what()).find("device_memory_budget") != std::string::npos);
+    CHECK(std::string(e.what()).find("positions, BVH and topology take") != std::string::npos);
+  }
+  // Raised, the same pipeline steps.
+  pipeline.set_device_memory_budget(std::size_t(1) << 34);
+  CHECK(pipeline.step(scene.step.x0, scene.step.x1).stats.narrow_parts >= 1);
 }

@@ -119,6 +119,64 @@ TEST_CASE("device memory budget: exceeding it is a clear error, not a crash", "[
   CHECK(out.num_results() > 0);
 }
 
+TEST_CASE("GPU traversal split into parts: a cut below the root, traversed a part at a time, gives the whole traversal",
+          "[gpu][traverse][streaming]") {
+  const MovingMesh m = lwsccd_test::folded_cloth(80, 2);
+  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+  gpu::Bvh<Aabbf> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(m.mesh.faces());
+  using Task = SelfCollisionTask<Aabbf>;
+  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  gpu::DeviceBuffer<NodePair> root;
+  root.upload(std::vector<NodePair>{NodePair{0, 0}});
+  gpu::TraversalOutput<Task> whole;
+  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, whole, true);
+  std::vector<TrianglePair> expected_results = whole.download_results();
+  auto as_pairs = [](const std::vector<NodePair>& items) {
+    std::vector<std::pair<index_t, index_t>> pairs;
+    for (const NodePair& p : items) pairs.emplace_back(p.a, p.b);
+    std::sort(pairs.begin(), pairs.end());
+    return pairs;
+  };
+  const auto expected_front = as_pairs(whole.download_front());
+  std::sort(expected_results.begin(), expected_results.end());
+  REQUIRE(!expected_results.empty());
+  for (const std::size_t target : {std::size_t(1), std::size_t(64), std::size_t(5000)}) {
+    INFO("cut of at least " << target);
+    gpu::TraversalOutput<Task> out;
+    const std::size_t n = gpu::expand(task, root.data(), 1, target, out, true);
+    CHECK((n >= target || n == 0));
+    std::vector<TrianglePair> results = out.download_results();
+    std::vector<NodePair> front = out.download_front();
+    gpu::DeviceBuffer<NodePair> cut;
+    cut.upload(std::vector<NodePair>(n));
+    LWSCCD_CUDA_CHECK(cudaMemcpy(cut.data(), out.expanded(), n * sizeof(NodePair), cudaMemcpyDeviceToDevice));
+    const std::size_t part = std::max<std::size_t>(1, n / 7);
+    for (std::size_t first = 0; first < n; first += part) {
+      gpu::traverse<gpu::StaticTaskList<>>(task, cut.data() + first, std::min(part, n - first), out, true);
+      REQUIRE(out.complete());
+      const auto r = out.download_results();
+      const auto f = out.download_front();
+      results.insert(results.end(), r.begin(), r.end());
+      front.insert(front.end(), f.begin(), f.end());
+    }
+    std::sort(results.begin(), results.end());
+    REQUIRE(results == expected_results);
+    REQUIRE(as_pairs(front) == expected_front);
+  }
+  // An output limit below what the traversal yields: it stops, says so, and grows nothing.
+  gpu::TraversalOutput<Task> limited;
+  limited.set_output_limit(1024);
+  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, limited, true);
+  CHECK_FALSE(limited.complete());
+  limited.set_output_limit(0);
+  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, limited, true);
+  CHECK(limited.complete());
+  CHECK(limited.num_results() == expected_results.size());
+}
+
 TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu][traverse][front]") {
   const MovingMesh a = lwsccd_test::random_soup(3000, 21), b = lwsccd_test::random_soup(2000, 22);
   gpu::DeviceStep<double> sa(a.mesh, a.x0, a.x1), sb(b.mesh, b.x0, b.x1);

@@ -1,11 +1,13 @@
 // The CPU pipeline against its stages composed by hand from the oracles.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <string>
 
 #include "lwsccd/pipeline.hpp"
 #include "lwsccd/scenes.hpp"
+#include "lwsccd/simulation.hpp"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 
@@ -169,4 +171,68 @@ TEST_CASE("CPU pipeline with a minimum separation: pairs closer than it are foun
   cpu::Bvh<Aabbf> bvh;
   CHECK_THROWS_AS(bvh.set_leaf_margin(-1), InputError);
   CHECK_THROWS_AS(feature_boxes(*mesh, x, x, -0.5), InputError);
+}
+
+TEST_CASE("CPU pipeline in parts (part_pairs): a cut below the root, traversal and narrow phase a part at a time, the "
+          "whole step's answer",
+          "[pipeline][parts]") {
+  lwsccd::ClothBallSimulation simulation(12000);
+  simulation.advance(30);
+  std::vector<lwsccd::Step> steps;
+  for (int s = 0; s < 4; ++s) steps.push_back(simulation.next_step());
+  for (const lwsccd::CcdMode mode : {lwsccd::CcdMode::contacts, lwsccd::CcdMode::earliest, lwsccd::CcdMode::set}) {
+    lwsccd::PipelineParams whole_params;
+    whole_params.mode = mode;
+    lwsccd::PipelineParams part_params = whole_params;
+    part_params.part_pairs = 500;
+    lwsccd::cpu::CcdPipeline<> whole(simulation.mesh(), simulation.layout(), whole_params);
+    lwsccd::cpu::CcdPipeline<> parts(simulation.mesh(), simulation.layout(), part_params);
+    for (std::size_t i = 0; i < steps.size(); ++i) {
+      INFO("mode " << static_cast<int>(mode) << ", step " << i);
+      const auto w = whole.step(steps[i].x0, steps[i].x1);
+      const auto p = parts.step(steps[i].x0, steps[i].x1);
+      lwsccd_test::require_same_contacts(p.contacts, w.contacts);
+      REQUIRE(p.contacts.earliest_toi == w.contacts.earliest_toi);
+      REQUIRE(p.stats.triangle_pairs == w.stats.triangle_pairs);
+      REQUIRE(p.stats.feature_pairs_vf == w.stats.feature_pairs_vf);
+      REQUIRE(p.stats.feature_pairs_ee == w.stats.feature_pairs_ee);
+      REQUIRE(p.stats.front_size == w.stats.front_size);  // the same front kept, found in parts
+      REQUIRE(p.stats.restarted_from_root == w.stats.restarted_from_root);
+      if (mode == lwsccd::CcdMode::contacts) {
+        lwsccd_test::require_same_counts(p.contacts.vf_counts, w.contacts.vf_counts);
+        lwsccd_test::require_same_counts(p.contacts.ee_counts, w.contacts.ee_counts);
+        CHECK(w.stats.hits_vf + w.stats.hits_ee > 0);
+      }
+      // Split for real: more parts than the candidates could fill at 500 each, none with more.
+      REQUIRE(p.stats.narrow_parts > w.stats.triangle_pairs / 500);
+      REQUIRE(p.stats.traversal_parts > 1);
+      CHECK(w.stats.narrow_parts == 0);
+    }
+  }
+}
+
+TEST_CASE("cpu::expand: a cut of the traversal whose parts give the whole traversal", "[traverse][parts]") {
+  const auto m = lwsccd_test::folded_cloth(40, 2);
+  lwsccd::cpu::Bvh<lwsccd::Aabbf> bvh;
+  bvh.build(m.mesh, m.x0, m.x1);
+  const lwsccd::SelfCollisionTask<lwsccd::Aabbf> task{bvh.view(), lwsccd::LeafFilter{nullptr, nullptr, m.mesh.faces().data(), true}};
+  const std::vector<lwsccd::NodePair> root{lwsccd::NodePair{0, 0}};
+  auto whole = lwsccd::cpu::traverse(task, root, true);
+  std::sort(whole.results.begin(), whole.results.end());
+  for (const std::size_t target : {std::size_t(1), std::size_t(10), std::size_t(1000)}) {
+    std::vector<lwsccd::NodePair> cut;
+    auto met = lwsccd::cpu::expand(task, root, target, true, cut);
+    CHECK((cut.size() >= target || cut.empty()));
+    std::vector<lwsccd::TrianglePair> results = met.results;
+    std::size_t front = met.front.size();
+    for (std::size_t first = 0; first < cut.size(); first += 3) {
+      const std::vector<lwsccd::NodePair> part(cut.begin() + first, cut.begin() + std::min(cut.size(), first + 3));
+      const auto r = lwsccd::cpu::traverse(task, part, true);
+      results.insert(results.end(), r.results.begin(), r.results.end());
+      front += r.front.size();
+    }
+    std::sort(results.begin(), results.end());
+    REQUIRE(results == whole.results);
+    REQUIRE(front == whole.front.size());
+  }
 }

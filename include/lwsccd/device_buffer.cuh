@@ -3,6 +3,7 @@
 
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <string>
@@ -106,6 +107,27 @@ class DeviceBuffer {
     std::vector<T> out(size_);
     if (size_) {
       LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.data(), ptr_, size_ * sizeof(T), cudaMemcpyDeviceToHost, stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    }
+    return out;
+  }
+
+  /// Sets the size to n keeping the first size() elements: reallocates (to grow_to elements, at
+  /// least n) only when n exceeds the capacity, copying them over on `stream`.
+  void resize_keep(std::size_t n, std::size_t grow_to = 0, cudaStream_t stream = nullptr) {
+    if (n > capacity_) {
+      DeviceBuffer bigger(std::max(n, grow_to));
+      if (size_) LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.ptr_, ptr_, size_ * sizeof(T), cudaMemcpyDeviceToDevice, stream));
+      std::swap(ptr_, bigger.ptr_);
+      std::swap(capacity_, bigger.capacity_);
+    }
+    size_ = n;
+  }
+  /// Synchronous copy of the first n elements to the host (waits for `stream`).
+  std::vector<T> download_prefix(std::size_t n, cudaStream_t stream = nullptr) const {
+    std::vector<T> out(n);
+    if (n) {
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.data(), ptr_, n * sizeof(T), cudaMemcpyDeviceToHost, stream));
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
     }
     return out;

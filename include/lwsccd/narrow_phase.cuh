@@ -50,6 +50,24 @@ struct NarrowPhasePolicy {
   static constexpr int kGridBlocksPerSm = 16;
 };
 
+/// Sorts device hits by (first, second), the order of the CPU backend's results (CUB radix sort
+/// on a 64-bit key). Owns its scratch (reused; it only grows).
+template <class T>
+class HitSorter {
+ public:
+  /// Sorts the first n hits of `hits` on `stream`. The sorted hits end up in `hits` by an exchange
+  /// of buffers (the old one becomes this sorter's scratch), so `hits` keeps at least its size.
+  void sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, cudaStream_t stream = nullptr);
+  std::size_t device_bytes() const {
+    return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes();
+  }
+
+ private:
+  DeviceBuffer<FeatureHit<T>> sorted_;
+  DeviceBuffer<unsigned long long> keys_, sorted_keys_;
+  DeviceBuffer<unsigned char> scratch_;
+};
+
 /// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as
 /// cpu::test_feature_pairs, with the same answers). CertifiedCcd classifies every pair in the
 /// first pass, a thread per pair (its hits are stored at once), and runs its fallback only on the
@@ -142,8 +160,7 @@ class NarrowPhase {
   std::size_t device_bytes() const {
     std::size_t bytes = control_.capacity_bytes();
     for (const auto& l : lists_)
-      bytes += l.hits.capacity_bytes() + l.sorted.capacity_bytes() + l.keys.capacity_bytes() + l.sorted_keys.capacity_bytes() +
-               l.scratch.capacity_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
+      bytes += l.hits.capacity_bytes() + l.sorter.device_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
                l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes();
     return bytes;
   }
@@ -151,9 +168,8 @@ class NarrowPhase {
  private:
   // One list's buffers (vertex-face or edge-edge) and its stream.
   struct List {
-    DeviceBuffer<FeatureHit<T>> hits, sorted;    ///< sorted: the ordering by (first, second)
-    DeviceBuffer<unsigned long long> keys, sorted_keys;
-    DeviceBuffer<unsigned char> scratch;
+    DeviceBuffer<FeatureHit<T>> hits;
+    HitSorter<T> sorter;                         ///< the ordering by (first, second)
     DeviceBuffer<Pair> survivors;                ///< pairs the first pass keeps
     DeviceBuffer<FeatureHit<T>> undecided;       ///< CertifiedCcd: left to the fallback, with the time excluded before
     DeviceBuffer<unsigned> deferred, open;       ///< indices: refinements deferred, searches left to a warp
@@ -174,7 +190,6 @@ class NarrowPhase {
   template <class P, bool kVertexFace>
   void enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
                          const CcdParams<T>& params, const unsigned long long* limit, List& list);
-  void sort_hits(List& list, cudaStream_t stream);
   unsigned grid_for(std::size_t room, int block, int per_sm) const;
 
   std::size_t initial_capacity_;

@@ -34,6 +34,15 @@ struct NarrowPhaseCounts {
   std::size_t screened = 0;  ///< CertifiedCcd: pairs its screen passed on to the refinement
 };
 
+/// Adds b's numbers to a's.
+inline void add_counts(NarrowPhaseCounts& a, const NarrowPhaseCounts& b) {
+  a.pairs += b.pairs;
+  a.certified_hits += b.certified_hits;
+  a.certified_misses += b.certified_misses;
+  a.fallbacks += b.fallbacks;
+  a.screened += b.screened;
+}
+
 template <class T>
 struct NarrowPhaseResult {
   std::vector<FeatureHit<T>> vf, ee;  ///< sorted by (first, second); empty in mode `earliest`
@@ -41,6 +50,26 @@ struct NarrowPhaseResult {
   std::size_t gave_up = 0;            ///< hits answered by a method's bounded-work fallback
   NarrowPhaseCounts vf_counts, ee_counts;
 };
+
+/// Adds a part's result to a step's (a step split into parts): hits appended (unsorted: sort
+/// with sort_by_pair once every part is in), the earliest time kept, the numbers summed.
+template <class T>
+void add_narrow_phase_part(const NarrowPhaseResult<T>& part, NarrowPhaseResult<T>& all) {
+  all.vf.insert(all.vf.end(), part.vf.begin(), part.vf.end());
+  all.ee.insert(all.ee.end(), part.ee.begin(), part.ee.end());
+  all.earliest_toi = std::min(all.earliest_toi, part.earliest_toi);
+  all.gave_up += part.gave_up;
+  add_counts(all.vf_counts, part.vf_counts);
+  add_counts(all.ee_counts, part.ee_counts);
+}
+
+/// Sorts hits by (first, second), the order every result is given in.
+template <class T>
+void sort_by_pair(std::vector<FeatureHit<T>>& hits) {
+  std::sort(hits.begin(), hits.end(), [](const FeatureHit<T>& a, const FeatureHit<T>& b) {
+    return a.first != b.first ? a.first < b.first : a.second < b.second;
+  });
+}
 
 /// Contacts against a scene's exact ground truth (the pairs it lists, not every pair tested).
 struct TruthScore {

@@ -5,11 +5,20 @@
 // phase. The feature pairs and the narrow phase run without a host round trip: their lengths stay
 // on the device, and the host reads them once, after the narrow phase (stage times are events,
 // read then too).
+//
+// Under a device-memory budget (PipelineParams::device_memory_budget), or with parts asked for
+// (PipelineParams::part_pairs), a step streams instead: the traversal runs from its seeds (the kept
+// front, or a cut of the BVTT below the root) a part at a time, and each part's triangle pairs go
+// through the feature pairs and the narrow phase in parts that fit; the hits gather on the device
+// and are sorted once. Same answer, more synchronisations.
 #pragma once
 
 #include <cub/device/device_scan.cuh>
 
+#include <algorithm>
 #include <memory>
+#include <utility>
+#include <vector>
 
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/narrow_phase.cuh"
@@ -50,7 +59,6 @@ class CcdPipeline {
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(lwsccd::detail::checked_mesh(std::move(mesh), "gpu::CcdPipeline")), layout_(std::move(layout)),
         params_(lwsccd::detail::validated(params)), features_(*mesh_), emitter_(RepresentativeTriangles(*mesh_, layout_)) {
-    if (params_.device_memory_budget) set_memory_budget(params_.device_memory_budget);
     // Features that come within min_separation: their boxes, each grown by half of it, overlap.
     bvh_.set_leaf_margin(params_.min_separation / 2);
     emitter_.set_box_margin(params_.min_separation / 2);
@@ -95,17 +103,18 @@ class CcdPipeline {
     step_->set_positions_from_device(device_x0, device_x1);
     DeviceStepResult<T> r;
     run_stages(r.stats);
+    const Outcome o = outcome();
     const bool pairs = params_.mode != CcdMode::earliest;
-    r.contacts.vf = narrow_.vf_hits();
-    r.contacts.ee = narrow_.ee_hits();
-    r.contacts.num_vf = pairs ? narrow_.num_vf_hits() : 0;
-    r.contacts.num_ee = pairs ? narrow_.num_ee_hits() : 0;
-    r.contacts.earliest_toi = narrow_.earliest_toi();
-    r.contacts.gave_up = narrow_.gave_up();
-    r.contacts.vf_counts = narrow_.counts(0);
-    r.contacts.ee_counts = narrow_.counts(1);
+    r.contacts.vf = o.hits[0];
+    r.contacts.ee = o.hits[1];
+    r.contacts.num_vf = pairs ? o.num_hits[0] : 0;
+    r.contacts.num_ee = pairs ? o.num_hits[1] : 0;
+    r.contacts.earliest_toi = o.earliest;
+    r.contacts.gave_up = o.gave_up;
+    r.contacts.vf_counts = o.counts[0];
+    r.contacts.ee_counts = o.counts[1];
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));  // the hits' sort is done
-    finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, r.contacts.gave_up, start);
+    finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, start);
     return r;
   }
 
@@ -113,32 +122,81 @@ class CcdPipeline {
   const BodyLayout& layout() const { return layout_; }
   const PipelineParams& params() const { return params_; }
 
+  /// Device bytes this pipeline holds now (every buffer's capacity; they are kept between steps).
+  std::size_t device_bytes() const {
+    return resident_bytes() + traversal_.device_bytes() + seeds_.capacity_bytes() + root_.capacity_bytes() +
+           cut_.capacity_bytes() + next_front_.capacity_bytes() + scratch_.capacity_bytes() + emitter_.list_bytes() +
+           narrow_.device_bytes() + gathered_[0].capacity_bytes() + gathered_[1].capacity_bytes() + gathered_sorter_.device_bytes();
+  }
+  /// Of those, what no split of a step can reduce: topology, positions, the BVH, the feature boxes.
+  std::size_t resident_bytes() const {
+    const std::size_t step = step_ ? step_->faces.capacity_bytes() + step_->x0.capacity_bytes() + step_->x1.capacity_bytes() : 0;
+    return step + bvh_.device_bytes() + features_.faces.capacity_bytes() + features_.edges.capacity_bytes() +
+           emitter_.device_bytes() - emitter_.list_bytes() + face_body_.capacity_bytes() + node_body_.capacity_bytes() +
+           body_changes_.capacity_bytes() + self_collides_.capacity_bytes();
+  }
+  /// The budget streamed steps keep to (PipelineParams::device_memory_budget; 0: no streaming).
+  /// It may change between steps (e.g. as the application's own use of the device changes).
+  void set_device_memory_budget(std::size_t bytes) { params_.device_memory_budget = bytes; }
+
  private:
+  // What the last step's narrow phase (or its parts, gathered) found, on the device.
+  struct Outcome {
+    const FeatureHit<T>* hits[2];
+    std::size_t num_hits[2];
+    T earliest;
+    std::size_t gave_up, survivors, warp_searches;
+    NarrowPhaseCounts counts[2];
+  };
+  Outcome outcome() const {
+    if (streamed_) return gathered_outcome_;
+    return {{narrow_.vf_hits(), narrow_.ee_hits()}, {narrow_.num_vf_hits(), narrow_.num_ee_hits()}, narrow_.earliest_toi(),
+            narrow_.gave_up(), narrow_.survivors(), narrow_.warp_searches(), {narrow_.counts(0), narrow_.counts(1)}};
+  }
+
   StepResult<T> run_step(std::chrono::steady_clock::time_point start) {
     StepResult<T> r;
     run_stages(r.stats);
-    r.contacts = narrow_.download();
-    finish_stats(r.stats, r.contacts.vf.size(), r.contacts.ee.size(), r.contacts.gave_up, start);
+    if (!streamed_) {
+      r.contacts = narrow_.download();
+    } else {
+      const Outcome& o = gathered_outcome_;
+      const bool pairs = params_.mode != CcdMode::earliest;
+      r.contacts.vf = gathered_[0].download_prefix(pairs ? o.num_hits[0] : 0);
+      r.contacts.ee = gathered_[1].download_prefix(pairs ? o.num_hits[1] : 0);
+      r.contacts.earliest_toi = o.earliest;
+      r.contacts.gave_up = o.gave_up;
+      r.contacts.vf_counts = o.counts[0];
+      r.contacts.ee_counts = o.counts[1];
+    }
+    finish_stats(r.stats, r.contacts.vf.size(), r.contacts.ee.size(), start);
     return r;
   }
 
-  void finish_stats(StepStats& stats, std::size_t hits_vf, std::size_t hits_ee, std::size_t gave_up,
-                    std::chrono::steady_clock::time_point start) {
+  void finish_stats(StepStats& stats, std::size_t hits_vf, std::size_t hits_ee, std::chrono::steady_clock::time_point start) {
+    const Outcome o = outcome();
     stats.hits_vf = hits_vf;
     stats.hits_ee = hits_ee;
-    stats.gave_up = gave_up;
-    stats.narrow_survivors = narrow_.survivors();
-    stats.narrow_warp_searches = narrow_.warp_searches();
-    stats.narrow_vf = narrow_.counts(0);
-    stats.narrow_ee = narrow_.counts(1);
+    stats.gave_up = o.gave_up;
+    stats.narrow_survivors = o.survivors;
+    stats.narrow_warp_searches = o.warp_searches;
+    stats.narrow_vf = o.counts[0];
+    stats.narrow_ee = o.counts[1];
     stats.peak_device_bytes = memory_stats().peak;
     stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   }
 
-  // Every stage of a step on the device; the narrow phase's hits stay there (sorted on the
-  // default stream once collected).
-  void run_stages(StepStats& stats) {
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
+  CcdParams<T> ccd_params() const {
+    CcdParams<T> ccd;
+    ccd.min_separation = static_cast<T>(params_.min_separation);
+    ccd.tolerance = static_cast<T>(params_.tolerance);
+    ccd.max_iterations = params_.max_iterations;
+    ccd.mode = params_.mode;
+    return ccd;
+  }
+
+  // Refit, or rebuild when the tree decayed (or on the first step).
+  void refit_stage(StepStats& stats) {
     if (!built_) {
       bvh_.build(*step_);
       built_ = stats.rebuilt = true;
@@ -146,6 +204,15 @@ class CcdPipeline {
       stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
     }
     if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
+  }
+
+  // Every stage of a step on the device; the narrow phase's hits stay there (sorted on the
+  // default stream once collected).
+  void run_stages(StepStats& stats) {
+    streamed_ = params_.device_memory_budget > 0 || params_.part_pairs > 0;
+    if (streamed_) return run_streamed_stages(stats);
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
+    refit_stage(stats);
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
     traverse_step(stats);
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[2]));
@@ -155,11 +222,7 @@ class CcdPipeline {
     else emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
     emitter_sized_ = true;
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[3]));
-    CcdParams<T> ccd;
-    ccd.min_separation = static_cast<T>(params_.min_separation);
-    ccd.tolerance = static_cast<T>(params_.tolerance);
-    ccd.max_iterations = params_.max_iterations;
-    ccd.mode = params_.mode;
+    const CcdParams<T> ccd = ccd_params();
     // One host round trip for both stages: their counters, read once the narrow phase is done;
     // a list that outgrew its buffer has it grown, and what read it runs again.
     while (true) {
@@ -203,11 +266,15 @@ class CcdPipeline {
     return t;
   }
 
+  Task traversal_task() const {
+    const bool bodies = face_body_.size() > 0;
+    return Task{bvh_.view(), LeafFilter{bodies ? face_body_.data() : nullptr, bodies ? self_collides_.data() : nullptr,
+                                        features_.faces.data(), true, bodies ? node_body_.data() : nullptr}};
+  }
+
   // Traversal from the front kept on the device (FrontTracker's policy, without a host copy).
   void traverse_step(StepStats& stats) {
-    const bool bodies = face_body_.size() > 0;
-    const Task task{bvh_.view(), LeafFilter{bodies ? face_body_.data() : nullptr, bodies ? self_collides_.data() : nullptr,
-                                            features_.faces.data(), true, bodies ? node_body_.data() : nullptr}};
+    const Task task = traversal_task();
     const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
     generation_ = bvh_.generation();
     if (restart) {
@@ -231,6 +298,218 @@ class CcdPipeline {
     stats.triangle_pairs = traversal_.num_results();
   }
 
+  // ---- A step streamed under PipelineParams::device_memory_budget ----
+
+  // Bytes the budget leaves now (0 when it is spent; without a budget, as good as unlimited).
+  std::size_t budget_left() const {
+    if (!params_.device_memory_budget) return kUnlimited;
+    const std::size_t held = device_bytes();
+    return params_.device_memory_budget > held ? params_.device_memory_budget - held : 0;
+  }
+  static constexpr std::size_t kUnlimited = std::size_t(1) << 60;
+
+  // The stages in parts that fit the budget: traversal from the seeds a part at a time, each
+  // part's candidates through the feature pairs and the narrow phase in parts, the hits gathered.
+  void run_streamed_stages(StepStats& stats) {
+    using clock = std::chrono::steady_clock;
+    auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
+    auto t = clock::now();
+    refit_stage(stats);
+    LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+    stats.refit_ms = ms_since(t);
+    const std::size_t budget = params_.device_memory_budget ? params_.device_memory_budget : kUnlimited;
+    const std::size_t resident = resident_bytes();
+    // A budget that leaves less than a few MiB beside the resident data cannot make progress (the
+    // narrow phase's and the scheduler's starting buffers alone take that).
+    const std::size_t least = resident + (std::size_t(4) << 20);
+    if (budget < least)
+      throw InputError("gpu::CcdPipeline", "device_memory_budget",
+                       std::to_string(budget) + " bytes is below what this mesh needs at least: " + std::to_string(least) +
+                           " (positions, BVH and topology take " + std::to_string(resident) + ")");
+    const std::size_t room = budget - resident;
+    gathered_outcome_ = Outcome{{nullptr, nullptr}, {0, 0}, T(1), 0, 0, 0, {}};
+    const CcdParams<T> ccd = ccd_params();
+    // The orphans (pairs no candidate emits) once per step, as a part of their own.
+    test_candidates(nullptr, 0, true, ccd, stats);
+
+    const Task task = traversal_task();
+    const std::uint64_t generation = bvh_.generation();
+    bool record = params_.front_tracking && front_refused_generation_ != generation;
+    const bool restart = !params_.front_tracking || generation != generation_ || front_size_ == 0 || reset_next_;
+    generation_ = generation;
+    const std::size_t front_room = static_cast<std::size_t>(StreamingPolicy::kFrontShare * static_cast<double>(room));
+    std::size_t next_front = 0;
+    // Keeps the part's front entries for the next step while they fit their share.
+    auto keep_front = [&] {
+      if (!record) return;
+      const std::size_t n = traversal_.num_front();
+      const std::size_t kept_seeds = restart ? 0 : seeds_.capacity_bytes();
+      if (kept_seeds + (next_front + n) * sizeof(NodePair) * 5 / 4 > front_room) {
+        record = false;  // the next step starts from the root (and this tree keeps no front)
+        front_refused_generation_ = generation;
+        next_front_ = DeviceBuffer<NodePair>();
+        return;
+      }
+      next_front_.resize_keep(next_front + n, (next_front + n) * 5 / 4);
+      if (n) LWSCCD_CUDA_CHECK(cudaMemcpyAsync(next_front_.data() + next_front, traversal_.front(), n * sizeof(NodePair),
+                                              cudaMemcpyDeviceToDevice));
+      next_front += n;
+    };
+    auto traversal_limit = [&] {
+      return std::max(traversal_.output_limit(),
+                      static_cast<std::size_t>(StreamingPolicy::kTraversalShare * static_cast<double>(room)));
+    };
+    const NodePair* seeds = seeds_.data();
+    std::size_t num_seeds = front_size_;
+    if (restart) {
+      // A cut below the root; what the expansion met on the way is a part of its own.
+      t = clock::now();
+      root_.upload(std::vector<NodePair>{NodePair{0, 0}});
+      traversal_.set_output_limit(traversal_limit());
+      num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, record);
+      if (!traversal_.complete())
+        throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
+                    " bytes cannot hold the first levels of the traversal; give it more");
+      cut_.resize_discard(std::max<std::size_t>(num_seeds, 1));
+      if (num_seeds)
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(cut_.data(), traversal_.expanded(), num_seeds * sizeof(NodePair), cudaMemcpyDeviceToDevice));
+      seeds = cut_.data();
+      stats.bvtt_nodes += traversal_.stats().items_processed;
+      stats.traverse_ms += ms_since(t);
+      keep_front();
+      test_traversal_output(ccd, stats);
+    }
+    // A part's seeds take room in the scheduler's own lists too (a few entries each).
+    const std::size_t max_part =
+        std::max<std::size_t>(1, static_cast<std::size_t>(StreamingPolicy::kTraversalShare * static_cast<double>(room)) /
+                                     (8 * sizeof(NodePair)));
+    std::size_t part = std::min(seeds_per_part_ ? seeds_per_part_ : num_seeds, max_part);
+    if (params_.part_pairs) part = std::min(part, std::max<std::size_t>(1, params_.part_pairs));
+    for (std::size_t first = 0; first < num_seeds;) {
+      const std::size_t n = std::min(part, num_seeds - first);
+      t = clock::now();
+      traversal_.set_output_limit(traversal_limit());
+      traverse<Scheduler>(task, seeds + first, n, traversal_, record);
+      stats.traverse_ms += ms_since(t);
+      const std::size_t cap = params_.part_pairs;
+      if (traversal_.complete() && cap && traversal_.num_results() > cap && n > 1) {
+        part = n / 2;  // more candidates than a part may have: fewer seeds
+        ++stats.reruns;
+        continue;
+      }
+      if (!traversal_.complete()) {
+        if (n == 1)
+          throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
+                      " bytes cannot hold what one node pair of the traversal yields; give it more");
+        part = n / 2;
+        ++stats.reruns;
+        continue;
+      }
+      stats.bvtt_nodes += traversal_.stats().items_processed;
+      keep_front();
+      test_traversal_output(ccd, stats);
+      ++stats.traversal_parts;
+      first += n;
+      // Parts whose outputs took under a quarter of their room may double.
+      const std::size_t used = traversal_.num_results() * sizeof(TrianglePair) + traversal_.num_front() * sizeof(NodePair);
+      if (used * 4 < traversal_.output_limit() && (!cap || traversal_.num_results() * 4 < cap))
+        part = std::min({num_seeds, 2 * part, max_part});
+    }
+    traversal_.set_output_limit(0);
+    seeds_per_part_ = part;
+    // The front for the next step, when it was kept whole.
+    if (record) {
+      std::swap(seeds_, next_front_);
+      front_size_ = next_front;
+      if (restart) size_at_restart_ = front_size_;
+      reset_next_ = static_cast<double>(front_size_) > params_.front_growth_limit * static_cast<double>(size_at_restart_);
+    } else {
+      front_size_ = 0;
+      seeds_ = DeviceBuffer<NodePair>();
+    }
+    next_front_ = DeviceBuffer<NodePair>();
+    stats.restarted_from_root = restart;
+    stats.front_size = front_size_;
+    // The gathered hits in (first, second) order, as an unstreamed step gives them.
+    t = clock::now();
+    if (params_.mode != CcdMode::earliest)
+      for (int k = 0; k < 2; ++k) gathered_sorter_.sort(gathered_[k], gathered_outcome_.num_hits[k]);
+    for (int k = 0; k < 2; ++k) gathered_outcome_.hits[k] = gathered_[k].data();
+    LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+    stats.narrow_ms += ms_since(t);
+  }
+
+  // The current traversal output's candidates through the feature pairs and the narrow phase.
+  void test_traversal_output(const CcdParams<T>& ccd, StepStats& stats) {
+    stats.triangle_pairs += traversal_.num_results();
+    test_candidates(traversal_.results(), traversal_.num_results(), false, ccd, stats);
+  }
+
+  // Candidates [0, n) (and the orphans when asked) in parts whose feature pairs fit the budget.
+  void test_candidates(const TrianglePair* candidates, std::size_t n, bool orphans, const CcdParams<T>& ccd, StepStats& stats) {
+    // The orphans' part comes first in a step and computes the feature boxes for all the others.
+    bool boxes_current = !orphans;
+    using clock = std::chrono::steady_clock;
+    auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
+    std::size_t part = candidates_per_part_ ? candidates_per_part_ : std::max<std::size_t>(n, 1);
+    if (params_.part_pairs) part = std::min(part, params_.part_pairs);
+    for (std::size_t first = 0; first < n || (orphans && first == 0);) {
+      const std::size_t count = std::min(part, n - first);
+      const bool with_orphans = orphans && first == 0;
+      auto t = clock::now();
+      emitter_.enqueue(step_->x0.data(), step_->x1.data(), candidates + first, count, nullptr, with_orphans, boxes_current);
+      boxes_current = true;  // the feature boxes are this step's from the first part on
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+      const auto counted = emitter_.counted();
+      const std::size_t pairs = counted.first + counted.second;
+      // What the part may take: what the budget leaves, plus what its lists and the narrow phase
+      // hold already (reused), less a reserve for gathering and sorting the hits so far.
+      const std::size_t gathered = gathered_outcome_.num_hits[0] + gathered_outcome_.num_hits[1];
+      const std::size_t reserve = gathered * (2 * sizeof(FeatureHit<T>) + 24) * 5 / 4;  // keys, sorted copy, CUB's temporary
+      const std::size_t reusable = budget_left() + emitter_.list_bytes() + narrow_.device_bytes();
+      const std::size_t allowed = reusable > reserve ? reusable - reserve : 0;
+      if (count > 1 && pairs * StreamingPolicy::bytes_per_feature_pair<T>() + count * StreamingPolicy::kBytesPerCandidate > allowed) {
+        part = count / 2;
+        ++stats.reruns;
+        stats.features_ms += ms_since(t);
+        continue;
+      }
+      if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+      stats.feature_pairs_vf += emitter_.num_vf();
+      stats.feature_pairs_ee += emitter_.num_ee();
+      stats.features_ms += ms_since(t);
+      t = clock::now();
+      narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd);
+      gather_hits();
+      stats.narrow_ms += ms_since(t);
+      ++stats.narrow_parts;
+      first += count;
+      if (n == 0) break;
+    }
+    if (n) candidates_per_part_ = part;
+  }
+
+  // Adds the narrow phase's last run to what the step's parts found.
+  void gather_hits() {
+    Outcome& o = gathered_outcome_;
+    const bool pairs = params_.mode != CcdMode::earliest;
+    const std::size_t found[2] = {narrow_.num_vf_hits(), narrow_.num_ee_hits()};
+    const FeatureHit<T>* hits[2] = {narrow_.vf_hits(), narrow_.ee_hits()};
+    for (int k = 0; k < 2 && pairs; ++k) {
+      if (!found[k]) continue;
+      gathered_[k].resize_keep(o.num_hits[k] + found[k], (o.num_hits[k] + found[k]) * 3 / 2);
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(gathered_[k].data() + o.num_hits[k], hits[k], found[k] * sizeof(FeatureHit<T>),
+                                        cudaMemcpyDeviceToDevice));
+      o.num_hits[k] += found[k];
+    }
+    o.earliest = std::min(o.earliest, narrow_.earliest_toi());
+    o.gave_up += narrow_.gave_up();
+    o.survivors += narrow_.survivors();
+    o.warp_searches += narrow_.warp_searches();
+    for (int k = 0; k < 2; ++k) add_counts(o.counts[k], narrow_.counts(k));
+  }
+
+
   std::shared_ptr<const TriangleMesh> mesh_;
   BodyLayout layout_;
   PipelineParams params_;
@@ -251,6 +530,14 @@ class CcdPipeline {
   bool emitter_sized_ = false;  ///< the emitter's buffers have been sized by a step
   NarrowPhase<Method, T> narrow_;
   cudaEvent_t mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
+  // Streaming under a budget:
+  bool streamed_ = false;                        ///< the last step was streamed
+  DeviceBuffer<NodePair> cut_, next_front_;      ///< a cut below the root; the front being recorded
+  DeviceBuffer<FeatureHit<T>> gathered_[2];      ///< the parts' hits (vertex-face, edge-edge)
+  HitSorter<T> gathered_sorter_;
+  Outcome gathered_outcome_{};
+  std::size_t seeds_per_part_ = 0, candidates_per_part_ = 0;  ///< part sizes that fitted last
+  std::uint64_t front_refused_generation_ = ~std::uint64_t(0);  ///< the tree on which a front did not fit
 };
 
 }  // namespace lwsccd::gpu

@@ -34,7 +34,13 @@ struct PipelineParams {
   bool front_tracking = true;    ///< restart each traversal from the last front
   double rebuild_factor = 1.5;   ///< rebuild the BVH when its cost exceeds this times the cost at build
   double front_growth_limit = 1.5;  ///< restart from the root once the front grew this much
-  std::size_t device_memory_budget = 0;  ///< GPU backend: device bytes the library may hold (0: no limit)
+  /// GPU backend: device bytes the pipeline may hold (0: no limit). Under a budget a step streams:
+  /// its traversal, feature pairs and narrow phase run in parts that fit, with the same answer.
+  std::size_t device_memory_budget = 0;
+  /// Both backends: at most this many candidate triangle pairs go through the feature pairs and
+  /// the narrow phase together, and the traversal runs from its seeds in parts of about as many
+  /// candidates (0: no limit). A step in parts holds less memory at once; same answer.
+  std::size_t part_pairs = 0;
   CcdMode mode = CcdMode::contacts;      ///< contacts, only the earliest TOI, or the colliding set (ccd_query.hpp)
 
   /// Throws InputError naming the first parameter out of range.
@@ -71,6 +77,29 @@ inline std::vector<unsigned char> self_collision_flags(const BodyLayout& layout)
 }
 }  // namespace detail
 
+/// Knobs of a step run in parts (PipelineParams::part_pairs, and on the GPU under a device-memory
+/// budget).
+struct StreamingPolicy {
+  /// A traversal from the root is first expanded breadth first into a cut of at least this many
+  /// node pairs, which are then traversed a part at a time (both backends).
+  static constexpr std::size_t kCutItems = std::size_t(1) << 15;
+  // GPU, under a budget:
+  /// Share of the room (budget less the resident data) that the kept fronts (the last step's and
+  /// the one being recorded) may take; past it the next step starts from the root instead.
+  static constexpr double kFrontShare = 0.35;
+  /// Share of the room that one part's traversal (its outputs, and its seeds in the scheduler's
+  /// lists) may take.
+  static constexpr double kTraversalShare = 0.25;
+  /// Device bytes a part may need per feature pair, counted as if every pair were a hit: its list
+  /// entry, the narrow phase's work lists and a hit with its sort keys, each grown by a quarter.
+  template <class T>
+  static constexpr std::size_t bytes_per_feature_pair() {
+    return (2 * sizeof(std::pair<index_t, index_t>) + 2 * sizeof(FeatureHit<T>) + 8 + 2 * sizeof(FeatureHit<T>) + 16) * 5 / 4;
+  }
+  /// Device bytes per candidate triangle pair of a part (its emission mask and block total).
+  static constexpr std::size_t kBytesPerCandidate = 4;
+};
+
 /// What one step measured.
 struct StepStats {
   double refit_ms = 0, traverse_ms = 0, features_ms = 0, narrow_ms = 0, total_ms = 0;
@@ -83,6 +112,10 @@ struct StepStats {
   /// GPU: stages enqueued again in this step because a list outgrew the room earlier steps gave
   /// it (the feature pairs' or the narrow phase's; nothing is lost, the step just costs more).
   std::size_t reruns = 0;
+  /// A step in parts (PipelineParams::part_pairs, or a GPU budget): the traversal's parts and the
+  /// narrow phase's parts (a part's candidates went through the feature pairs and the narrow
+  /// phase together); 0: the step ran whole.
+  std::size_t traversal_parts = 0, narrow_parts = 0;
   bool rebuilt = false, restarted_from_root = false;
 };
 
@@ -154,6 +187,11 @@ class CcdPipeline {
     const std::vector<NodePair> root{NodePair{0, 0}};
     const auto& seeds = params_.front_tracking ? tracker_.seeds(bvh_.generation()) : root;
     r.stats.restarted_from_root = !params_.front_tracking || tracker_.last_was_restart();
+    if (params_.part_pairs) {
+      step_in_parts(task, seeds, r.stats.restarted_from_root, x0, x1, r);
+      r.stats.total_ms = ms(start);
+      return r;
+    }
     auto traversal = cpu::traverse(task, seeds, params_.front_tracking, WorkStealingScheduler{});
     if (params_.front_tracking) tracker_.update(std::move(traversal.front));
     r.stats.traverse_ms = ms(t);
@@ -167,12 +205,7 @@ class CcdPipeline {
     r.stats.feature_pairs_vf = features.vf.size();
     r.stats.feature_pairs_ee = features.ee.size();
     t = clock::now();
-    CcdParams<T> ccd;
-    ccd.min_separation = static_cast<T>(params_.min_separation);
-    ccd.tolerance = static_cast<T>(params_.tolerance);
-    ccd.max_iterations = params_.max_iterations;
-    ccd.mode = params_.mode;
-    r.contacts = test_feature_pairs<Method, T>(*mesh_, x0, x1, features, ccd);
+    r.contacts = test_feature_pairs<Method, T>(*mesh_, x0, x1, features, ccd_params());
     r.stats.narrow_vf = r.contacts.vf_counts;
     r.stats.narrow_ee = r.contacts.ee_counts;
     r.stats.narrow_ms = ms(t);
@@ -188,6 +221,94 @@ class CcdPipeline {
   const PipelineParams& params() const { return params_; }
 
  private:
+  CcdParams<T> ccd_params() const {
+    CcdParams<T> ccd;
+    ccd.min_separation = static_cast<T>(params_.min_separation);
+    ccd.tolerance = static_cast<T>(params_.tolerance);
+    ccd.max_iterations = params_.max_iterations;
+    ccd.mode = params_.mode;
+    return ccd;
+  }
+
+  // The step in parts (PipelineParams::part_pairs): a cut below the root when the traversal
+  // restarts, traversed a part at a time; each part's candidates through the feature pairs and
+  // the narrow phase in parts of at most part_pairs; the hits gathered and sorted as a whole
+  // step's are. The same answer as the whole step.
+  template <class Task>
+  void step_in_parts(const Task& task, const std::vector<NodePair>& seeds, bool restart, const std::vector<Vec3d>& x0,
+                     const std::vector<Vec3d>& x1, StepResult<T>& r) {
+    using clock = std::chrono::steady_clock;
+    auto ms = [](clock::time_point a) { return std::chrono::duration<double, std::milli>(clock::now() - a).count(); };
+    const std::size_t cap = params_.part_pairs;
+    const bool record = params_.front_tracking;
+    auto t = clock::now();
+    const std::vector<Aabbf> boxes = feature_boxes(*mesh_, x0, x1, params_.min_separation / 2);
+    r.stats.features_ms += ms(t);
+    const CcdParams<T> ccd = ccd_params();
+    NarrowPhaseResult<T>& all = r.contacts;
+    std::vector<NodePair> front;
+    // Candidates in parts of at most `cap`, the orphans with the first when asked.
+    auto test = [&](const TrianglePair* candidates, std::size_t n, bool orphans) {
+      for (std::size_t first = 0; first < n || (orphans && first == 0); first += cap) {
+        const std::size_t count = std::min(cap, n - first);
+        auto t0 = clock::now();
+        const FeaturePairs features = emit_feature_pairs(representatives_, candidates + first, count, boxes, orphans && first == 0);
+        r.stats.features_ms += ms(t0);
+        r.stats.feature_pairs_vf += features.vf.size();
+        r.stats.feature_pairs_ee += features.ee.size();
+        t0 = clock::now();
+        add_narrow_phase_part(test_feature_pairs<Method, T>(*mesh_, x0, x1, features, ccd), all);
+        r.stats.narrow_ms += ms(t0);
+        ++r.stats.narrow_parts;
+        if (n == 0) break;
+      }
+    };
+    test(nullptr, 0, true);
+    const std::vector<NodePair>* parts_of = &seeds;
+    std::vector<NodePair> cut;
+    if (restart) {
+      t = clock::now();
+      TraversalResult<Task> met = expand(task, seeds, StreamingPolicy::kCutItems, record, cut);
+      r.stats.traverse_ms += ms(t);
+      r.stats.bvtt_nodes += met.stats.items_processed;
+      r.stats.triangle_pairs += met.results.size();
+      front.insert(front.end(), met.front.begin(), met.front.end());
+      test(met.results.data(), met.results.size(), false);
+      parts_of = &cut;
+    }
+    // Traversal parts, halved while they yield more than `cap` candidates (down to one seed).
+    const std::size_t num_seeds = parts_of->size();
+    std::size_t part = std::max<std::size_t>(1, std::min(num_seeds, cap));
+    for (std::size_t first = 0; first < num_seeds;) {
+      const std::size_t n = std::min(part, num_seeds - first);
+      t = clock::now();
+      const std::vector<NodePair> part_seeds(parts_of->begin() + static_cast<std::ptrdiff_t>(first),
+                                             parts_of->begin() + static_cast<std::ptrdiff_t>(first + n));
+      TraversalResult<Task> traversal = cpu::traverse(task, part_seeds, record, WorkStealingScheduler{});
+      r.stats.traverse_ms += ms(t);
+      if (traversal.results.size() > cap && n > 1) {
+        part = n / 2;
+        ++r.stats.reruns;
+        continue;
+      }
+      r.stats.bvtt_nodes += traversal.stats.items_processed;
+      r.stats.triangle_pairs += traversal.results.size();
+      front.insert(front.end(), traversal.front.begin(), traversal.front.end());
+      test(traversal.results.data(), traversal.results.size(), false);
+      ++r.stats.traversal_parts;
+      first += n;
+      if (traversal.results.size() * 4 < cap) part = std::min(num_seeds, 2 * part);
+    }
+    if (record) tracker_.update(std::move(front));
+    r.stats.front_size = tracker_.size();
+    sort_by_pair(all.vf);
+    sort_by_pair(all.ee);
+    r.stats.narrow_vf = all.vf_counts;
+    r.stats.narrow_ee = all.ee_counts;
+    r.stats.hits_vf = all.vf.size();
+    r.stats.hits_ee = all.ee.size();
+    r.stats.gave_up = all.gave_up;
+  }
 
   std::shared_ptr<const TriangleMesh> mesh_;
   BodyLayout layout_;

@@ -16,6 +16,7 @@
 #include <cub/block/block_scan.cuh>
 #include <cub/device/device_scan.cuh>
 
+#include <tuple>
 #include <utility>
 
 #include "lwsccd/cuda_check.cuh"
@@ -160,17 +161,25 @@ class FeatureEmitter {
 
   /// As run() without waiting: the pairs go to buffers sized by earlier runs and their numbers stay
   /// on the device (vf_list(), ee_list() give them to the narrow phase); call collect() after
-  /// `stream` has been synchronized. The candidates must stay valid until then.
+  /// `stream` has been synchronized. The candidates must stay valid until then. `with_orphans`
+  /// false leaves the orphans out (a step split into parts lists them with one part only).
+  /// `boxes_current` true skips recomputing the feature boxes (they are those of an earlier
+  /// enqueue with the same positions).
   template <class P>
-  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr) {
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr,
+               bool with_orphans = true, bool boxes_current = false) {
     const index_t features = num_vertices_ + num_edges_ + num_faces_;
     const EmissionView m = view();
-    detail::feature_boxes_kernel<<<static_cast<unsigned>((features + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
-                                   stream>>>(m, x0, x1, features, margin_, boxes_.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    if (!boxes_current) {
+      detail::feature_boxes_kernel<<<static_cast<unsigned>((features + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
+                                     stream>>>(m, x0, x1, features, margin_, boxes_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
     candidates_ = candidates;
     num_candidates_ = n;
-    const std::size_t items = n + orphan_vf_.size() + orphan_ee_.size();
+    num_orphan_vf_ = with_orphans ? orphan_vf_.size() : 0;
+    num_orphan_ee_ = with_orphans ? orphan_ee_.size() : 0;
+    const std::size_t items = n + num_orphan_vf_ + num_orphan_ee_;
     blocks_ = (items + Policy::kBlock - 1) / Policy::kBlock;
     vf_.resize_discard(std::max<std::size_t>(vf_room_, 1));
     ee_.resize_discard(std::max<std::size_t>(ee_room_, 1));
@@ -180,7 +189,7 @@ class FeatureEmitter {
       masks_.resize_discard(items);
       block_totals_.resize_discard(blocks_);
       detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-          m, candidates, n, orphan_vf_.data(), orphan_vf_.size(), orphan_ee_.data(), items, masks_.data(), block_totals_.data());
+          m, candidates, n, orphan_vf_.data(), num_orphan_vf_, orphan_ee_.data(), items, masks_.data(), block_totals_.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       std::size_t bytes = 0;
       LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
@@ -200,9 +209,7 @@ class FeatureEmitter {
   /// false when a list outgrew its buffer: the buffer is grown and the pairs written again on
   /// `stream` (what read the short lists must run again); true when the lists were complete.
   bool collect(cudaStream_t stream = nullptr) {
-    const unsigned long long total = host_total_[0];
-    num_vf_ = static_cast<std::size_t>(total >> 32);
-    num_ee_ = static_cast<std::size_t>(total & 0xffffffffull);
+    std::tie(num_vf_, num_ee_) = counted();
     if (num_vf_ <= vf_room_ && num_ee_ <= ee_room_) return true;
     // A quarter more room than needed, so that lists that grow a little do not repeat the writing.
     vf_room_ = std::max(vf_room_, num_vf_ + num_vf_ / 4);
@@ -211,6 +218,18 @@ class FeatureEmitter {
     ee_.resize_discard(std::max<std::size_t>(ee_room_, 1));
     write(stream);
     return false;
+  }
+
+  /// After `stream` (the last enqueue's) has been synchronized: the numbers of vertex-face and
+  /// edge-edge pairs that enqueue counted, whether or not they fitted (collect() not needed).
+  std::pair<std::size_t, std::size_t> counted() const {
+    const unsigned long long total = host_total_[0];
+    return {static_cast<std::size_t>(total >> 32), static_cast<std::size_t>(total & 0xffffffffull)};
+  }
+  /// Bytes of the lists and the per-candidate scratch (what grows with a step's candidates).
+  std::size_t list_bytes() const {
+    return vf_.capacity_bytes() + ee_.capacity_bytes() + masks_.capacity_bytes() + block_totals_.capacity_bytes() +
+           scratch_.capacity_bytes();
   }
 
   /// The lists for the narrow phase, their lengths read on the device (valid after enqueue()).
@@ -250,10 +269,10 @@ class FeatureEmitter {
  private:
   // The writing pass of the last enqueue (the masks and the block totals are still there).
   void write(cudaStream_t stream) {
-    const std::size_t items = num_candidates_ + orphan_vf_.size() + orphan_ee_.size();
+    const std::size_t items = num_candidates_ + num_orphan_vf_ + num_orphan_ee_;
     if (items == 0) return;
     detail::emission_write_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-        view(), candidates_, num_candidates_, orphan_vf_.data(), orphan_vf_.size(), orphan_ee_.data(), items, masks_.data(),
+        view(), candidates_, num_candidates_, orphan_vf_.data(), num_orphan_vf_, orphan_ee_.data(), items, masks_.data(),
         block_totals_.data(), vf_.data(), vf_room_, ee_.data(), ee_room_);
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
@@ -275,6 +294,7 @@ class FeatureEmitter {
   PinnedBuffer<unsigned long long> host_total_;  // allocated on first use
   const TrianglePair* candidates_ = nullptr;
   std::size_t num_candidates_ = 0, blocks_ = 0;
+  std::size_t num_orphan_vf_ = 0, num_orphan_ee_ = 0;  ///< orphans the last enqueue listed
   std::size_t vf_room_ = 0, ee_room_ = 0;         ///< room of vf_, ee_ (grown by collect())
   std::size_t num_vf_ = 0, num_ee_ = 0;
   float margin_ = 0;

@@ -202,6 +202,10 @@ std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec
 /// kept orphans in order - not sorted (the GPU emitter gives the same lists in the same order).
 FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::vector<TrianglePair>& candidates,
                                 const std::vector<Aabbf>& boxes);
+/// The same for n candidates from `candidates`, with the orphans' pairs only when `with_orphans`
+/// (a step split into parts lists them with one part).
+FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                                const std::vector<Aabbf>& boxes, bool with_orphans);
 
 /// The oracle: every non-incident vertex-face pair and every edge-edge pair without a common
 /// vertex whose feature boxes overlap (and, with a layout, that rep.considers), sorted; vertices

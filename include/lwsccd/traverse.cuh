@@ -109,8 +109,19 @@ class TraversalOutput {
   std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(front_, num_front_, stream); }
   std::size_t device_bytes() const {
     return results_.capacity_bytes() + front_.capacity_bytes() + work_.capacity_bytes() + next_.capacity_bytes() +
-           stacks_.capacity_bytes() + stacks_alt_.capacity_bytes() + sizes_.capacity_bytes() + counters_.capacity_bytes();
+           stacks_.capacity_bytes() + stacks_alt_.capacity_bytes() + sizes_.capacity_bytes() + sizes_alt_.capacity_bytes() +
+           locks_.capacity_bytes() + deque_ends_.capacity_bytes() + block_activity_.capacity_bytes() +
+           counters_.capacity_bytes();
   }
+  /// Caps the bytes the results and front outputs may grow to (0: no cap). A traversal whose
+  /// outputs would need more stops without growing them and reports complete() == false; the
+  /// caller runs fewer seeds at a time (gpu::CcdPipeline streams its seeds so under a budget).
+  void set_output_limit(std::size_t bytes) { output_limit_ = bytes; }
+  std::size_t output_limit() const { return output_limit_; }
+  /// False when the last traversal stopped at the output limit (its outputs are then incomplete).
+  bool complete() const { return complete_; }
+  /// gpu::expand: the items of the cut it produced (valid until the next traversal).
+  const item_type* expanded() const { return work_.data(); }
 
   // Storage used by the schedulers.
   DeviceBuffer<result_type> results_;
@@ -122,6 +133,8 @@ class TraversalOutput {
   PinnedBuffer<unsigned long long> host_counters_;  ///< their last reading (pinned: the copy does not block)
   std::uint64_t counter_reads_ = 0;                 ///< readings so far (traverse() reuses a final one)
   std::size_t num_results_ = 0, num_front_ = 0;
+  std::size_t output_limit_ = 0;
+  bool complete_ = true;
   TraversalStats stats_;
 
  private:
@@ -140,6 +153,16 @@ class TraversalOutput {
 template <class Scheduler, class Task>
 void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
               bool record_front, cudaStream_t stream = nullptr);
+
+/// Expands the seeds breadth first, a level per launch, until at least `target` items remain (or
+/// none): returns their number; they are at out.expanded() and form a cut of the traversal, so
+/// traversing them (in any grouping) gives the results that traversing the seeds would, less the
+/// results and front entries met on the way, which are in out.results() and out.front(). Splits
+/// one traversal into independent parts (gpu::CcdPipeline's streaming under a memory budget).
+/// Honours out's output limit as traverse() does. Synchronizes.
+template <class Task>
+std::size_t expand(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, std::size_t target,
+                   TraversalOutput<Task>& out, bool record_front, cudaStream_t stream = nullptr);
 
 }  // namespace lwsccd::gpu
 

@@ -70,6 +70,29 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
   return out;
 }
 
+/// Expands the seeds breadth first, a level at a time, until at least `target` items remain (or
+/// none): they form a cut of the traversal (returned in `cut`), so traversing them in any grouping
+/// gives the results and front of traversing the seeds, less those met on the way (returned).
+/// As gpu::expand: a traversal split into independent parts.
+template <class Task>
+TraversalResult<Task> expand(const Task& task, const std::vector<typename Task::item_type>& seeds, std::size_t target,
+                             bool record_front, std::vector<typename Task::item_type>& cut) {
+  static_assert(require_traversal_task<Task>::value, "");
+  TraversalResult<Task> out;
+  cut = seeds;
+  std::vector<typename Task::item_type> next;
+  detail::VectorEmitter<Task> emit{&next, &out.results, record_front ? &out.front : nullptr};
+  while (!cut.empty() && cut.size() < target) {
+    next.clear();
+    for (const auto& item : cut) task.process(item, emit);
+    out.stats.items_processed += cut.size();
+    cut.swap(next);
+  }
+  out.stats.results = out.results.size();
+  out.stats.front = out.front.size();
+  return out;
+}
+
 template <class Task>
 TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task::item_type>& seeds, bool record_front,
                                WorkStealingScheduler scheduler) {

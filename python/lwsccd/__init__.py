@@ -199,8 +199,12 @@ class Pipeline:
         max_iterations: narrow-phase work bound per pair; past it a pair counts as a contact.
         front_tracking: start each step's traversal from the last step's front (default True).
         rebuild_factor, front_growth_limit: when to rebuild the BVH / restart from the root.
-        device_memory_budget: GPU bytes the library may hold (0: no limit); past it a step
-            raises RuntimeError instead of running out.
+        device_memory_budget: GPU bytes the pipeline may hold (0: no limit); a step that needs
+            more runs in parts that fit, with the same contacts (RuntimeError only when even the
+            mesh's own data does not fit).
+        part_pairs: at most this many candidate triangle pairs go through the narrow phase
+            together, the traversal running in parts of about as many (0: no limit); both
+            devices, same contacts, less memory at once.
         device: "auto" (the GPU when the package has it and a device is present, else the
             CPU), "gpu" or "cpu".
 
@@ -228,6 +232,7 @@ class Pipeline:
         rebuild_factor: float = 1.5,
         front_growth_limit: float = 1.5,
         device_memory_budget: int = 0,
+        part_pairs: int = 0,
         device: str = "auto",
     ) -> None:
         f = np.asarray(faces)
@@ -252,7 +257,8 @@ class Pipeline:
         self._core = _lwsccd.Pipeline(
             int(num_vertices), f, body_list, collides, bv, scheduler, method, precision, mode,
             float(min_separation), float(tolerance), int(max_iterations), bool(front_tracking),
-            float(rebuild_factor), float(front_growth_limit), int(device_memory_budget), device,
+            float(rebuild_factor), float(front_growth_limit), int(device_memory_budget),
+            int(part_pairs), device,
         )
         self.mode = mode
 

@@ -67,6 +67,18 @@ def test_modes_agree(cloth_steps):
             assert np.all(a["toi"] <= b["toi"]), "with lower bounds of their TOIs"
 
 
+def test_parts_give_the_whole_steps_contacts(cloth_steps):
+    sim, steps = cloth_steps
+    whole, parts = cpu_pipeline(sim), cpu_pipeline(sim, part_pairs=200)
+    for x0, x1 in steps:
+        w, p = whole.step(x0, x1), parts.step(x0, x1)
+        assert np.array_equal(p.vertex_face, w.vertex_face) and np.array_equal(p.edge_edge, w.edge_edge)
+        assert p.earliest_toi == w.earliest_toi
+        assert p.stats["narrow_parts"] > 1 and w.stats["narrow_parts"] == 0
+    with pytest.raises(TypeError):
+        cpu_pipeline(sim, part_pairs=-1)
+
+
 def test_obb_finds_a_subset_with_the_same_tois(cloth_steps):
     # OBBs cull more triangle pairs than AABBs; the narrow phase is the same, so every pair an
     # OBB pipeline reports is the AABB pipeline's, with the same TOI.

@@ -616,26 +616,25 @@ bool NarrowPhase<Method, T, Policy>::collect() {
   }
   // The hits in (first, second) order, on the device: they were appended in any order.
   if (!earliest_only_)
-    for (auto& l : lists_) sort_hits(l, stream_);
+    for (auto& l : lists_) l.sorter.sort(l.hits, l.count, stream_);
   return true;
 }
 
-template <class Method, class T, class Policy>
-void NarrowPhase<Method, T, Policy>::sort_hits(List& l, cudaStream_t stream) {
-  if (l.count < 2) return;
-  const std::size_t n = l.count;
-  l.keys.resize_discard(n);
-  l.sorted_keys.resize_discard(n);
-  l.sorted.resize_discard(std::max(n, l.hit_room));
-  detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(l.hits.data(), n, l.keys.data());
+template <class T>
+void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, cudaStream_t stream) {
+  if (n < 2) return;
+  keys_.resize_discard(n);
+  sorted_keys_.resize_discard(n);
+  sorted_.resize_discard(std::max(n, hits.size()));
+  detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(hits.data(), n, keys_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, l.keys.data(), l.sorted_keys.data(), l.hits.data(),
-                                                    l.sorted.data(), static_cast<std::int64_t>(n), 0, 64, stream));
-  l.scratch.resize_discard(std::max({bytes, l.scratch.size(), std::size_t(1)}));
-  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(l.scratch.data(), bytes, l.keys.data(), l.sorted_keys.data(), l.hits.data(),
-                                                    l.sorted.data(), static_cast<std::int64_t>(n), 0, 64, stream));
-  std::swap(l.hits, l.sorted);  // (only the handles: the sort writes `sorted`, which is now `hits`)
+  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys_.data(), sorted_keys_.data(), hits.data(),
+                                                    sorted_.data(), static_cast<std::int64_t>(n), 0, 64, stream));
+  scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
+  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(scratch_.data(), bytes, keys_.data(), sorted_keys_.data(), hits.data(),
+                                                    sorted_.data(), static_cast<std::int64_t>(n), 0, 64, stream));
+  std::swap(hits, sorted_);  // (only the handles: the sort wrote `sorted_`, which is now `hits`)
 }
 
 template <class Method, class T, class Policy>

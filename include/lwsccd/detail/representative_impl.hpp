@@ -177,6 +177,11 @@ std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec
 
 inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::vector<TrianglePair>& candidates,
                                        const std::vector<Aabbf>& boxes) {
+  return emit_feature_pairs(rep, candidates.data(), candidates.size(), boxes, true);
+}
+
+inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                                       const std::vector<Aabbf>& boxes, bool with_orphans) {
   const TriangleMesh& mesh = rep.mesh();
   const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
   if (boxes.size() != features)
@@ -184,7 +189,7 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
   const EmissionView view = rep.view(boxes.data());
   FeaturePairs out;
-  auto parts = detail::ordered_parts<FeaturePairs>(candidates.size(), [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
+  auto parts = detail::ordered_parts<FeaturePairs>(n, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
     for (std::size_t i = begin; i < end; ++i) {
       const TrianglePair& p = candidates[i];
       if (p.adjacent) continue;
@@ -194,6 +199,7 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
     }
   });
   detail::append_parts(parts, out);
+  if (!with_orphans) return out;
   const OrphanSets& orphans = rep.orphans();
   for (const auto* list : {&orphans.vf, &orphans.ee}) {
     auto& target = list == &orphans.vf ? out.vf : out.ee;

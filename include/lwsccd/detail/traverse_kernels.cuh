@@ -683,30 +683,34 @@ struct is_lazy_steal<S, std::void_t<decltype(S::kIsLazySteal)>> : std::bool_cons
 
 }  // namespace detail
 
-template <class Scheduler, class Task>
-void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
-              bool record_front, cudaStream_t stream) {
-  static_assert(require_traversal_task<Task>::value, "");
-  detail::ensure(out.counters_, detail::kCounters);
+namespace detail {
+
+// Runs `attempt` (one complete pass that leaves the final counters in out.host_counters_ when it
+// read them) until the results and front fit their outputs, growing them in between (tasks are
+// deterministic, so a pass again from the same seeds gives the same outputs); stops without
+// growing past out's output limit (complete_ false).
+template <class Task, class Attempt>
+void run_until_outputs_fit(TraversalOutput<Task>& out, bool record_front, cudaStream_t stream, Attempt attempt) {
+  using Item = typename Task::item_type;
+  using Result = typename Task::result_type;
+  ensure(out.counters_, kCounters);
   if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
   if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
   out.stats_ = {};
-  for (int attempt = 0;; ++attempt) {
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
+  out.complete_ = true;
+  while (true) {
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, kCounters * sizeof(unsigned long long), stream));
     out.stats_.items_processed = 0;
     const std::uint64_t reads = out.counter_reads_;
-    if constexpr (Scheduler::kIsStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
-    else if constexpr (detail::is_lazy_steal<Scheduler>::value)
-      detail::run_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
-    else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    attempt();
     // Every scheduler's last device operation is a reading of the counters (when it made one):
     // that reading is final, and another would only cost a synchronisation.
     const auto c = out.counter_reads_ != reads
-                       ? std::vector<unsigned long long>(out.host_counters_.data(), out.host_counters_.data() + detail::kCounters)
-                       : detail::read_counters(out, stream);
-    out.stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
-    const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
-    const std::size_t front = record_front ? static_cast<std::size_t>(c[detail::kFront]) : 0;
+                       ? std::vector<unsigned long long>(out.host_counters_.data(), out.host_counters_.data() + kCounters)
+                       : read_counters(out, stream);
+    out.stats_.items_processed += static_cast<std::size_t>(c[kProcessed]);
+    const std::size_t results = static_cast<std::size_t>(c[kResults]);
+    const std::size_t front = record_front ? static_cast<std::size_t>(c[kFront]) : 0;
     if (results <= out.results_.size() && front <= out.front_.size()) {
       out.num_results_ = results;
       out.num_front_ = front;
@@ -714,11 +718,47 @@ void traverse(const Task& task, const typename Task::item_type* seeds, std::size
       out.stats_.front = front;
       return;
     }
-    // An output overflowed: grow it to what was counted and run again from the same seeds.
-    if (results > out.results_.size()) out.results_.resize_discard(results + results / 4);
-    if (front > out.front_.size()) out.front_.resize_discard(front + front / 4);
+    // An output overflowed: grow it to what was counted (a quarter more) and run again.
+    const std::size_t results_room = results > out.results_.size() ? results + results / 4 : out.results_.size();
+    const std::size_t front_room = front > out.front_.size() ? front + front / 4 : out.front_.size();
+    if (out.output_limit_ && results_room * sizeof(Result) + front_room * sizeof(Item) > out.output_limit_) {
+      out.complete_ = false;
+      out.num_results_ = std::min(results, out.results_.size());
+      out.num_front_ = std::min(front, out.front_.size());
+      return;
+    }
+    out.results_.resize_discard(results_room);
+    out.front_.resize_discard(front_room);
     ++out.stats_.relaunches;
   }
+}
+
+}  // namespace detail
+
+template <class Scheduler, class Task>
+void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+              bool record_front, cudaStream_t stream) {
+  static_assert(require_traversal_task<Task>::value, "");
+  detail::run_until_outputs_fit(out, record_front, stream, [&] {
+    if constexpr (Scheduler::kIsStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    else if constexpr (detail::is_lazy_steal<Scheduler>::value)
+      detail::run_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+  });
+}
+
+template <class Task>
+std::size_t expand(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, std::size_t target,
+                   TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+  static_assert(require_traversal_task<Task>::value, "");
+  std::size_t items = 0;
+  // expand_breadth_first stops once a level holds target / kMaxChildren items; asking for
+  // target * kMaxChildren makes the cut at least `target` items (or the seeds' whole tree).
+  detail::run_until_outputs_fit(out, record_front, stream, [&] {
+    items = detail::expand_breadth_first(task, seeds, num_seeds, std::max<std::size_t>(target, 1) * Task::kMaxChildren, out,
+                                         record_front, stream);
+  });
+  return items;
 }
 
 }  // namespace lwsccd::gpu
