@@ -32,23 +32,23 @@ struct Coplanarity {
 };
 
 template <class T>
-LWSCCD_HD Coplanarity<T> coplanarity_of(const VertexFaceQuery<T>& q) {
+LWSCCD_HD LWSCCD_HOST_INLINE Coplanarity<T> coplanarity_of(const VertexFaceQuery<T>& q) {
   return {vsub(q.p0, q.a0), vsub(q.p1, q.a1), vsub(q.b0, q.a0), vsub(q.b1, q.a1), vsub(q.c0, q.a0), vsub(q.c1, q.a1)};
 }
 template <class T>
-LWSCCD_HD Coplanarity<T> coplanarity_of(const EdgeEdgeQuery<T>& q) {
+LWSCCD_HD LWSCCD_HOST_INLINE Coplanarity<T> coplanarity_of(const EdgeEdgeQuery<T>& q) {
   return {vsub(q.c0, q.a0), vsub(q.c1, q.a1), vsub(q.b0, q.a0), vsub(q.b1, q.a1), vsub(q.d0, q.c0), vsub(q.d1, q.c1)};
 }
 
 /// |a| x |b| componentwise: the majorant of a cross product.
 template <class T>
-LWSCCD_HD Vec3<T> abs_cross(const Vec3<T>& a, const Vec3<T>& b) {
+LWSCCD_HD LWSCCD_HOST_INLINE Vec3<T> abs_cross(const Vec3<T>& a, const Vec3<T>& b) {
   return {fadd(fmul(a.y, b.z), fmul(a.z, b.y)), fadd(fmul(a.z, b.x), fmul(a.x, b.z)), fadd(fmul(a.x, b.y), fmul(a.y, b.x))};
 }
 
 /// Bernstein control values (scaled by positive factors) of f, and their majorants.
 template <class T>
-LWSCCD_HD void bernstein_controls(const Coplanarity<T>& c, T k[4]) {
+LWSCCD_HD LWSCCD_HOST_INLINE void bernstein_controls(const Coplanarity<T>& c, T k[4]) {
   const Vec3<T> n0 = vcross(c.a0, c.b0), n1 = vcross(c.a1, c.b1);
   const Vec3<T> nm = vadd(vcross(c.a0, c.b1), vcross(c.a1, c.b0));  // twice the middle control normal
   k[0] = vdot(c.p0, n0);
@@ -58,7 +58,7 @@ LWSCCD_HD void bernstein_controls(const Coplanarity<T>& c, T k[4]) {
 }
 
 template <class T>
-LWSCCD_HD void bernstein_majorants(const Coplanarity<T>& c, T k[4]) {
+LWSCCD_HD LWSCCD_HOST_INLINE void bernstein_majorants(const Coplanarity<T>& c, T k[4]) {
   const Vec3<T> n0 = abs_cross(c.a0, c.b0), n1 = abs_cross(c.a1, c.b1);
   const Vec3<T> nm = vadd(abs_cross(c.a0, c.b1), abs_cross(c.a1, c.b0));
   k[0] = vdot(c.p0, n0);
@@ -68,13 +68,13 @@ LWSCCD_HD void bernstein_majorants(const Coplanarity<T>& c, T k[4]) {
 }
 
 template <class T>
-LWSCCD_HD Coplanarity<T> abs_plus(const Coplanarity<T>& c, const Vec3<T>& e) {
+LWSCCD_HD LWSCCD_HOST_INLINE Coplanarity<T> abs_plus(const Coplanarity<T>& c, const Vec3<T>& e) {
   return {vadd(abs(c.p0), e), vadd(abs(c.p1), e), vadd(abs(c.a0), e), vadd(abs(c.a1), e), vadd(abs(c.b0), e), vadd(abs(c.b1), e)};
 }
 
 /// Largest coordinate magnitude per axis over the query's eight points.
 template <class Q>
-LWSCCD_HD auto coordinate_magnitude(const Q& q) {
+LWSCCD_HD LWSCCD_HOST_INLINE auto coordinate_magnitude(const Q& q) {
   const auto* pts = q.points();
   using T = typename std::decay_t<decltype(*pts)>::scalar_type;
   Vec3<T> m{0, 0, 0};
@@ -120,7 +120,7 @@ LWSCCD_HD T coplanarity_bernstein(const Q& q, T b[4], T perturbation = unit_roun
 
 /// True when the four values share a strict sign beyond `bound`.
 template <class T>
-LWSCCD_HD bool same_sign_beyond(const T b[4], T bound) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool same_sign_beyond(const T b[4], T bound) {
   const bool positive = b[0] > bound && b[1] > bound && b[2] > bound && b[3] > bound;
   const bool negative = b[0] < -bound && b[1] < -bound && b[2] < -bound && b[3] < -bound;
   return positive || negative;

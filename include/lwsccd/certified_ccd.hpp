@@ -26,6 +26,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "lwsccd/ccd_filters.hpp"
@@ -70,10 +71,27 @@ struct CertifiedAnswer {
 
 namespace detail {
 
+/// 2^-k for 0 <= k <= 120, built from its bits: exact, and no call (std::ldexp was a libm call on
+/// the host, in the refinement's inner loop). x * exact_pow2_neg<T>(k) equals std::ldexp(x, -k)
+/// wherever that does not underflow, which the refinement's dyadic times never do.
+template <class T>
+LWSCCD_HD LWSCCD_HOST_INLINE T exact_pow2_neg(int k) {
+  static_assert(sizeof(T) == 8 || sizeof(T) == 4, "lwsccd: exact_pow2_neg is for float and double");
+  T r;
+  if constexpr (sizeof(T) == 8) {
+    const std::uint64_t bits = static_cast<std::uint64_t>(1023 - k) << 52;
+    std::memcpy(&r, &bits, sizeof r);
+  } else {
+    const std::uint32_t bits = static_cast<std::uint32_t>(127 - k) << 23;
+    std::memcpy(&r, &bits, sizeof r);
+  }
+  return r;
+}
+
 /// Bound on what underflow can add to a degree-`d` product expression of values up to `mag`:
 /// each operation loses at most a denormal, later multiplied by at most d - 1 factors.
 template <class T>
-LWSCCD_HD T underflow_slack(T mag, int degree) {
+LWSCCD_HD LWSCCD_HOST_INLINE T underflow_slack(T mag, int degree) {
   T s = T(64) * std::numeric_limits<T>::denorm_min();
   const T f = fadd(T(1), mag);
   for (int i = 1; i < degree; ++i) s = fmul(s, f);
@@ -81,7 +99,7 @@ LWSCCD_HD T underflow_slack(T mag, int degree) {
 }
 
 template <class T>
-LWSCCD_HD bool finite_value(T x) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool finite_value(T x) {
   return x - x == T(0);  // false for NaN and infinities
 }
 
@@ -97,7 +115,7 @@ struct BernsteinPiece {
 /// Halves a piece by de Casteljau at 1/2. Each average rounds once (|error| <= u max|c|, halving
 /// is exact but for underflow); the innermost value goes through three: 3 u max|c| per halving.
 template <class Policy, class T>
-LWSCCD_HD void bernstein_halves(const BernsteinPiece<T>& p, BernsteinPiece<T>& left, BernsteinPiece<T>& right) {
+LWSCCD_HD LWSCCD_HOST_INLINE void bernstein_halves(const BernsteinPiece<T>& p, BernsteinPiece<T>& left, BernsteinPiece<T>& right) {
   const T h = T(0.5);
   const T m01 = fmul(fadd(p.c[0], p.c[1]), h), m12 = fmul(fadd(p.c[1], p.c[2]), h), m23 = fmul(fadd(p.c[2], p.c[3]), h);
   const T m012 = fmul(fadd(m01, m12), h), m123 = fmul(fadd(m12, m23), h);
@@ -112,7 +130,7 @@ LWSCCD_HD void bernstein_halves(const BernsteinPiece<T>& p, BernsteinPiece<T>& l
 }
 
 template <class T>
-LWSCCD_HD bool all_within(const T c[4], T bound) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool all_within(const T c[4], T bound) {
   return std::fabs(c[0]) <= bound && std::fabs(c[1]) <= bound && std::fabs(c[2]) <= bound && std::fabs(c[3]) <= bound;
 }
 
@@ -126,7 +144,7 @@ struct MovingDifference {
 };
 
 template <class T>
-LWSCCD_HD Vec3<T> lerp_point(const Vec3<T>& x0, const Vec3<T>& x1, T t) {
+LWSCCD_HD LWSCCD_HOST_INLINE Vec3<T> lerp_point(const Vec3<T>& x0, const Vec3<T>& x1, T t) {
   return vadd_scaled(x0, vsub(x1, x0), t);
 }
 
@@ -139,7 +157,7 @@ LWSCCD_HD Vec3<T> lerp_point(const Vec3<T>& x0, const Vec3<T>& x1, T t) {
 // features moving together (a sheet falling along its normal) thus keep tight bounds. Over at
 // most `half`, with the products' rounding in the (1 + 8 u).
 template <class T>
-LWSCCD_HD MovingDifference<T> moving_difference(const Vec3<T>& x0, const Vec3<T>& x1, const Vec3<T>& y0, const Vec3<T>& y1,
+LWSCCD_HD LWSCCD_HOST_INLINE MovingDifference<T> moving_difference(const Vec3<T>& x0, const Vec3<T>& x1, const Vec3<T>& y0, const Vec3<T>& y1,
                                                 T mid, T half, const Vec3<T>& m, T perturbation) {
   const Vec3<T> x = lerp_point(x0, x1, mid), y = lerp_point(y0, y1, mid);
   const Vec3<T> dx = vsub(x1, x0), dy = vsub(y1, y0);
@@ -160,7 +178,7 @@ enum class InsideVerdict : std::uint8_t { outside, outside_as_given, inside, unk
 template <class T>
 struct CrossTerm {
   Vec3<T> value, majorant, as_given, perturbed;
-  LWSCCD_HD CrossTerm(const MovingDifference<T>& X, const MovingDifference<T>& Y) {
+  LWSCCD_HD LWSCCD_HOST_INLINE CrossTerm(const MovingDifference<T>& X, const MovingDifference<T>& Y) {
     value = vcross(X.value, Y.value);
     const Vec3<T> ax = abs(X.value), ay = abs(Y.value);
     majorant = abs_cross(ax, ay);
@@ -180,7 +198,7 @@ template <class Policy, class T>
 struct SignTest {
   T sigma, bound, exact = T(0);
   bool finite;
-  LWSCCD_HD SignTest(const CrossTerm<T>& xy, const CrossTerm<T>& ab, T slack) {
+  LWSCCD_HD LWSCCD_HOST_INLINE SignTest(const CrossTerm<T>& xy, const CrossTerm<T>& ab, T slack) {
     sigma = vdot(xy.value, ab.value);
     const T m0 = vdot(xy.majorant, ab.majorant), mp = vdot(xy.perturbed, ab.perturbed);
     const T k = T(Policy::kInsideBound), r = T(32) * unit_roundoff<T>();
@@ -191,7 +209,7 @@ struct SignTest {
     exact = fadd(fmul(k, fadd(fsub(me, m0), fmul(r, me))), slack);
   }
   /// Certainly negative, even for a perturbed query (the values are finite, so nothing overflowed).
-  LWSCCD_HD bool excludes() const { return finite && sigma < -bound; }
+  LWSCCD_HD LWSCCD_HOST_INLINE bool excludes() const { return finite && sigma < -bound; }
 };
 
 /// Combines the sign tests that must all be >= 0 at a contact: outside when one is certainly
@@ -202,7 +220,7 @@ struct InsideVote {
   bool all_positive = true, some_negative_as_given = false, finite = true;
   /// Adds a test that must be >= 0 at a contact; true when it alone excludes the contact.
   template <class Test>
-  LWSCCD_HD bool add(const Test& t) {
+  LWSCCD_HD LWSCCD_HOST_INLINE bool add(const Test& t) {
     if (t.excludes()) return true;
     finite = finite && t.finite;
     all_positive = all_positive && t.sigma > t.exact;
@@ -211,13 +229,13 @@ struct InsideVote {
   }
   /// Adds a test that must be <= 0 at a contact, given negated: only its certain sign counts.
   template <class Test>
-  LWSCCD_HD bool add_exclusion(const Test& t) {
+  LWSCCD_HD LWSCCD_HOST_INLINE bool add_exclusion(const Test& t) {
     if (t.excludes()) return true;
     finite = finite && t.finite;
     some_negative_as_given = some_negative_as_given || t.sigma < -t.exact;
     return false;
   }
-  LWSCCD_HD InsideVerdict verdict() const {
+  LWSCCD_HD LWSCCD_HOST_INLINE InsideVerdict verdict() const {
     if (!finite) return InsideVerdict::unknown;
     if (some_negative_as_given) return InsideVerdict::outside_as_given;
     return all_positive ? InsideVerdict::inside : InsideVerdict::unknown;
@@ -279,7 +297,7 @@ LWSCCD_HD InsideVerdict inside_over(const EdgeEdgeQuery<T>& q, T mid, T half, co
 /// at the largest arguments); (1 + 16 u) covers rounding this bound. Most pairs that reach the
 /// cubic are rejected by it, for a third of the operations of the full bound.
 template <class Q, class W>
-LWSCCD_HD W screening_bernstein(const Q& q, W b[4], const Vec3<W>& m, W perturbation) {
+LWSCCD_HD LWSCCD_HOST_INLINE W screening_bernstein(const Q& q, W b[4], const Vec3<W>& m, W perturbation) {
   const Coplanarity<W> c = coplanarity_of(q);
   W k[4];
   bernstein_controls(c, k);
@@ -313,7 +331,7 @@ LWSCCD_HD int certified_max_level(T tolerance) {
 /// feature at any time lie in the hull of those) are apart by more than `pad` per axis: then they
 /// never touch, even with every coordinate perturbed by pad / 4 (the pad is 4 p m; 2 p m is needed).
 template <class W>
-LWSCCD_HD bool boxes_apart(const Vec3<W>* a, int na, const Vec3<W>* b, int nb, const Vec3<W>& pad) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool boxes_apart(const Vec3<W>* a, int na, const Vec3<W>* b, int nb, const Vec3<W>& pad) {
   Vec3<W> alo = a[0], ahi = a[0], blo = b[0], bhi = b[0];
   for (int i = 1; i < na; ++i) alo = min(alo, a[i]), ahi = max(ahi, a[i]);
   for (int i = 1; i < nb; ++i) blo = min(blo, b[i]), bhi = max(bhi, b[i]);
@@ -322,12 +340,12 @@ LWSCCD_HD bool boxes_apart(const Vec3<W>* a, int na, const Vec3<W>* b, int nb, c
   return false;
 }
 template <class W>
-LWSCCD_HD bool swept_boxes_apart(const VertexFaceQuery<W>& q, const Vec3<W>& pad) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool swept_boxes_apart(const VertexFaceQuery<W>& q, const Vec3<W>& pad) {
   const Vec3<W> vertex[2] = {q.p0, q.p1}, face[6] = {q.a0, q.b0, q.c0, q.a1, q.b1, q.c1};
   return boxes_apart(vertex, 2, face, 6, pad);
 }
 template <class W>
-LWSCCD_HD bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& pad) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& pad) {
   const Vec3<W> first[4] = {q.a0, q.b0, q.a1, q.b1}, second[4] = {q.c0, q.d0, q.c1, q.d1};
   return boxes_apart(first, 4, second, 4, pad);
 }
@@ -338,17 +356,17 @@ LWSCCD_HD bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& pad) 
 /// move a point by at most 3 u m for w <= 1/2); a perturbation of the inputs by e moves them by at
 /// most e m. So pad = 20 e m (+ underflow's share) covers both sides' errors twice over (e >= u).
 template <class W>
-LWSCCD_HD Vec3<W> position_at(const Vec3<W>& x0, const Vec3<W>& x1, W w) {
+LWSCCD_HD LWSCCD_HOST_INLINE Vec3<W> position_at(const Vec3<W>& x0, const Vec3<W>& x1, W w) {
   return {fadd(x0.x, fmul(w, fsub(x1.x, x0.x))), fadd(x0.y, fmul(w, fsub(x1.y, x0.y))), fadd(x0.z, fmul(w, fsub(x1.z, x0.z)))};
 }
 template <class W>
-LWSCCD_HD bool window_boxes_apart(const VertexFaceQuery<W>& q, W w, const Vec3<W>& pad) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool window_boxes_apart(const VertexFaceQuery<W>& q, W w, const Vec3<W>& pad) {
   const Vec3<W> vertex[2] = {q.p0, position_at(q.p0, q.p1, w)};
   const Vec3<W> face[6] = {q.a0, q.b0, q.c0, position_at(q.a0, q.a1, w), position_at(q.b0, q.b1, w), position_at(q.c0, q.c1, w)};
   return boxes_apart(vertex, 2, face, 6, pad);
 }
 template <class W>
-LWSCCD_HD bool window_boxes_apart(const EdgeEdgeQuery<W>& q, W w, const Vec3<W>& pad) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool window_boxes_apart(const EdgeEdgeQuery<W>& q, W w, const Vec3<W>& pad) {
   const Vec3<W> first[4] = {q.a0, q.b0, position_at(q.a0, q.a1, w), position_at(q.b0, q.b1, w)};
   const Vec3<W> second[4] = {q.c0, q.d0, position_at(q.c0, q.c1, w), position_at(q.d0, q.d1, w)};
   return boxes_apart(first, 4, second, 4, pad);
@@ -399,7 +417,7 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   // refinement (a halving is a convex combination, so the bound on [0, 1] still bounds the error).
   BernsteinPiece<W> piece{{b[0], b[1], b[2], b[3]}, screen, screen};
   // A wider piece that keeps its sign already covers the window: stop there (most pairs do early).
-  for (int level = 0; level < 30 && std::ldexp(W(1), -(level + 1)) >= W(params.time_limit); ++level) {
+  for (int level = 0; level < 30 && exact_pow2_neg<W>(level + 1) >= W(params.time_limit); ++level) {
     if (level > 0 && same_sign_beyond(piece.c, piece.bound)) return true;
     BernsteinPiece<W> left, right;
     bernstein_halves<Policy>(piece, left, right);
@@ -466,7 +484,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   while (top > 0) {
     const Entry e = stack[--top];
     // Dyadic with at most certified_max_level(T) bits: exact in T and W.
-    const T lo = std::ldexp(static_cast<T>(e.index), -e.level), hi = std::ldexp(static_cast<T>(e.index + 1u), -e.level);
+    const T scale = exact_pow2_neg<T>(e.level);
+    const T lo = static_cast<T>(e.index) * scale, hi = static_cast<T>(e.index + 1u) * scale;
     if (lo >= params.time_limit) continue;  // later than what the caller still wants
     const W* c = e.piece.c;
     const W bound = e.piece.bound, exact = e.piece.exact;
@@ -483,7 +502,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     const bool coarse = Policy::kInsideEvery > 0 && e.level >= Policy::kInsideFrom &&
                         (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
     const bool coplanar = all_within(c, exact);
-    const W half = std::ldexp(W(1), -e.level - 1);
+    const W half = exact_pow2_neg<W>(e.level + 1);
     InsideVerdict inside = InsideVerdict::unknown;
     if (try_hit || coarse || coplanar) {
       inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -116,9 +117,23 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
     std::size_t gave_up = 0;
   };
   std::vector<Part> parts(workers);
+  // (Short lists, such as the fallback's few expensive queries, in short runs.)
+  const std::size_t kRun = std::max<std::size_t>(1, std::min<std::size_t>(1024, n / (std::size_t(workers) * 64)));
+  std::atomic<std::size_t> next{0};
   run_on_all_cores([&](unsigned w, unsigned nw) {
-    Part& out = parts[w];
-    for (std::size_t i = w; i < n; i += nw) {
+    // A local part, moved out at the end: the workers' counters side by side in `parts` would
+    // share cache lines, and every query bumps one.
+    Part out;
+    struct MoveOut {
+      Part& from;
+      Part& to;
+      ~MoveOut() { to = std::move(from); }
+    } move_out{out, parts[w]};
+    (void)nw;
+    // Runs of consecutive pairs (neighbours in space: they share vertices and cache lines), taken
+    // as workers free up (contacts cluster, so a fixed split would leave one worker the hard part).
+    for (std::size_t begin = next.fetch_add(kRun); begin < n; begin = next.fetch_add(kRun))
+    for (std::size_t i = begin, end = std::min(n, begin + kRun); i < end; ++i) {
       const auto q = gather(i);
       if constexpr (lwsccd::detail::certified_of<Method>::value) {
         if (undecided) {  // first pass: the screen, then the refinement of what it passes

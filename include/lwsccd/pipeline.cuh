@@ -186,14 +186,7 @@ class CcdPipeline {
     stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   }
 
-  CcdParams<T> ccd_params() const {
-    CcdParams<T> ccd;
-    ccd.min_separation = static_cast<T>(params_.min_separation);
-    ccd.tolerance = static_cast<T>(params_.tolerance);
-    ccd.max_iterations = params_.max_iterations;
-    ccd.mode = params_.mode;
-    return ccd;
-  }
+  CcdParams<T> ccd_params() const { return lwsccd::detail::ccd_params_of<T>(params_); }
 
   // Refit, or rebuild when the tree decayed (or on the first step).
   void refit_stage(StepStats& stats) {

@@ -67,6 +67,16 @@ inline std::shared_ptr<const TriangleMesh> checked_mesh(std::shared_ptr<const Tr
   if (!mesh) throw InputError(who, "mesh", "is null");
   return mesh;
 }
+// The narrow phase's parameters of a pipeline's.
+template <class T>
+CcdParams<T> ccd_params_of(const PipelineParams& params) {
+  CcdParams<T> ccd;
+  ccd.min_separation = static_cast<T>(params.min_separation);
+  ccd.tolerance = static_cast<T>(params.tolerance);
+  ccd.max_iterations = params.max_iterations;
+  ccd.mode = params.mode;
+  return ccd;
+}
 // BodyLayout::body_self_collides as bytes (device-friendly), empty when every body self-collides
 // (then nothing is pruned by body).
 inline std::vector<unsigned char> self_collision_flags(const BodyLayout& layout) {
@@ -221,14 +231,7 @@ class CcdPipeline {
   const PipelineParams& params() const { return params_; }
 
  private:
-  CcdParams<T> ccd_params() const {
-    CcdParams<T> ccd;
-    ccd.min_separation = static_cast<T>(params_.min_separation);
-    ccd.tolerance = static_cast<T>(params_.tolerance);
-    ccd.max_iterations = params_.max_iterations;
-    ccd.mode = params_.mode;
-    return ccd;
-  }
+  CcdParams<T> ccd_params() const { return detail::ccd_params_of<T>(params_); }
 
   // The step in parts (PipelineParams::part_pairs): a cut below the root when the traversal
   // restarts, traversed a part at a time; each part's candidates through the feature pairs and
