@@ -355,6 +355,7 @@ class CcdPipeline {
     const NodePair* seeds = seeds_.data();
     std::size_t num_seeds = front_size_;
     if (restart) {
+      seeds_ = DeviceBuffer<NodePair>();  // an old front is of no use from the root: its room goes to the parts
       // A cut below the root; what the expansion met on the way is a part of its own.
       t = clock::now();
       root_.upload(std::vector<NodePair>{NodePair{0, 0}});
