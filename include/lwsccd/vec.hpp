@@ -46,8 +46,10 @@ template <class T> LWSCCD_HD constexpr Vec3<T> cross(const Vec3<T>& a, const Vec
 }
 template <class T> LWSCCD_HD constexpr T squared_norm(const Vec3<T>& a) { return dot(a, a); }
 template <class T> LWSCCD_HD T norm(const Vec3<T>& a) { return std::sqrt(dot(a, a)); }
-template <class T> LWSCCD_HD constexpr Vec3<T> abs(const Vec3<T>& a) {
-  return {a.x < T(0) ? -a.x : a.x, a.y < T(0) ? -a.y : a.y, a.z < T(0) ? -a.z : a.z};
+/// Componentwise |a| (std::fabs: a mask, no branch; the sign tests `x < 0 ? -x : x` compiled to
+/// were branches that coordinates' random signs mispredicted, in the narrow phase's hottest loop).
+template <class T> LWSCCD_HD Vec3<T> abs(const Vec3<T>& a) {
+  return {std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)};
 }
 template <class T> LWSCCD_HD constexpr Vec3<T> min(const Vec3<T>& a, const Vec3<T>& b) {
   return {a.x < b.x ? a.x : b.x, a.y < b.y ? a.y : b.y, a.z < b.z ? a.z : b.z};
@@ -56,7 +58,9 @@ template <class T> LWSCCD_HD constexpr Vec3<T> max(const Vec3<T>& a, const Vec3<
   return {a.x > b.x ? a.x : b.x, a.y > b.y ? a.y : b.y, a.z > b.z ? a.z : b.z};
 }
 template <class T> LWSCCD_HD constexpr T max_component(const Vec3<T>& a) {
-  return a.x > a.y ? (a.x > a.z ? a.x : a.z) : (a.y > a.z ? a.y : a.z);
+  // Two selects (the nested form's branches mispredict); the same result for every input, NaN too.
+  const T xy = a.x > a.y ? a.x : a.y;
+  return xy > a.z ? xy : a.z;
 }
 /// True when no component is NaN or infinite.
 template <class T> LWSCCD_HD bool is_finite(const Vec3<T>& a) {
