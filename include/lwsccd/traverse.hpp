@@ -44,10 +44,12 @@ namespace cpu {
 /// One thread, one explicit stack (depth first).
 struct SerialScheduler {};
 
-/// All cores: a deque per thread; a thread pops its newest item and, when out of work, steals
-/// the oldest half of another thread's deque (the largest subtrees). Termination: a shared count
-/// of items pushed but not yet processed reaches zero only when no thread holds or can create
-/// work, because an item's children are counted before the item itself is retired.
+/// All cores: each thread works depth first on a private stack and shares the older half of it
+/// through its deque whenever that deque is empty; a thread out of work pops its deque's newest
+/// item or steals the oldest half of another's (the largest subtrees). Termination: a shared count
+/// of the items in the deques and of those taken from them but not settled reaches zero only when
+/// no thread holds or can create work (a thread settles only with an empty private stack, and
+/// counts items before it shares them). No lock or shared counter per item.
 struct WorkStealingScheduler {
   unsigned threads = 0;  ///< 0: std::thread::hardware_concurrency()
 };
@@ -101,62 +103,73 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
   const unsigned n = scheduler.threads ? scheduler.threads : std::max(1u, std::thread::hardware_concurrency());
   struct Worker {
     std::mutex lock;
-    std::deque<Item> deque;
+    std::deque<Item> deque;                     ///< shared: the owner pops its newest, thieves take the oldest half
+    std::atomic<std::size_t> shared_size{0};    ///< deque.size(), readable without the lock
     std::vector<typename Task::result_type> results;
     std::vector<Item> front;
     std::size_t processed = 0;
   };
   std::vector<Worker> workers(n);
+  // Items in the deques plus, per worker, the items it took from them and has not settled; a
+  // worker settles (subtracts what it took) only once its private stack is empty, and adds items
+  // before it shares them, so this is 0 only when no item is left anywhere.
   std::atomic<long long> pending{static_cast<long long>(seeds.size())};
   for (std::size_t i = 0; i < seeds.size(); ++i) workers[i % n].deque.push_back(seeds[i]);
+  for (Worker& w : workers) w.shared_size.store(w.deque.size());
+  // A worker runs a private stack (no lock, no shared counter per item) and shares the older half
+  // of it, in one batch, whenever its own deque has been emptied (by itself or by thieves).
+  constexpr std::size_t kShareAbove = 8;
 
   auto run = [&](unsigned self) {
     Worker& me = workers[self];
     std::minstd_rand rng(self + 1);
-    std::vector<Item> children;
+    std::vector<Item> children, local;
+    long long taken = 0;  // items this worker took from the deques and has not settled
     detail::VectorEmitter<Task> emit{&children, &me.results, record_front ? &me.front : nullptr};
     while (true) {
-      Item item;
-      bool have = false;
-      {
-        std::lock_guard<std::mutex> guard(me.lock);
-        if (!me.deque.empty()) {
-          item = me.deque.back();
-          me.deque.pop_back();
-          have = true;
-        }
-      }
-      if (!have && n > 1) {  // steal the oldest half of a random victim's deque
-        const unsigned victim = (self + 1 + rng() % (n - 1)) % n;
-        std::vector<Item> stolen;
+      if (local.empty()) {
+        if (taken) pending.fetch_sub(taken, std::memory_order_acq_rel), taken = 0;
         {
-          std::lock_guard<std::mutex> guard(workers[victim].lock);
-          const std::size_t take = (workers[victim].deque.size() + 1) / 2;
-          for (std::size_t i = 0; i < take; ++i) {
-            stolen.push_back(workers[victim].deque.front());
-            workers[victim].deque.pop_front();
+          std::lock_guard<std::mutex> guard(me.lock);
+          if (!me.deque.empty()) {
+            local.push_back(me.deque.back());
+            me.deque.pop_back();
+            me.shared_size.store(me.deque.size(), std::memory_order_relaxed);
           }
         }
-        if (!stolen.empty()) {
-          std::lock_guard<std::mutex> guard(me.lock);
-          for (const Item& x : stolen) me.deque.push_back(x);
+        if (local.empty() && n > 1) {  // steal the oldest half of a random victim's deque
+          Worker& victim = workers[(self + 1 + rng() % (n - 1)) % n];
+          std::lock_guard<std::mutex> guard(victim.lock);
+          const std::size_t take = (victim.deque.size() + 1) / 2;
+          for (std::size_t i = 0; i < take; ++i) {
+            local.push_back(victim.deque.front());
+            victim.deque.pop_front();
+          }
+          victim.shared_size.store(victim.deque.size(), std::memory_order_relaxed);
+        }
+        if (local.empty()) {
+          if (pending.load(std::memory_order_acquire) == 0) return;
+          std::this_thread::yield();
           continue;
         }
+        taken = static_cast<long long>(local.size());
       }
-      if (!have) {
-        if (pending.load(std::memory_order_acquire) == 0) return;
-        std::this_thread::yield();
-        continue;
-      }
+      const Item item = local.back();
+      local.pop_back();
       children.clear();
       task.process(item, emit);
       ++me.processed;
-      if (!children.empty()) {
-        pending.fetch_add(static_cast<long long>(children.size()), std::memory_order_acq_rel);
-        std::lock_guard<std::mutex> guard(me.lock);
-        for (auto it = children.rbegin(); it != children.rend(); ++it) me.deque.push_back(*it);
+      for (auto it = children.rbegin(); it != children.rend(); ++it) local.push_back(*it);
+      if (n > 1 && local.size() >= kShareAbove && me.shared_size.load(std::memory_order_relaxed) == 0) {
+        const std::size_t share = local.size() / 2;  // the oldest: the largest subtrees
+        pending.fetch_add(static_cast<long long>(share), std::memory_order_acq_rel);  // counted before seen
+        {
+          std::lock_guard<std::mutex> guard(me.lock);
+          for (std::size_t i = 0; i < share; ++i) me.deque.push_back(local[i]);
+          me.shared_size.store(me.deque.size(), std::memory_order_relaxed);
+        }
+        local.erase(local.begin(), local.begin() + static_cast<std::ptrdiff_t>(share));
       }
-      pending.fetch_sub(1, std::memory_order_acq_rel);  // retired after its children were counted
     }
   };
   std::vector<std::thread> threads;
