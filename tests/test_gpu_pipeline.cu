@@ -298,6 +298,7 @@ void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>
       lwsccd_test::require_same_counts(r.contacts.ee_counts, expected[i].contacts.ee_counts);
     }
     CHECK(streamed.device_bytes() <= params.device_memory_budget);
+    if (i > 0) CHECK(r.stats.peak_device_bytes <= params.device_memory_budget);  // the first builds the BVH
     parts = std::max(parts, r.stats.narrow_parts);
     std::printf("streamed step %zu (mode %d): %zu traversal parts, %zu narrow parts, %zu triangle pairs, %zu contacts, "
                 "held %.1f of %.1f MiB (unstreamed %.1f)\n",
@@ -372,4 +373,26 @@ TEST_CASE("GPU pipeline: a device-memory budget below the mesh's own data is ref
   // Raised, the same pipeline steps.
   pipeline.set_device_memory_budget(std::size_t(1) << 34);
   CHECK(pipeline.step(scene.step.x0, scene.step.x1).stats.narrow_parts >= 1);
+}
+
+TEST_CASE("GPU pipeline: a budget that leaves the parts no room is an error naming what it needs, not a crawl",
+          "[gpu][pipeline][streaming]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(20000);
+  std::size_t resident = 0;
+  {
+    gpu::CcdPipeline<> measure(scene.step.mesh, scene.layout);
+    measure.step(scene.step.x0, scene.step.x1);
+    resident = measure.resident_bytes();
+  }
+  // Above the least the mesh's data need, below what the default scheduler's own lists take.
+  PipelineParams params;
+  params.device_memory_budget = resident + (std::size_t(5) << 20);
+  gpu::CcdPipeline<> pipeline(scene.step.mesh, scene.layout, params);
+  try {
+    pipeline.step(scene.step.x0, scene.step.x1);
+    FAIL("a budget of the resident data + 5 MiB was accepted");
+  } catch (const Error& e) {
+    INFO(e.what());
+    CHECK(std::string(e.what()).find("device memory budget") != std::string::npos);
+  }
 }

@@ -322,8 +322,8 @@ class CcdPipeline {
     const std::size_t room = budget - resident;
     gathered_outcome_ = Outcome{{nullptr, nullptr}, {0, 0}, T(1), 0, 0, 0, {}};
     const CcdParams<T> ccd = ccd_params();
-    // The orphans (pairs no candidate emits) once per step, as a part of their own.
-    test_candidates(nullptr, 0, true, ccd, stats);
+    boxes_current_ = false;  // the first part to emit feature pairs computes the step's feature boxes
+    room_ = room;
 
     const Task task = traversal_task();
     const std::uint64_t generation = bvh_.generation();
@@ -337,7 +337,11 @@ class CcdPipeline {
       if (!record) return;
       const std::size_t n = traversal_.num_front();
       const std::size_t kept_seeds = restart ? 0 : seeds_.capacity_bytes();
-      if (kept_seeds + (next_front + n) * sizeof(NodePair) * 5 / 4 > front_room) {
+      const std::size_t wanted = (next_front + n) * sizeof(NodePair) * 5 / 4;
+      // The front is kept within its share and only where the budget has room for it now (it is
+      // an optimisation: the parts' narrow phase does not leave room for it).
+      const std::size_t grows = (next_front + n) * sizeof(NodePair) > next_front_.capacity_bytes() ? wanted : 0;
+      if (kept_seeds + wanted > front_room || device_bytes() + grows > budget) {
         record = false;  // the next step starts from the root (and this tree keeps no front)
         front_refused_generation_ = generation;
         next_front_ = DeviceBuffer<NodePair>();
@@ -348,10 +352,7 @@ class CcdPipeline {
                                               cudaMemcpyDeviceToDevice));
       next_front += n;
     };
-    auto traversal_limit = [&] {
-      return std::max(traversal_.output_limit(),
-                      static_cast<std::size_t>(StreamingPolicy::kTraversalShare * static_cast<double>(room)));
-    };
+    auto traversal_limit = [&] { return traversal_output_limit(); };
     const NodePair* seeds = seeds_.data();
     std::size_t num_seeds = front_size_;
     if (restart) {
@@ -371,12 +372,17 @@ class CcdPipeline {
       stats.bvtt_nodes += traversal_.stats().items_processed;
       stats.traverse_ms += ms_since(t);
       keep_front();
-      test_traversal_output(ccd, stats);
+      // What the expansion met is tested after the parts, once the scheduler's own lists hold
+      // their room (the parts' narrow phase is sized around them).
+      met_.resize_discard(std::max<std::size_t>(traversal_.num_results(), 1));
+      met_size_ = traversal_.num_results();
+      stats.triangle_pairs += met_size_;
+      if (met_size_)
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(met_.data(), traversal_.results(), met_size_ * sizeof(TrianglePair),
+                                          cudaMemcpyDeviceToDevice));
     }
     // A part's seeds take room in the scheduler's own lists too (a few entries each).
-    const std::size_t max_part =
-        std::max<std::size_t>(1, static_cast<std::size_t>(StreamingPolicy::kTraversalShare * static_cast<double>(room)) /
-                                     (8 * sizeof(NodePair)));
+    const std::size_t max_part = std::max<std::size_t>(1, seed_list_bytes() / seed_bytes());
     std::size_t part = std::min(seeds_per_part_ ? seeds_per_part_ : num_seeds, max_part);
     if (params_.part_pairs) part = std::min(part, std::max<std::size_t>(1, params_.part_pairs));
     for (std::size_t first = 0; first < num_seeds;) {
@@ -411,6 +417,10 @@ class CcdPipeline {
     }
     traversal_.set_output_limit(0);
     seeds_per_part_ = part;
+    if (restart && met_size_) test_candidates(met_.data(), met_size_, false, ccd, stats);
+    met_size_ = 0;
+    // The orphans (pairs no candidate emits), in parts of their own.
+    test_candidates(nullptr, 0, true, ccd, stats);
     // The front for the next step, when it was kept whole.
     if (record) {
       std::swap(seeds_, next_front_);
@@ -439,48 +449,105 @@ class CcdPipeline {
     test_candidates(traversal_.results(), traversal_.num_results(), false, ccd, stats);
   }
 
-  // Candidates [0, n) (and the orphans when asked) in parts whose feature pairs fit the budget.
+  // The bytes one traversal part's outputs may grow to under the budget.
+  std::size_t traversal_output_limit() const {
+    return static_cast<std::size_t>(StreamingPolicy::kTraversalShare * static_cast<double>(room_));
+  }
+
+  // Bytes the scheduler's lists may take for one traversal part's seeds, and per seed: the seed and
+  // the items it first expands to.
+  std::size_t seed_list_bytes() const {
+    return static_cast<std::size_t>(StreamingPolicy::kSeedListShare * static_cast<double>(room_));
+  }
+  static constexpr std::size_t seed_bytes() { return sizeof(NodePair) * (1 + Task::kMaxChildren); }
+
+  // Bytes a part's feature pairs and narrow phase may hold: the budget less everything else held
+  // now, less what the traversal's outputs may still grow to in this step and a reserve for
+  // gathering and sorting the hits so far (so nothing later passes the budget; a front is kept
+  // only where it fits beside).
+  std::size_t narrow_allowance() const {
+    if (!params_.device_memory_budget) return kUnlimited;
+    const std::size_t others = held_beside_parts();
+    return params_.device_memory_budget > others ? params_.device_memory_budget - others : 0;
+  }
+  // What narrow_allowance() leaves out of the budget.
+  std::size_t held_beside_parts() const {
+    const std::size_t own = emitter_.list_bytes() + narrow_.device_bytes();
+    const std::size_t outputs = traversal_.results_.capacity_bytes() + traversal_.front_.capacity_bytes();
+    const std::size_t limit = traversal_output_limit();
+    std::size_t later = limit > outputs ? limit - outputs : 0;
+    // The scheduler's lists of a part's seeds (and of what they first expand to) may still grow.
+    const std::size_t seed_lists = traversal_.work_.capacity_bytes() + traversal_.next_.capacity_bytes();
+    if (seed_list_bytes() > seed_lists) later += seed_list_bytes() - seed_lists;
+    const std::size_t gathered = gathered_outcome_.num_hits[0] + gathered_outcome_.num_hits[1];
+    later += gathered * (2 * sizeof(FeatureHit<T>) + 24) * 5 / 4;  // keys, sorted copy, CUB's temporary
+    return device_bytes() - own + later;
+  }
+
+  // Candidates [0, n), or (orphans) the orphan pairs, in parts whose feature pairs and narrow
+  // phase fit narrow_allowance(). The first part of a step also computes the feature boxes.
   void test_candidates(const TrianglePair* candidates, std::size_t n, bool orphans, const CcdParams<T>& ccd, StepStats& stats) {
-    // The orphans' part comes first in a step and computes the feature boxes for all the others.
-    bool boxes_current = !orphans;
     using clock = std::chrono::steady_clock;
     auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
-    std::size_t part = candidates_per_part_ ? candidates_per_part_ : std::max<std::size_t>(n, 1);
-    if (params_.part_pairs) part = std::min(part, params_.part_pairs);
-    for (std::size_t first = 0; first < n || (orphans && first == 0);) {
+    using OrphanRange = typename FeatureEmitter<>::OrphanRange;
+    if (orphans) n = emitter_.num_orphans();
+    constexpr std::size_t bytes_per_pair = StreamingPolicy::bytes_per_feature_pair<T>();
+    // Items (candidates or orphans) per part: the estimate the last part of this kind left, at
+    // first a guess from their usual numbers of pairs; never above PipelineParams::part_pairs.
+    const std::size_t cap = params_.part_pairs ? params_.part_pairs : kUnlimited;
+    std::size_t& estimate = orphans ? orphans_per_part_ : candidates_per_part_;
+    auto guess = [&] {
+      const double per_item = StreamingPolicy::kBytesPerCandidate +
+                              (orphans ? 1.0 : StreamingPolicy::kPairsPerCandidateGuess) * static_cast<double>(bytes_per_pair);
+      return std::max<std::size_t>(
+          1, static_cast<std::size_t>(std::min(1e18, StreamingPolicy::kPartMargin * static_cast<double>(narrow_allowance()) / per_item)));
+    };
+    std::size_t part = std::min(estimate ? estimate : guess(), cap);
+    for (std::size_t first = 0; first < n || !boxes_current_;) {
       const std::size_t count = std::min(part, n - first);
-      const bool with_orphans = orphans && first == 0;
       auto t = clock::now();
-      emitter_.enqueue(step_->x0.data(), step_->x1.data(), candidates + first, count, nullptr, with_orphans, boxes_current);
-      boxes_current = true;  // the feature boxes are this step's from the first part on
+      if (orphans)
+        emitter_.enqueue(step_->x0.data(), step_->x1.data(), static_cast<const TrianglePair*>(nullptr), 0, nullptr,
+                         OrphanRange{first, count}, boxes_current_);
+      else
+        emitter_.enqueue(step_->x0.data(), step_->x1.data(), candidates + first, count, nullptr, OrphanRange{}, boxes_current_);
+      boxes_current_ = true;  // the feature boxes are this step's from the first part on
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
       const auto counted = emitter_.counted();
       const std::size_t pairs = counted.first + counted.second;
-      // What the part may take: what the budget leaves, plus what its lists and the narrow phase
-      // hold already (reused), less a reserve for gathering and sorting the hits so far.
-      const std::size_t gathered = gathered_outcome_.num_hits[0] + gathered_outcome_.num_hits[1];
-      const std::size_t reserve = gathered * (2 * sizeof(FeatureHit<T>) + 24) * 5 / 4;  // keys, sorted copy, CUB's temporary
-      const std::size_t reusable = budget_left() + emitter_.list_bytes() + narrow_.device_bytes();
-      const std::size_t allowed = reusable > reserve ? reusable - reserve : 0;
-      if (count > 1 && pairs * StreamingPolicy::bytes_per_feature_pair<T>() + count * StreamingPolicy::kBytesPerCandidate > allowed) {
-        part = count / 2;
+      const std::size_t allowed = narrow_allowance();
+      const std::size_t need = pairs * bytes_per_pair + count * StreamingPolicy::kBytesPerCandidate;
+      if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed)
+        throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(params_.device_memory_budget) +
+                    " bytes leaves " + std::to_string(allowed) + " for the feature pairs and the narrow phase (the mesh's data take " +
+                    std::to_string(resident_bytes()) + ", the traversal " + std::to_string(traversal_.device_bytes()) +
+                    "); give it at least " + std::to_string(held_beside_parts() + StreamingPolicy::kLeastPartBytes) + " bytes");
+      // The items a part of this density may have (with a margin: density varies along the list).
+      // Parts are sized from it both ways, so they neither overrun nor stay small.
+      const std::size_t fits =
+          need ? std::max<std::size_t>(1, static_cast<std::size_t>(StreamingPolicy::kPartMargin * static_cast<double>(count) *
+                                                                   static_cast<double>(allowed) / static_cast<double>(need)))
+               : part;
+      if (count > 1 && need > allowed) {
+        part = std::min(fits, count - 1);
         ++stats.reruns;
         stats.features_ms += ms_since(t);
         continue;
       }
+      if (count) part = std::min(fits, cap);
       if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
       stats.feature_pairs_vf += emitter_.num_vf();
       stats.feature_pairs_ee += emitter_.num_ee();
       stats.features_ms += ms_since(t);
+      first += count;
+      if (count == 0) break;  // nothing to test (the feature boxes only)
       t = clock::now();
       narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd);
       gather_hits();
       stats.narrow_ms += ms_since(t);
       ++stats.narrow_parts;
-      first += count;
-      if (n == 0) break;
     }
-    if (n) candidates_per_part_ = part;
+    if (n) estimate = part;
   }
 
   // Adds the narrow phase's last run to what the step's parts found.
@@ -530,7 +597,11 @@ class CcdPipeline {
   DeviceBuffer<FeatureHit<T>> gathered_[2];      ///< the parts' hits (vertex-face, edge-edge)
   HitSorter<T> gathered_sorter_;
   Outcome gathered_outcome_{};
-  std::size_t seeds_per_part_ = 0, candidates_per_part_ = 0;  ///< part sizes that fitted last
+  std::size_t seeds_per_part_ = 0, candidates_per_part_ = 0, orphans_per_part_ = 0;  ///< part sizes that fitted last
+  std::size_t room_ = 0;                   ///< this step's room beside the resident data
+  bool boxes_current_ = false;             ///< the feature boxes are this step's
+  DeviceBuffer<TrianglePair> met_;         ///< candidates the expansion below the root met
+  std::size_t met_size_ = 0;
   std::uint64_t front_refused_generation_ = ~std::uint64_t(0);  ///< the tree on which a front did not fit
 };
 

@@ -100,6 +100,9 @@ struct StreamingPolicy {
   /// Share of the room that one part's traversal (its outputs, and its seeds in the scheduler's
   /// lists) may take.
   static constexpr double kTraversalShare = 0.25;
+  /// Share of the room that the scheduler's lists of one part's seeds (and of the items they first
+  /// expand to) may take; it bounds the seeds of a part.
+  static constexpr double kSeedListShare = 1.0 / 16;
   /// Device bytes a part may need per feature pair, counted as if every pair were a hit: its list
   /// entry, the narrow phase's work lists and a hit with its sort keys, each grown by a quarter.
   template <class T>
@@ -108,6 +111,16 @@ struct StreamingPolicy {
   }
   /// Device bytes per candidate triangle pair of a part (its emission mask and block total).
   static constexpr std::size_t kBytesPerCandidate = 4;
+  /// A part's next size is this share of what the last one's density of feature pairs would let
+  /// fit (the density varies along the candidates; a part that overruns is counted again).
+  static constexpr double kPartMargin = 0.8;
+  /// Feature pairs per candidate triangle pair assumed before a step has counted any (the real
+  /// scenes have 1.7-2.6; a wrong guess costs one counting pass).
+  static constexpr double kPairsPerCandidateGuess = 3.0;
+  /// A budget that leaves less than this for a part's feature pairs and narrow phase (beside the
+  /// resident data, the traversal's lists and the hits so far) is refused with an error rather
+  /// than run in parts of a few pairs.
+  static constexpr std::size_t kLeastPartBytes = std::size_t(1) << 20;
 };
 
 /// What one step measured.

@@ -168,6 +168,25 @@ class FeatureEmitter {
   template <class P>
   void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr,
                bool with_orphans = true, bool boxes_current = false) {
+    enqueue(x0, x1, candidates, n, stream, with_orphans ? OrphanRange{0, num_orphans()} : OrphanRange{}, boxes_current);
+  }
+
+  /// A range of the orphans, numbered vertex-face first, then edge-edge: [first, first + count)
+  /// of [0, num_orphans()).
+  struct OrphanRange {
+    std::size_t first = 0, count = 0;
+  };
+  std::size_t num_orphans() const { return orphan_vf_.size() + orphan_ee_.size(); }
+
+  /// As enqueue() above with a range of the orphans (a step split into parts lists them a range
+  /// at a time). Throws lwsccd::Error for a range past num_orphans().
+  template <class P>
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream,
+               OrphanRange orphans, bool boxes_current) {
+    if (orphans.first > num_orphans() || orphans.count > num_orphans() - orphans.first)
+      throw Error("gpu::FeatureEmitter::enqueue: orphan range [" + std::to_string(orphans.first) + ", " +
+                  std::to_string(orphans.first + orphans.count) + ") is past the " + std::to_string(num_orphans()) +
+                  " orphans");
     const index_t features = num_vertices_ + num_edges_ + num_faces_;
     const EmissionView m = view();
     if (!boxes_current) {
@@ -177,8 +196,12 @@ class FeatureEmitter {
     }
     candidates_ = candidates;
     num_candidates_ = n;
-    num_orphan_vf_ = with_orphans ? orphan_vf_.size() : 0;
-    num_orphan_ee_ = with_orphans ? orphan_ee_.size() : 0;
+    // The range split at the boundary between the two orphan lists.
+    const std::size_t vf_total = orphan_vf_.size(), end = orphans.first + orphans.count;
+    orphan_vf_first_ = std::min(orphans.first, vf_total);
+    num_orphan_vf_ = std::min(end, vf_total) - orphan_vf_first_;
+    orphan_ee_first_ = std::max(orphans.first, vf_total) - vf_total;
+    num_orphan_ee_ = std::max(end, vf_total) - vf_total - orphan_ee_first_;
     const std::size_t items = n + num_orphan_vf_ + num_orphan_ee_;
     blocks_ = (items + Policy::kBlock - 1) / Policy::kBlock;
     vf_.resize_discard(std::max<std::size_t>(vf_room_, 1));
@@ -189,7 +212,8 @@ class FeatureEmitter {
       masks_.resize_discard(items);
       block_totals_.resize_discard(blocks_);
       detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-          m, candidates, n, orphan_vf_.data(), num_orphan_vf_, orphan_ee_.data(), items, masks_.data(), block_totals_.data());
+          m, candidates, n, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_, orphan_ee_.data() + orphan_ee_first_, items,
+          masks_.data(), block_totals_.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       std::size_t bytes = 0;
       LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
@@ -272,7 +296,8 @@ class FeatureEmitter {
     const std::size_t items = num_candidates_ + num_orphan_vf_ + num_orphan_ee_;
     if (items == 0) return;
     detail::emission_write_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-        view(), candidates_, num_candidates_, orphan_vf_.data(), num_orphan_vf_, orphan_ee_.data(), items, masks_.data(),
+        view(), candidates_, num_candidates_, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_,
+        orphan_ee_.data() + orphan_ee_first_, items, masks_.data(),
         block_totals_.data(), vf_.data(), vf_room_, ee_.data(), ee_room_);
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
@@ -294,7 +319,8 @@ class FeatureEmitter {
   PinnedBuffer<unsigned long long> host_total_;  // allocated on first use
   const TrianglePair* candidates_ = nullptr;
   std::size_t num_candidates_ = 0, blocks_ = 0;
-  std::size_t num_orphan_vf_ = 0, num_orphan_ee_ = 0;  ///< orphans the last enqueue listed
+  std::size_t num_orphan_vf_ = 0, num_orphan_ee_ = 0;      ///< orphans the last enqueue listed
+  std::size_t orphan_vf_first_ = 0, orphan_ee_first_ = 0;  ///< and where they start in each list
   std::size_t vf_room_ = 0, ee_room_ = 0;         ///< room of vf_, ee_ (grown by collect())
   std::size_t num_vf_ = 0, num_ee_ = 0;
   float margin_ = 0;
