@@ -111,6 +111,32 @@ void require_fuzz_agreement(const lwsccd::StepResult<T>& got, const lwsccd::Narr
   }
 }
 
+/// A scene's step in parts: PipelineParams::part_pairs a few candidate triangle pairs (1-17, from
+/// the scene's size), so that even small scenes split into many parts.
+inline lwsccd::PipelineParams fuzz_part_params(const FuzzScene& s, lwsccd::CcdMode mode) {
+  lwsccd::PipelineParams p = fuzz_params(s, mode);
+  p.part_pairs = 1 + static_cast<std::size_t>(s.mesh->num_faces()) % 17;
+  return p;
+}
+
+/// An AABB pipeline's step in parts against the oracle: the same pairs, TOIs bit for bit and
+/// earliest TOI; the same counts in mode contacts and hits given up in modes contacts and set.
+/// (Mode earliest counts per time window, and a part does not know the earlier parts' best time,
+/// so it may search, and give up on, pairs a whole step drops as later: neither adds up to a whole
+/// step's.)
+template <class T>
+void require_parts_agreement(const lwsccd::StepResult<T>& got, const lwsccd::NarrowPhaseResult<T>& oracle, lwsccd::CcdMode mode) {
+  INFO("step in parts: " << got.stats.traversal_parts << " traversal parts, " << got.stats.narrow_parts << " narrow-phase parts");
+  require_same_hits(got.contacts.vf, oracle.vf);
+  require_same_hits(got.contacts.ee, oracle.ee);
+  REQUIRE(got.contacts.earliest_toi == oracle.earliest_toi);
+  if (mode != lwsccd::CcdMode::earliest) REQUIRE(got.contacts.gave_up == oracle.gave_up);
+  if (mode == lwsccd::CcdMode::contacts) {
+    require_same_counts(got.contacts.vf_counts, oracle.vf_counts);
+    require_same_counts(got.contacts.ee_counts, oracle.ee_counts);
+  }
+}
+
 /// The fuzz run: scenes LWSCCD_FUZZ_SEED .. + LWSCCD_FUZZ_SCENES (default 1 .. 40), each with its
 /// mode, through check_scene(scene, mode) (which compares every configuration with the oracle).
 /// Failures name the seed that reruns the scene alone; long runs print progress every 500 scenes.

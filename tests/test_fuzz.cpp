@@ -20,12 +20,14 @@ void check_cpu_all_bvs(const lwsccd_test::FuzzScene& s, CcdMode mode) {
   const auto oracle = lwsccd_test::fuzz_oracle<Method, T>(s, mode);
   check_cpu<Aabbf, Method, T>(s, mode, oracle);
   check_cpu<Obbf, Method, T>(s, mode, oracle);
+  cpu::CcdPipeline<Aabbf, Method, T> in_parts(s.mesh, s.layout, lwsccd_test::fuzz_part_params(s, mode));
+  lwsccd_test::require_parts_agreement(in_parts.step(s.x0, s.x1), oracle, mode);
 }
 
 }  // namespace
 
-TEST_CASE("fuzz: random scenes through every CPU BV x method x precision equal the oracle", "[.fuzz]") {
-  lwsccd_test::run_fuzz("CPU", "2 BVs x 2 methods x 2 precisions", [](const lwsccd_test::FuzzScene& s, CcdMode mode) {
+TEST_CASE("fuzz: random scenes through every CPU BV x method x precision, whole and in parts, equal the oracle", "[.fuzz]") {
+  lwsccd_test::run_fuzz("CPU", "(2 BVs + AABB in parts) x 2 methods x 2 precisions", [](const lwsccd_test::FuzzScene& s, CcdMode mode) {
     check_cpu_all_bvs<CertifiedCcd, double>(s, mode);
     check_cpu_all_bvs<CertifiedCcd, float>(s, mode);
     check_cpu_all_bvs<Filtered<InclusionCcd>, double>(s, mode);

@@ -1,7 +1,7 @@
 // Differential fuzzing of the GPU backend (hidden tag [.fuzz]: its own CTest entry, skipped
 // without a GPU; LWSCCD_FUZZ_SEED / LWSCCD_FUZZ_SCENES choose the scenes, reproducibly): every
-// scheduler, both BVs, both methods and both precisions (24 pipelines a scene) against the
-// oracle of fuzz_check.hpp.
+// scheduler, both BVs, both methods and both precisions (24 pipelines a scene), and two AABB
+// pipelines in parts under a budget (8 more), against the oracle of fuzz_check.hpp.
 #include <catch2/catch.hpp>
 
 #include "lwsccd/pipeline.cuh"
@@ -29,12 +29,19 @@ void check_gpu_all(const lwsccd_test::FuzzScene& s, CcdMode mode) {
   check_gpu<Obbf, gpu::LazyStealScheduler<>, Method, T>("OBB lazy", s, mode, oracle);
   check_gpu<Obbf, gpu::StaticTaskList<>, Method, T>("OBB static", s, mode, oracle);
   check_gpu<Obbf, gpu::GProximityBalancer<>, Method, T>("OBB gproximity", s, mode, oracle);
+  // Steps in parts: a few candidate pairs (and orphans) a part, under a budget (the streamed path).
+  PipelineParams parts = lwsccd_test::fuzz_part_params(s, mode);
+  parts.device_memory_budget = std::size_t(1) << 30;
+  gpu::CcdPipeline<Aabbf, gpu::LazyStealScheduler<>, Method, T> lazy_parts(s.mesh, s.layout, parts);
+  lwsccd_test::require_parts_agreement(lazy_parts.step(s.x0, s.x1), oracle, mode);
+  gpu::CcdPipeline<Aabbf, gpu::StaticTaskList<>, Method, T> static_parts(s.mesh, s.layout, parts);
+  lwsccd_test::require_parts_agreement(static_parts.step(s.x0, s.x1), oracle, mode);
 }
 
 }  // namespace
 
 TEST_CASE("fuzz: random scenes through every GPU scheduler x BV x method x precision equal the oracle", "[.fuzz][gpu]") {
-  lwsccd_test::run_fuzz("GPU", "3 schedulers x 2 BVs x 2 methods x 2 precisions", [](const lwsccd_test::FuzzScene& s, CcdMode mode) {
+  lwsccd_test::run_fuzz("GPU", "(3 schedulers x 2 BVs + 2 in parts) x 2 methods x 2 precisions", [](const lwsccd_test::FuzzScene& s, CcdMode mode) {
     check_gpu_all<CertifiedCcd, double>(s, mode);
     check_gpu_all<CertifiedCcd, float>(s, mode);
     check_gpu_all<Filtered<InclusionCcd>, double>(s, mode);
