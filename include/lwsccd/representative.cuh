@@ -162,7 +162,7 @@ class FeatureEmitter {
   /// As run() without waiting: the pairs go to buffers sized by earlier runs and their numbers stay
   /// on the device (vf_list(), ee_list() give them to the narrow phase); call collect() after
   /// `stream` has been synchronized. The candidates must stay valid until then. `with_orphans`
-  /// false leaves the orphans out (a step split into parts lists them with one part only).
+  /// false leaves the orphans out (a step split into parts lists them a range at a time, below).
   /// `boxes_current` true skips recomputing the feature boxes (they are those of an earlier
   /// enqueue with the same positions).
   template <class P>
