@@ -119,6 +119,7 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
   // A worker runs a private stack (no lock, no shared counter per item) and shares the older half
   // of it, in one batch, whenever its own deque has been emptied (by itself or by thieves).
   constexpr std::size_t kShareAbove = 8;
+  constexpr std::size_t kTakeBatch = 64;  // items a worker moves from its own deque at once
 
   auto run = [&](unsigned self) {
     Worker& me = workers[self];
@@ -131,9 +132,10 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
         if (taken) pending.fetch_sub(taken, std::memory_order_acq_rel), taken = 0;
         {
           std::lock_guard<std::mutex> guard(me.lock);
-          if (!me.deque.empty()) {
-            local.push_back(me.deque.back());
-            me.deque.pop_back();
+          if (!me.deque.empty()) {  // its newest items, a batch at a time (a front seeds millions)
+            const std::size_t take = std::min(me.deque.size(), kTakeBatch);
+            local.insert(local.end(), me.deque.end() - static_cast<std::ptrdiff_t>(take), me.deque.end());
+            me.deque.erase(me.deque.end() - static_cast<std::ptrdiff_t>(take), me.deque.end());
             me.shared_size.store(me.deque.size(), std::memory_order_relaxed);
           }
         }
