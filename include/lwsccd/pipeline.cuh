@@ -293,12 +293,6 @@ class CcdPipeline {
 
   // ---- A step streamed under PipelineParams::device_memory_budget ----
 
-  // Bytes the budget leaves now (0 when it is spent; without a budget, as good as unlimited).
-  std::size_t budget_left() const {
-    if (!params_.device_memory_budget) return kUnlimited;
-    const std::size_t held = device_bytes();
-    return params_.device_memory_budget > held ? params_.device_memory_budget - held : 0;
-  }
   static constexpr std::size_t kUnlimited = std::size_t(1) << 60;
 
   // The stages in parts that fit the budget: traversal from the seeds a part at a time, each
@@ -352,7 +346,6 @@ class CcdPipeline {
                                               cudaMemcpyDeviceToDevice));
       next_front += n;
     };
-    auto traversal_limit = [&] { return traversal_output_limit(); };
     const NodePair* seeds = seeds_.data();
     std::size_t num_seeds = front_size_;
     if (restart) {
@@ -360,7 +353,7 @@ class CcdPipeline {
       // A cut below the root; what the expansion met on the way is a part of its own.
       t = clock::now();
       root_.upload(std::vector<NodePair>{NodePair{0, 0}});
-      traversal_.set_output_limit(traversal_limit());
+      traversal_.set_output_limit(traversal_output_limit());
       num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, record);
       if (!traversal_.complete())
         throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
@@ -388,7 +381,7 @@ class CcdPipeline {
     for (std::size_t first = 0; first < num_seeds;) {
       const std::size_t n = std::min(part, num_seeds - first);
       t = clock::now();
-      traversal_.set_output_limit(traversal_limit());
+      traversal_.set_output_limit(traversal_output_limit());
       traverse<Scheduler>(task, seeds + first, n, traversal_, record);
       stats.traverse_ms += ms_since(t);
       const std::size_t cap = params_.part_pairs;
@@ -417,7 +410,7 @@ class CcdPipeline {
     }
     traversal_.set_output_limit(0);
     seeds_per_part_ = part;
-    if (restart && met_size_) test_candidates(met_.data(), met_size_, false, ccd, stats);
+    if (met_size_) test_candidates(met_.data(), met_size_, false, ccd, stats);
     met_size_ = 0;
     // The orphans (pairs no candidate emits), in parts of their own.
     test_candidates(nullptr, 0, true, ccd, stats);

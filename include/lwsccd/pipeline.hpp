@@ -97,8 +97,7 @@ struct StreamingPolicy {
   /// Share of the room (budget less the resident data) that the kept fronts (the last step's and
   /// the one being recorded) may take; past it the next step starts from the root instead.
   static constexpr double kFrontShare = 0.35;
-  /// Share of the room that one part's traversal (its outputs, and its seeds in the scheduler's
-  /// lists) may take.
+  /// Share of the room that one traversal part's outputs (candidate pairs, front) may take.
   static constexpr double kTraversalShare = 0.25;
   /// Share of the room that the scheduler's lists of one part's seeds (and of the items they first
   /// expand to) may take; it bounds the seeds of a part.

@@ -45,8 +45,8 @@ namespace cpu {
 struct SerialScheduler {};
 
 /// All cores: each thread works depth first on a private stack and shares the older half of it
-/// through its deque whenever that deque is empty; a thread out of work pops its deque's newest
-/// item or steals the oldest half of another's (the largest subtrees). Termination: a shared count
+/// through its deque whenever that deque is empty; a thread out of work takes its deque's newest
+/// items (a batch) or steals the oldest half of another's (the largest subtrees). Termination: a shared count
 /// of the items in the deques and of those taken from them but not settled reaches zero only when
 /// no thread holds or can create work (a thread settles only with an empty private stack, and
 /// counts items before it shares them). No lock or shared counter per item.
@@ -103,7 +103,7 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
   const unsigned n = scheduler.threads ? scheduler.threads : std::max(1u, std::thread::hardware_concurrency());
   struct Worker {
     std::mutex lock;
-    std::deque<Item> deque;                     ///< shared: the owner pops its newest, thieves take the oldest half
+    std::deque<Item> deque;                     ///< shared: the owner takes its newest, thieves the oldest half
     std::atomic<std::size_t> shared_size{0};    ///< deque.size(), readable without the lock
     std::vector<typename Task::result_type> results;
     std::vector<Item> front;
