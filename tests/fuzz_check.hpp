@@ -8,6 +8,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -23,6 +24,27 @@
 namespace lwsccd_test {
 
 /// Scenes and first seed of a fuzz run: LWSCCD_FUZZ_SCENES / LWSCCD_FUZZ_SEED, else the defaults.
+// Seconds a fuzzing run spends in each kind of work (reported with its last line, so a slow run
+// says whether the oracle, the pipelines' construction or their steps take the time).
+struct FuzzTimes {
+  double oracle = 0, construct = 0, step = 0;
+};
+inline FuzzTimes& fuzz_times() {
+  static FuzzTimes t;
+  return t;
+}
+// Runs f() and adds its wall time to `into`; returns what f returns.
+template <class F>
+auto fuzz_timed(double& into, F&& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  struct Add {
+    double& into;
+    std::chrono::steady_clock::time_point t0;
+    ~Add() { into += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
+  } add{into, t0};
+  return f();
+}
+
 inline std::uint64_t fuzz_setting(const char* name, std::uint64_t fallback) {
   const char* text = std::getenv(name);
   return text && *text ? std::strtoull(text, nullptr, 10) : fallback;
@@ -72,12 +94,15 @@ inline std::vector<lwsccd::Obbf> face_obbs(const FuzzScene& s) {
 // proves that no contact was lost. (Orphan pairs share a vertex: their OBBs always overlap.)
 template <class T>
 void require_obb_subset(const std::vector<lwsccd::FeatureHit<T>>& hits, const std::vector<lwsccd::FeatureHit<T>>& all,
-                        const std::vector<lwsccd::Obbf>& obbs, bool vertex_face, const lwsccd::RepresentativeTriangles& rep) {
+                        const std::vector<lwsccd::Obbf>& obbs, bool vertex_face, const lwsccd::RepresentativeTriangles& rep,
+                        const lwsccd::TriangleMesh& mesh) {
   using lwsccd::index_t;
   std::size_t j = 0;
   auto explain_missing = [&](const lwsccd::FeatureHit<T>& lost) {
-    const index_t a = vertex_face ? rep.vertex_owner(lost.first) : rep.edge_owner(lost.first);
-    const index_t b = vertex_face ? lost.second : rep.edge_owner(lost.second);
+    // Hits name features by feature id (vertices, then edges, then faces); owners take indices.
+    const index_t nv = mesh.num_vertices(), ne = mesh.num_edges();
+    const index_t a = vertex_face ? rep.vertex_owner(lost.first) : rep.edge_owner(lost.first - nv);
+    const index_t b = vertex_face ? lost.second - nv - ne : rep.edge_owner(lost.second - nv);
     INFO("oracle hit (" << lost.first << ", " << lost.second << ") missing from the OBB pipeline; faces " << a << ", " << b);
     REQUIRE_FALSE(lwsccd::Obbf::overlap(obbs[a], obbs[b]));
   };
@@ -103,8 +128,8 @@ void require_fuzz_agreement(const lwsccd::StepResult<T>& got, const lwsccd::Narr
   } else {
     const lwsccd::RepresentativeTriangles rep(*s.mesh, s.layout);
     const std::vector<lwsccd::Obbf> obbs = face_obbs(s);
-    require_obb_subset(got.contacts.vf, oracle.vf, obbs, true, rep);
-    require_obb_subset(got.contacts.ee, oracle.ee, obbs, false, rep);
+    require_obb_subset(got.contacts.vf, oracle.vf, obbs, true, rep, *s.mesh);
+    require_obb_subset(got.contacts.ee, oracle.ee, obbs, false, rep, *s.mesh);
     REQUIRE(got.contacts.vf_counts.pairs <= oracle.vf_counts.pairs);
     REQUIRE(got.contacts.ee_counts.pairs <= oracle.ee_counts.pairs);
     REQUIRE(got.contacts.earliest_toi >= oracle.earliest_toi);
@@ -156,8 +181,11 @@ void run_fuzz(const char* backend, const char* configurations, CheckScene&& chec
       std::fflush(stdout);
     }
   }
-  std::printf("fuzz (%s): %llu scenes from seed %llu (%zu triangles), %s each: no disagreement\n", backend,
-              static_cast<unsigned long long>(scenes), static_cast<unsigned long long>(first), triangles, configurations);
+  const FuzzTimes& t = fuzz_times();
+  std::printf("fuzz (%s): %llu scenes from seed %llu (%zu triangles), %s each: no disagreement"
+              " (seconds: oracle %.1f, pipelines' construction %.1f, steps %.1f)\n",
+              backend, static_cast<unsigned long long>(scenes), static_cast<unsigned long long>(first), triangles,
+              configurations, t.oracle, t.construct, t.step);
 }
 
 }  // namespace lwsccd_test

@@ -4,6 +4,8 @@
 // pipelines in parts under a budget (8 more), against the oracle of fuzz_check.hpp.
 #include <catch2/catch.hpp>
 
+#include <memory>
+
 #include "lwsccd/pipeline.cuh"
 #include "fuzz_check.hpp"
 
@@ -15,14 +17,18 @@ template <class BV, class Scheduler, class Method, class T>
 void check_gpu(const char* config, const lwsccd_test::FuzzScene& s, CcdMode mode, const NarrowPhaseResult<T>& oracle) {
   INFO("pipeline " << config << ", " << (std::is_same<T, float>::value ? "float" : "double") << ", "
                    << (lwsccd::detail::certified_of<Method>::value ? "CertifiedCcd" : "Filtered<InclusionCcd>"));
-  gpu::CcdPipeline<BV, Scheduler, Method, T> pipeline(s.mesh, s.layout, lwsccd_test::fuzz_params(s, mode));
-  lwsccd_test::require_fuzz_agreement<BV>(pipeline.step(s.x0, s.x1), oracle, s);
+  auto& times = lwsccd_test::fuzz_times();
+  auto pipeline = lwsccd_test::fuzz_timed(times.construct, [&] {
+    return std::make_unique<gpu::CcdPipeline<BV, Scheduler, Method, T>>(s.mesh, s.layout, lwsccd_test::fuzz_params(s, mode));
+  });
+  const auto got = lwsccd_test::fuzz_timed(times.step, [&] { return pipeline->step(s.x0, s.x1); });
+  lwsccd_test::require_fuzz_agreement<BV>(got, oracle, s);
 }
 
 // Every scheduler and BV with one method and precision, against that method's oracle.
 template <class Method, class T>
 void check_gpu_all(const lwsccd_test::FuzzScene& s, CcdMode mode) {
-  const auto oracle = lwsccd_test::fuzz_oracle<Method, T>(s, mode);
+  const auto oracle = lwsccd_test::fuzz_timed(lwsccd_test::fuzz_times().oracle, [&] { return lwsccd_test::fuzz_oracle<Method, T>(s, mode); });
   check_gpu<Aabbf, gpu::LazyStealScheduler<>, Method, T>("AABB lazy", s, mode, oracle);
   check_gpu<Aabbf, gpu::StaticTaskList<>, Method, T>("AABB static", s, mode, oracle);
   check_gpu<Aabbf, gpu::GProximityBalancer<>, Method, T>("AABB gproximity", s, mode, oracle);

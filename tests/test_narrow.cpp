@@ -219,6 +219,51 @@ TEST_CASE("a vertex near a sliver triangle that moves away: no contact (it overf
   CHECK_FALSE(InclusionCcd::vertex_face(q.cast<float>(), CcdParams<float>{}).hit);
 }
 
+TEST_CASE("nearly parallel edges a few micrometres apart are decided in a few hundred boxes", "[narrow]") {
+  // cloth-funnel 227->228, in the query's local frame: two edges 6e-3 long, parallel to 1e-4
+  // rad, 8e-6 apart at t = 0, whose offset turns through the line of the edges near t = 0.41
+  // (crossing: a contact in the ground truth) or passes it 1e-7 away (no contact). Only along
+  // the direction of the offset is F far from 0 over a wide (u, v) box: the axis test alone
+  // needed > 16,384 boxes and gave up, at t = 0.25; along the separating directions (and with
+  // the splits they steer into time) each takes a few hundred.
+  const EdgeEdgeQuery<double> crossing{{0, 0, 0},
+                                       {0.0035238005220890045, 0.0046004019677639008, -0.0011450052261352539},
+                                       {-2.600252628326416e-06, 0, -9.0003013610839844e-06},
+                                       {0.0035209022462368011, 0.0046004019677639008, -0.0011540055274963379},
+                                       {7.9501420259475708e-05, -7.8696757555007935e-05, -0.0030869841575622559},
+                                       {0.0036102011799812317, 0.0045313015580177307, -0.0042350292205810547},
+                                       {8.3200633525848389e-05, -7.8696757555007935e-05, -0.0030750036239624023},
+                                       {0.0036143027245998383, 0.0045313015580177307, -0.0042219758033752441}};
+  const EdgeEdgeQuery<double> passing{{0, 0, 0},
+                                      {0.0039592981338500977, 0.004185900092124939, -0.0012859702110290527},
+                                      {-2.3990869522094727e-06, 0, -7.9870223999023438e-06},
+                                      {0.0039566978812217712, 0.004185900092124939, -0.0012949705123901367},
+                                      {7.1499496698379517e-05, -8.7298452854156494e-05, -0.0030829906463623047},
+                                      {0.0040387995541095734, 0.004107203334569931, -0.0043729543685913086},
+                                      {7.4900686740875244e-05, -8.7298452854156494e-05, -0.0030729770660400391},
+                                      {0.004042498767375946, 0.004107203334569931, -0.0043609738349914551}};
+  CcdParams<double> params;
+  params.max_iterations = 2000;
+  const auto crossed = InclusionCcd::edge_edge(crossing, params);
+  CHECK(crossed.hit);
+  CHECK_FALSE(crossed.gave_up);
+  CHECK(crossed.toi > 0.4);  // the offset is >= 2e-6 from the edges' line before t = 0.35
+  CHECK(crossed.toi < 0.42);
+  const auto passed = InclusionCcd::edge_edge(passing, params);
+  CHECK_FALSE(passed.gave_up);
+  CHECK_FALSE(passed.hit);
+  // Time reversed: the same verdicts (the search runs forward in time, so the boxes differ).
+  auto reversed = [](EdgeEdgeQuery<double> q) {
+    std::swap(q.a0, q.a1), std::swap(q.b0, q.b1), std::swap(q.c0, q.c1), std::swap(q.d0, q.d1);
+    return q;
+  };
+  const auto crossed_back = InclusionCcd::edge_edge(reversed(crossing), params);
+  CHECK(crossed_back.hit);
+  CHECK_FALSE(crossed_back.gave_up);
+  CHECK(crossed_back.toi > 0.58);
+  CHECK_FALSE(InclusionCcd::edge_edge(reversed(passing), params).gave_up);
+}
+
 TEST_CASE("CPU narrow phase over a cloth's feature pairs: filtered equals unfiltered", "[narrow]") {
   const auto m = lwsccd_test::folded_cloth(16, 3);
   const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));

@@ -191,6 +191,88 @@ LWSCCD_HD InclusionSetup<T> inclusion_setup(const Q& q, const CcdParams<T>& para
   return s;
 }
 
+// Separating directions of a box, from the query at the box's middle (time t, parameters u, v):
+// the face normal (vertex-face), or the edges' cross product and the part of F at the middle
+// that is perpendicular to the first edge (edge-edge: the second one works where the edges are
+// parallel, which the cross product cannot). Any direction is sound (excluded_along); these are
+// the ones along which F hardly varies over a box, so that F's distance shows.
+template <class T>
+LWSCCD_HD int separating_directions(const VertexFaceQuery<T>& q, T t, T, T, Vec3<T> n[2]) {
+  const Vec3<T> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t);
+  const Vec3<T> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t), a);
+  const Vec3<T> ac = vsub(vadd_scaled(q.c0, vsub(q.c1, q.c0), t), a);
+  n[0] = vcross(ab, ac);
+  return 1;
+}
+template <class T>
+LWSCCD_HD int separating_directions(const EdgeEdgeQuery<T>& q, T t, T u, T v, Vec3<T> n[2]) {
+  const Vec3<T> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t);
+  const Vec3<T> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t), a);
+  const Vec3<T> c = vadd_scaled(q.c0, vsub(q.c1, q.c0), t);
+  const Vec3<T> cd = vsub(vadd_scaled(q.d0, vsub(q.d1, q.d0), t), c);
+  n[0] = vcross(ab, cd);
+  const Vec3<T> middle = vsub(vadd(vsub(a, c), vscale(ab, u)), vscale(cd, v));
+  const T ab2 = vdot(ab, ab);
+  n[1] = ab2 > T(0) ? vsub(middle, vscale(ab, vdot(middle, ab) / ab2)) : middle;
+  return 2;
+}
+
+// n . F over a box (n any direction, scaled to a largest component of exactly 1): whether it
+// stays outside [-d |n|_1, d |n|_1], so that no point of the box has F within d (infinity norm)
+// of 0; otherwise how wide it is and along which dimension it varies most. F over a box lies
+// in the convex hull of its corner values (it is linear in each of t, u, v), so n . F lies
+// between the corners' extremes, each known to within sum_k |n_k| (eps_k + 4 u |f_k|) (the
+// corners' bound plus the dot product's rounding, bounded twice over; with |n_k| <= 1 = max,
+// no product of the bound underflows below eps's denormal term). docs/NARROW_PHASE.md, section 1.
+template <class T>
+struct AlongDirection {
+  bool excluded = false;
+  T width = std::numeric_limits<T>::infinity();  ///< hi - lo of n . F over the box (as computed)
+  int widest = 0;                                 ///< dimension (t, u, v) along which n . F varies most
+  bool above_rounding = false;                    ///< the width is well above the rounding bound
+};
+template <class T>
+LWSCCD_HD AlongDirection<T> along_direction(Vec3<T> n, const Vec3<T> f[2][2][2], const InclusionSetup<T>& s) {
+  AlongDirection<T> r;
+  const T big = max_component(abs(n));
+  if (!(big > T(0)) || !(big <= std::numeric_limits<T>::max())) return r;  // no direction, or NaN
+  n = Vec3<T>{n.x / big, n.y / big, n.z / big};
+  const Vec3<T> size = abs(n);
+  T along[8];
+  T lo = std::numeric_limits<T>::infinity(), hi = -lo;
+  Vec3<T> magnitude{0, 0, 0};
+  for (int c = 0; c < 8; ++c) {
+    const Vec3<T>& x = f[c >> 2][(c >> 1) & 1][c & 1];
+    along[c] = vdot(n, x);
+    if (!(along[c] == along[c])) return r;  // NaN: nothing can be concluded
+    lo = along[c] < lo ? along[c] : lo;
+    hi = along[c] > hi ? along[c] : hi;
+    magnitude = max(magnitude, abs(x));
+  }
+  const T unit = unit_roundoff<T>();
+  const T error = fmul(T(2), vdot(size, vadd(s.eps, vscale(magnitude, T(4) * unit))));
+  const T reach = fmul(fmul(fadd(fadd(size.x, size.y), size.z), s.d), fadd(T(1), T(8) * unit));
+  r.excluded = fsub(lo, error) > reach || fadd(hi, error) < -reach;
+  r.width = fsub(hi, lo);
+  // A range not much wider than the rounding (features that stay in one plane, along their
+  // normal) says nothing about where to split.
+  r.above_rounding = r.width > fmul(error, T(64));
+  T best = T(-1);
+  for (int k = 0; k < 3; ++k) {
+    T spread = T(0);
+    for (int c = 0; c < 8; ++c) {
+      if ((c >> (2 - k)) & 1) continue;  // corners on the low side of dimension k
+      const T w = std::fabs(fsub(along[c | (1 << (2 - k))], along[c]));
+      spread = w > spread ? w : spread;
+    }
+    if (spread > best) {
+      best = spread;
+      r.widest = k;
+    }
+  }
+  return r;
+}
+
 enum class BoxVerdict : std::uint8_t { excluded, accepted, split_t, split_u, split_v };
 
 /// One box's test: excluded (no contact in it), accepted (contact within tolerance, or finest),
@@ -220,6 +302,7 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
   Vec3<T> f[2][2][2];
   corner_values(q, t, u, v, f);
   bool within_tolerance = true;
+  T axis_width = T(0);  // the widest range of F's components over the box
   for (int k = 0; k < 3; ++k) {
     T fmin = f[0][0][0][k], fmax = fmin;
     for (int c = 1; c < 8; ++c) {
@@ -227,11 +310,26 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
       fmin = x < fmin ? x : fmin;
       fmax = x > fmax ? x : fmax;
     }
+    axis_width = fsub(fmax, fmin) > axis_width ? fsub(fmax, fmin) : axis_width;
     const T low = fsub(fmin, s.eps[k]), high = fadd(fmax, s.eps[k]);
     if (low > s.d || high < -s.d) return BoxVerdict::excluded;
     // Contact up to `delta`, and up to the rounding bound, which no subdivision can resolve.
     const T reach = fadd(fadd(s.d, s.delta), fmul(T(2), s.eps[k]));
     within_tolerance = within_tolerance && high <= reach && low >= -reach;
+  }
+  // Along directions other than the axes: parallel edges a few tolerances apart, or a vertex
+  // hovering over a tilted face, are excluded by a few boxes instead of thousands.
+  AlongDirection<T> flattest;
+  {
+    Vec3<T> n[2];
+    const T half = T(0.5);
+    const int count = separating_directions(q, fmul(fadd(t[0], t[1]), half), fmul(fadd(u[0], u[1]), half),
+                                            fmul(fadd(v[0], v[1]), half), n);
+    for (int i = 0; i < count; ++i) {
+      const AlongDirection<T> a = along_direction(n[i], f, s);
+      if (a.excluded) return BoxVerdict::excluded;
+      if (a.above_rounding && a.width < flattest.width) flattest = a;
+    }
   }
   const bool finest = box.level[0] >= s.max_level && box.level[1] >= s.max_level && box.level[2] >= s.max_level;
   if (within_tolerance || finest) return BoxVerdict::accepted;
@@ -240,7 +338,13 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
   // fallback searches end in a few rounds). Not across time_from: there the box would be split
   // as often, and on cloth-funnel's boundary contacts the GPU's longest searches got slower.
   if (t[0] < s.time_limit && t[1] > s.time_limit && box.level[0] < s.max_level) return BoxVerdict::split_t;
-  // Split the dimension along which F varies most (time first on ties).
+  // Where F along a direction is far flatter than along the axes (its range is mostly the
+  // distance between the features, as for parallel edges), split where that range varies most:
+  // the splits that lead to its test excluding boxes (time, for parallel edges, while u and v
+  // would be split thousands of times along them).
+  if (flattest.width < fmul(axis_width, T(1) / T(16)) && box.level[flattest.widest] < s.max_level)
+    return static_cast<BoxVerdict>(static_cast<int>(BoxVerdict::split_t) + flattest.widest);
+  // Otherwise split the dimension along which F varies most (time first on ties).
   int split = -1;
   T best = T(-1);
   for (int k = 0; k < 3; ++k) {
