@@ -194,7 +194,7 @@ LWSCCD_HD InclusionSetup<T> inclusion_setup(const Q& q, const CcdParams<T>& para
 // Separating directions of a box, from the query at the box's middle (time t, parameters u, v):
 // the face normal (vertex-face), or the edges' cross product and the part of F at the middle
 // that is perpendicular to the first edge (edge-edge: the second one works where the edges are
-// parallel, which the cross product cannot). Any direction is sound (excluded_along); these are
+// parallel, which the cross product cannot). Any direction is sound (along_direction); these are
 // the ones along which F hardly varies over a box, so that F's distance shows.
 template <class T>
 LWSCCD_HD int separating_directions(const VertexFaceQuery<T>& q, T t, T, T, Vec3<T> n[2]) {
@@ -219,9 +219,9 @@ LWSCCD_HD int separating_directions(const EdgeEdgeQuery<T>& q, T t, T u, T v, Ve
 
 // n . F over a box (n any direction, scaled to a largest component of exactly 1): whether it
 // stays outside [-d |n|_1, d |n|_1], so that no point of the box has F within d (infinity norm)
-// of 0; otherwise how wide it is and along which dimension it varies most. F over a box lies
-// in the convex hull of its corner values (it is linear in each of t, u, v), so n . F lies
-// between the corners' extremes, each known to within sum_k |n_k| (eps_k + 4 u |f_k|) (the
+// of 0; and, for a direction that steers the split, how wide it is and along which dimension it
+// varies most. F over a box lies in the convex hull of its corner values (it is linear in each
+// of t, u, v), so n . F lies between the corners' extremes, each known to within sum_k |n_k| (eps_k + 4 u |f_k|) (the
 // corners' bound plus the dot product's rounding, bounded twice over; with |n_k| <= 1 = max,
 // no product of the bound underflows below eps's denormal term). docs/NARROW_PHASE.md, section 1.
 template <class T>
@@ -232,7 +232,7 @@ struct AlongDirection {
   bool above_rounding = false;                    ///< the width is well above the rounding bound
 };
 template <class T>
-LWSCCD_HD AlongDirection<T> along_direction(Vec3<T> n, const Vec3<T> f[2][2][2], const InclusionSetup<T>& s) {
+LWSCCD_HD AlongDirection<T> along_direction(Vec3<T> n, const Vec3<T> f[2][2][2], const InclusionSetup<T>& s, bool steers) {
   AlongDirection<T> r;
   const T big = max_component(abs(n));
   if (!(big > T(0)) || !(big <= std::numeric_limits<T>::max())) return r;  // no direction, or NaN
@@ -253,6 +253,7 @@ LWSCCD_HD AlongDirection<T> along_direction(Vec3<T> n, const Vec3<T> f[2][2][2],
   const T error = fmul(T(2), vdot(size, vadd(s.eps, vscale(magnitude, T(4) * unit))));
   const T reach = fmul(fmul(fadd(fadd(size.x, size.y), size.z), s.d), fadd(T(1), T(8) * unit));
   r.excluded = fsub(lo, error) > reach || fadd(hi, error) < -reach;
+  if (r.excluded || !steers) return r;
   r.width = fsub(hi, lo);
   // A range not much wider than the rounding (features that stay in one plane, along their
   // normal) says nothing about where to split.
@@ -326,11 +327,12 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
     const int count = separating_directions(q, fmul(fadd(t[0], t[1]), half), fmul(fadd(u[0], u[1]), half),
                                             fmul(fadd(v[0], v[1]), half), n);
     for (int i = 0; i < count; ++i) {
-      const AlongDirection<T> a = along_direction(n[i], f, s);
-      if (a.excluded) return BoxVerdict::excluded;
       // Only the second edge-edge direction steers the split (parallel edges); the face normal
       // and the cross product steering it gave up on thousands of armadillo-rollers' pairs.
-      if (i == 1 && a.above_rounding && a.width < flattest.width) flattest = a;
+      const bool steers = i == 1;
+      const AlongDirection<T> a = along_direction(n[i], f, s, steers);
+      if (a.excluded) return BoxVerdict::excluded;
+      if (steers && a.above_rounding && a.width < flattest.width) flattest = a;
     }
   }
   const bool finest = box.level[0] >= s.max_level && box.level[1] >= s.max_level && box.level[2] >= s.max_level;
