@@ -27,7 +27,7 @@ namespace lwsccd_test {
 // Seconds a fuzzing run spends in each kind of work (reported with its last line, so a slow run
 // says whether the oracle, the pipelines' construction or their steps take the time).
 struct FuzzTimes {
-  double oracle = 0, construct = 0, step = 0;
+  double oracle = 0, construct = 0, step = 0, parts = 0;
 };
 inline FuzzTimes& fuzz_times() {
   static FuzzTimes t;
@@ -48,6 +48,15 @@ auto fuzz_timed(double& into, F&& f) {
 inline std::uint64_t fuzz_setting(const char* name, std::uint64_t fallback) {
   const char* text = std::getenv(name);
   return text && *text ? std::strtoull(text, nullptr, 10) : fallback;
+}
+
+/// Whether a scene also runs the pipelines in parts: every LWSCCD_FUZZ_PARTS_EVERY-th seed (default
+/// 1: every scene). A step in parts of 1-17 candidate pairs is thousands of tiny parts, each with
+/// its host synchronisation, so it costs ~5x all the whole pipelines of a scene: a long device run
+/// thins it out to reach many scenes, and still covers the streamed path on a tenth of them.
+inline bool fuzz_in_parts(std::uint64_t seed) {
+  const std::uint64_t every = fuzz_setting("LWSCCD_FUZZ_PARTS_EVERY", 1);
+  return every != 0 && seed % every == 0;
 }
 
 /// The mode a scene runs in: mostly contacts, sometimes earliest or set (from its seed).
@@ -183,9 +192,9 @@ void run_fuzz(const char* backend, const char* configurations, CheckScene&& chec
   }
   const FuzzTimes& t = fuzz_times();
   std::printf("fuzz (%s): %llu scenes from seed %llu (%zu triangles), %s each: no disagreement"
-              " (seconds: oracle %.1f, pipelines' construction %.1f, steps %.1f)\n",
+              " (seconds: oracle %.1f, pipelines' construction %.1f, steps %.1f, steps in parts %.1f)\n",
               backend, static_cast<unsigned long long>(scenes), static_cast<unsigned long long>(first), triangles,
-              configurations, t.oracle, t.construct, t.step);
+              configurations, t.oracle, t.construct, t.step, t.parts);
 }
 
 }  // namespace lwsccd_test

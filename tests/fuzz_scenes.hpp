@@ -19,6 +19,7 @@ namespace lwsccd_test {
 
 struct FuzzScene {
   std::string what;  ///< how it was made, for messages
+  std::uint64_t seed = 0;  ///< the seed that makes it again
   std::shared_ptr<const lwsccd::TriangleMesh> mesh;
   lwsccd::BodyLayout layout;
   std::vector<lwsccd::Vec3d> x0, x1;
@@ -138,6 +139,7 @@ inline FuzzScene make_fuzz_scene(std::uint64_t seed) {
     scene.min_separation = extent * std::ldexp(1.0, -between(8, 14));
     scene.what += ", min separation " + std::to_string(scene.min_separation);
   }
+  scene.seed = seed;
   scene.what = "seed " + std::to_string(seed) + ": " + scene.what + ", " + std::to_string(m.mesh.num_faces()) + " triangles";
   scene.mesh = std::make_shared<const TriangleMesh>(m.mesh);
   scene.x0 = std::move(m.x0);

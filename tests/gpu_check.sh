@@ -13,8 +13,11 @@
 #   LWSCCD_CHECK_PARTS       which parts run (default "tests fuzz sanitizers")
 #   LWSCCD_FUZZ_SEED         first seed of the fuzzing run (default 1; scene k uses seed + k)
 #   LWSCCD_FUZZ_SCENES       scenes per GPU configuration (default 2000; 0 skips the part)
-#   LWSCCD_SANITIZE_TESTS    Catch2 test spec for the sanitizer runs (default "~[data]~[fuzz]": every
-#                            kernel runs in the procedural tests, and the tools slow them 10-100x)
+#   LWSCCD_FUZZ_PARTS_EVERY  the pipelines in parts run on every N-th seed only (default 1: every
+#                            scene; they cost ~5x a scene's 24 whole pipelines)
+#   LWSCCD_SANITIZE_TESTS    Catch2 test spec for the sanitizer runs (default "~[data]~[fuzz]~[large]":
+#                            every kernel runs in the procedural tests, and the tools slow them
+#                            10-100x; [large] cases have a small twin that the tools run instead)
 #   LWSCCD_SANITIZE_TOOLS    which tools (default "memcheck racecheck synccheck initcheck")
 #   LWSCCD_SANITIZE_TIMEOUT  seconds per tool before it is stopped and counted failed (default 1200)
 set -uo pipefail
@@ -23,7 +26,7 @@ tests="${1:-build/tests/lwsccd_tests_gpu}"
 logs="${LWSCCD_CHECK_LOGS:-gpu-check-logs}"
 fuzz_scenes="${LWSCCD_FUZZ_SCENES:-2000}"
 fuzz_seed="${LWSCCD_FUZZ_SEED:-1}"
-sanitize_spec="${LWSCCD_SANITIZE_TESTS:-~[data]~[fuzz]}"
+sanitize_spec="${LWSCCD_SANITIZE_TESTS:-~[data]~[fuzz]~[large]}"
 sanitize_tools="${LWSCCD_SANITIZE_TOOLS:-memcheck racecheck synccheck initcheck}"
 sanitize_timeout="${LWSCCD_SANITIZE_TIMEOUT:-1200}"
 parts=" ${LWSCCD_CHECK_PARTS:-tests fuzz sanitizers} "

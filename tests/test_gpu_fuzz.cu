@@ -36,12 +36,15 @@ void check_gpu_all(const lwsccd_test::FuzzScene& s, CcdMode mode) {
   check_gpu<Obbf, gpu::StaticTaskList<>, Method, T>("OBB static", s, mode, oracle);
   check_gpu<Obbf, gpu::GProximityBalancer<>, Method, T>("OBB gproximity", s, mode, oracle);
   // Steps in parts: a few candidate pairs (and orphans) a part, under a budget (the streamed path).
-  PipelineParams parts = lwsccd_test::fuzz_part_params(s, mode);
-  parts.device_memory_budget = std::size_t(1) << 30;
-  gpu::CcdPipeline<Aabbf, gpu::LazyStealScheduler<>, Method, T> lazy_parts(s.mesh, s.layout, parts);
-  lwsccd_test::require_parts_agreement(lazy_parts.step(s.x0, s.x1), oracle, mode);
-  gpu::CcdPipeline<Aabbf, gpu::StaticTaskList<>, Method, T> static_parts(s.mesh, s.layout, parts);
-  lwsccd_test::require_parts_agreement(static_parts.step(s.x0, s.x1), oracle, mode);
+  if (!lwsccd_test::fuzz_in_parts(s.seed)) return;
+  lwsccd_test::fuzz_timed(lwsccd_test::fuzz_times().parts, [&] {
+    PipelineParams parts = lwsccd_test::fuzz_part_params(s, mode);
+    parts.device_memory_budget = std::size_t(1) << 30;
+    gpu::CcdPipeline<Aabbf, gpu::LazyStealScheduler<>, Method, T> lazy_parts(s.mesh, s.layout, parts);
+    lwsccd_test::require_parts_agreement(lazy_parts.step(s.x0, s.x1), oracle, mode);
+    gpu::CcdPipeline<Aabbf, gpu::StaticTaskList<>, Method, T> static_parts(s.mesh, s.layout, parts);
+    lwsccd_test::require_parts_agreement(static_parts.step(s.x0, s.x1), oracle, mode);
+  });
 }
 
 }  // namespace
