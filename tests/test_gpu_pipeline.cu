@@ -287,7 +287,8 @@ namespace {
 // same pairs and TOIs bit for bit, the same counts, step after step (the kept front included).
 template <class Scheduler>
 void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>& mesh, const BodyLayout& layout,
-                                       const std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>>& steps, CcdMode mode) {
+                                       const std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>>& steps, CcdMode mode,
+                                       double budget_share) {
   PipelineParams params;
   params.mode = mode;
   std::vector<StepResult<double>> expected;
@@ -298,8 +299,8 @@ void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>
     resident = whole.resident_bytes();
     held = whole.device_bytes();
   }
-  // Half of what the unstreamed steps held beyond the resident data.
-  params.device_memory_budget = resident + (held - resident) / 2;
+  // A share of what the unstreamed steps held beyond the resident data.
+  params.device_memory_budget = resident + static_cast<std::size_t>(budget_share * static_cast<double>(held - resident));
   gpu::CcdPipeline<Aabbf, Scheduler> streamed(mesh, layout, params);
   std::size_t parts = 0;
   for (std::size_t i = 0; i < steps.size(); ++i) {
@@ -328,28 +329,52 @@ void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>
 
 }  // namespace
 
-TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts and answers as without one",
-          "[gpu][pipeline][streaming]") {
+namespace {
+
+// Cloth-ball scenes of `triangles` stepped under a budget of `budget_share` of what they held
+// unstreamed beyond their data (every mode, a repeated step and a moving sequence; the static
+// scheduler too where `with_static`) answer as without one.
+void require_budgeted_cloth_ball_agrees(std::size_t triangles, double budget_share, bool with_static) {
   // Schedulers with small lists of their own, so that what a step needs is mostly what grows with
   // its pairs (the part a budget can split).
   using SmallLazy = gpu::LazyStealScheduler<128, 1024, 1024, 256, 512, 1>;
   using SmallStatic = gpu::StaticTaskList<128, 1024, 2048, 64>;
-  const MultiBodyStep scene = make_cloth_ball_scene(150000);
+  const MultiBodyStep scene = make_cloth_ball_scene(triangles);
   // The same positions three times: the first step starts from the root, the others from the
   // kept front.
   const std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>> repeated(3, {scene.step.x0, scene.step.x1});
   for (const CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set})
-    require_streaming_changes_nothing<SmallLazy>(scene.step.mesh, scene.layout, repeated, mode);
-  require_streaming_changes_nothing<SmallStatic>(scene.step.mesh, scene.layout, repeated, CcdMode::contacts);
+    require_streaming_changes_nothing<SmallLazy>(scene.step.mesh, scene.layout, repeated, mode, budget_share);
+  if (with_static) require_streaming_changes_nothing<SmallStatic>(scene.step.mesh, scene.layout, repeated, CcdMode::contacts, budget_share);
   // Consecutive steps of the built-in simulation (the front moves with the cloth).
-  ClothBallSimulation simulation(150000);
+  ClothBallSimulation simulation(triangles);
   simulation.advance(30);
   std::vector<std::pair<std::vector<Vec3d>, std::vector<Vec3d>>> sequence;
   for (int s = 0; s < 4; ++s) {
     const Step step = simulation.next_step();
     sequence.push_back({step.x0, step.x1});
   }
-  require_streaming_changes_nothing<SmallLazy>(simulation.mesh(), simulation.layout(), sequence, CcdMode::contacts);
+  require_streaming_changes_nothing<SmallLazy>(simulation.mesh(), simulation.layout(), sequence, CcdMode::contacts, budget_share);
+}
+
+}  // namespace
+
+// [large]: under compute-sanitizer's racecheck this case ran past 560 s; the sanitizer runs take
+// the small one below instead.
+TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts and answers as without one",
+          "[gpu][pipeline][streaming][large]") {
+  require_budgeted_cloth_ball_agrees(150000, 0.5, true);
+}
+
+// At this size the schedulers' own lists, which no split reduces, are most of what a step holds
+// beyond the scene's data (H100: the lazy one's 13-14 MB of 30; the static one's 21 MB), and they
+// grow in a step from a kept front and stay grown. At half of it the pipeline said the budget left
+// the parts no room; at three quarters, mode set's second step was 0.3% short (the error names the
+// bytes it needs; it split the steps into 3-8 narrow parts). Hence 0.85, without the static
+// scheduler. Under racecheck this case too is slow (unfinished after 170 s on an H100).
+TEST_CASE("GPU pipeline under a device-memory budget answers as without one on a small scene (sanitizer-sized)",
+          "[gpu][pipeline][streaming]") {
+  require_budgeted_cloth_ball_agrees(24000, 0.85, false);
 }
 
 TEST_CASE("GPU pipeline in parts (part_pairs) equals the CPU pipeline in parts and whole, step after step",

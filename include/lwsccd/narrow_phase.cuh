@@ -88,8 +88,9 @@ class NarrowPhase {
   static_assert(require_ccd_method<Method>::value, "");
   using Pair = std::pair<index_t, index_t>;
 
-  /// Output buffers start with room for `initial_capacity` pairs and grow (with a rerun) whenever
-  /// a run needed more (tests force tiny values).
+  /// Output buffers start with room for `initial_capacity` pairs, or for the input's room where
+  /// that is less (a list never holds more than its input: a streamed step's small parts keep
+  /// small buffers), and grow (with a rerun) whenever a run needed more (tests force tiny values).
   explicit NarrowPhase(std::size_t initial_capacity = 1 << 16)
       : initial_capacity_(std::max<std::size_t>(initial_capacity, 1)) {}
 

@@ -463,8 +463,10 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   for (int k = 0; k < 2; ++k) {
     List& l = lists_[k];
     const std::size_t room = inputs[k].count.room;
-    if (l.hit_room == 0) l.hit_room = initial_capacity_;
-    if (l.work_room == 0) l.work_room = initial_capacity_;
+    // Hits and survivors of a run are at most its input: buffers start no larger than that.
+    const std::size_t start = std::max<std::size_t>(std::min(initial_capacity_, room), 1);
+    if (l.hit_room == 0) l.hit_room = start;
+    if (l.work_room == 0) l.work_room = start;
     if (!kTwoPass) l.work_room = std::max(l.work_room, room);  // one-pass methods test the input itself
     l.work_room = std::max<std::size_t>(l.work_room, 1);
     l.hits.resize_discard(l.hit_room);
