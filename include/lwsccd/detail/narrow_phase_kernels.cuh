@@ -463,12 +463,13 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   for (int k = 0; k < 2; ++k) {
     List& l = lists_[k];
     const std::size_t room = inputs[k].count.room;
-    // Hits and survivors of a run are at most its input: buffers start no larger than that.
-    const std::size_t start = std::max<std::size_t>(std::min(initial_capacity_, room), 1);
-    if (l.hit_room == 0) l.hit_room = start;
-    if (l.work_room == 0) l.work_room = start;
+    // Hits and survivors of a run are at most its input: room for the initial capacity, or for
+    // the input where that is less (grown before the launch, so an input that grew since the last
+    // run costs no rerun below it); larger only where an earlier run needed more.
+    const std::size_t least = std::max<std::size_t>(std::min(initial_capacity_, room), 1);
+    l.hit_room = std::max(l.hit_room, least);
+    l.work_room = std::max(l.work_room, least);
     if (!kTwoPass) l.work_room = std::max(l.work_room, room);  // one-pass methods test the input itself
-    l.work_room = std::max<std::size_t>(l.work_room, 1);
     l.hits.resize_discard(l.hit_room);
     if (kTwoPass) l.survivors.resize_discard(l.work_room);
     if (kCertified) {
