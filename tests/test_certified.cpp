@@ -144,10 +144,16 @@ struct ShrunkPolicy : CertifiedPolicy {
   static constexpr double kInsideBound = kInside / 100.0;
 };
 
+// The halving search alone, without the certain descent.
+struct NoDescentPolicy : CertifiedPolicy {
+  static constexpr bool kCertainDescent = false;
+};
+
 }  // namespace
 
 TEST_CASE("certified path: hard generated cases never missed, intervals contain the exact TOI", "[narrow][certified]") {
-  for (const Outcome& o : {run_generators<CertifiedPolicy, double>(12, true), run_generators<CertifiedPolicy, float>(12, true)}) {
+  for (const Outcome& o : {run_generators<CertifiedPolicy, double>(12, true), run_generators<CertifiedPolicy, float>(12, true),
+                           run_generators<NoDescentPolicy, double>(12, false), run_generators<NoDescentPolicy, float>(12, false)}) {
     CHECK(o.cases > 500);
     CHECK(o.misses == 0);
     CHECK(o.outside_interval == 0);
@@ -243,6 +249,125 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
               violations_mutated);
   CHECK(violations_sound == 0);
   CHECK(violations_mutated > 0);
+}
+
+TEST_CASE("certified path: the certain descent agrees with the halving search and contains the TOI", "[narrow][certified]") {
+  // Vertices through a moving triangle and edges through moving edges at random (dyadic) times
+  // and places, inside and just beside: the descent decides most contacts, and must give the
+  // halving search's certainty and an interval that overlaps its interval and holds the TOI.
+  std::mt19937 rng(20261123);
+  std::uniform_int_distribution<int> grid(-64, 64);
+  auto coordinate = [&] { return grid(rng) / 16.0; };
+  std::size_t hits = 0, disagreements = 0, apart = 0, without_toi = 0;
+  auto compare = [&](const auto& q, double toi) {
+    using T = std::decay_t<decltype(q.points()[0].x)>;
+    const CcdParams<T> params;
+    const CertifiedAnswer<T> fast = detail::certified_classify<CertifiedPolicy>(q, params);
+    const CertifiedAnswer<T> slow = detail::certified_classify<NoDescentPolicy>(q, params);
+    hits += fast.certainty == Certainty::hit;
+    // A miss on one side and a hit on the other is a contradiction; undecided may meet either.
+    disagreements += (fast.certainty == Certainty::miss && slow.certainty == Certainty::hit) ||
+                     (fast.certainty == Certainty::hit && slow.certainty == Certainty::miss);
+    if (fast.certainty == Certainty::hit && slow.certainty == Certainty::hit) apart += fast.hi < slow.lo || slow.hi < fast.lo;
+    // toi is a contact (maybe not the earliest: the tilting triangle's cubic may have more roots).
+    if (fast.certainty == Certainty::hit && toi >= 0) {
+      without_toi += fast.lo > T(toi);
+      CHECK(fast.hi - fast.lo <= params.tolerance);
+    }
+  };
+  for (int n = 0; n < 3000; ++n) {
+    // The plane z = 0 at t = toi: every point's z is s (t - toi) for its own speed s.
+    const double toi = std::uniform_int_distribution<int>(1, 1023)(rng) / 1024.0;
+    auto point = [&](double x, double y, double z_speed, double dx, double dy, Vec3d& p0, Vec3d& p1) {
+      p0 = {x, y, -z_speed * toi};
+      p1 = {x + dx, y + dy, z_speed * (1 - toi)};
+    };
+    const double speed[4] = {1.0 + rng() % 8, 0.5 * (rng() % 3), 0.25 * (rng() % 3), 0.5 * (rng() % 2)};
+    VertexFaceQuery<double> vf;
+    const Vec3d a{coordinate(), coordinate(), 0}, b = a + Vec3d{4, 0, 0}, c = a + Vec3d{0, 4, 0};
+    const bool beside = rng() % 4 == 0;  // outside the triangle at the plane time
+    point(a.x + (beside ? 5.0 : 1.0), a.y + 1.0, speed[0], 0, 0, vf.p0, vf.p1);
+    point(a.x, a.y, -speed[1], 0.25, 0, vf.a0, vf.a1);
+    point(b.x, b.y, -speed[2], 0, 0.25, vf.b0, vf.b1);
+    point(c.x, c.y, -speed[3], 0, 0, vf.c0, vf.c1);
+    // Shift the moving corners so that at toi they sit at a, b, c: then the vertex is inside.
+    for (Vec3d* p : {&vf.a0, &vf.a1}) *p = *p - Vec3d{0.25 * toi, 0, 0};
+    for (Vec3d* p : {&vf.b0, &vf.b1}) *p = *p - Vec3d{0, 0.25 * toi, 0};
+    compare(vf, beside ? -1.0 : toi);
+    compare(vf.cast<float>(), -1.0);  // rounded to float: only agreement is checked
+    EdgeEdgeQuery<double> ee;
+    const double y = coordinate(), x = coordinate();
+    point(-8, y, speed[0], 0, 0, ee.a0, ee.a1);
+    point(8, y, speed[0], 0, 0, ee.b0, ee.b1);
+    point(x, beside ? y + 9 : -8, -speed[1], 0, 0, ee.c0, ee.c1);
+    point(x, y + 8, -speed[1], 0, 0, ee.d0, ee.d1);
+    compare(ee, beside ? -1.0 : toi);
+  }
+  std::printf("  certain descent: %zu hits, %zu contradictions with the halving search, %zu disjoint intervals, %zu lower bounds past the TOI\n",
+              hits, disagreements, apart, without_toi);
+  CHECK(hits > 4000);
+  CHECK(disagreements == 0);
+  CHECK(apart == 0);
+  CHECK(without_toi == 0);
+}
+
+TEST_CASE("certified filter: a query it decides gets the whole search's answer, in every mode", "[narrow][certified]") {
+  // The GPU's first refinement step (CertifiedFilter) decides only what certified_refine answers
+  // the same way (a miss, or undecided from the same time): the hard cases, with the vertex or an edge moved beside (near misses), under
+  // the default parameters, mode set, a time limit and a coarse tolerance, double and float (whose
+  // rounding makes pieces that only the query as given excludes).
+  using Filter = detail::CertifiedFilter<CertifiedPolicy>;
+  std::mt19937 rng(11);
+  std::vector<Case> cases = hard_cases(rng, 8);
+  const std::size_t base = cases.size();
+  for (std::size_t k = 0; k < base; ++k)
+    for (long double shift : {0.25L, 3.0L, 24.0L}) {
+      Case beside = cases[k];
+      for (int i : {0, 4}) beside.p[i] = beside.p[i] + Vec3<long double>{shift, shift / 2, 0};
+      cases.push_back(beside);
+    }
+  std::vector<CcdParams<double>> settings(4);
+  settings[1].mode = CcdMode::set;
+  settings[2].time_limit = 0.3;
+  settings[3].tolerance = 0.2;
+  std::size_t excluded = 0, whole = 0, wrong = 0, refine_misses = 0, noted_lower = 0;
+  auto check = [&](const auto& q, const CcdParams<double>& double_params) {
+    using T = std::decay_t<decltype(q.points()[0].x)>;
+    CcdParams<T> params;
+    params.mode = double_params.mode;
+    params.time_limit = static_cast<T>(double_params.time_limit);
+    params.tolerance = static_cast<T>(double_params.tolerance);
+    std::uint32_t mask = 0;
+    detail::Noted<T> noted;
+    const int n = Filter::intervals(q, params, mask, noted);
+    const CertifiedAnswer<T> a = detail::certified_refine<CertifiedPolicy>(q, params);
+    refine_misses += a.certainty == Certainty::miss;
+    if (n < 0) {
+      ++whole;
+      return;
+    }
+    bool all_outside = true;
+    for (unsigned k = 0; k < 32; ++k)
+      if (mask >> k & 1u) all_outside = all_outside && Filter::excluded(q, params, k);
+    if (!all_outside) return;
+    ++excluded;
+    noted_lower += noted.any;
+    if (noted.any) wrong += a.certainty != Certainty::undecided || a.lo != noted.lower || a.hi != T(1);
+    else wrong += a.certainty != Certainty::miss || a.lo != T(0) || a.hi != T(1);
+  };
+  for (const CcdParams<double>& params : settings)
+    for (const Case& c : cases)
+      for (int scale : {0, 40}) {
+        const Case t = transformed(c, int(rng() % 6), int(rng() % 8), scale, rng() % 2 == 0);
+        if (t.vertex_face) check(as_query<double, VertexFaceQuery<double>>(t), params), check(as_query<float, VertexFaceQuery<float>>(t), params);
+        else check(as_query<double, EdgeEdgeQuery<double>>(t), params), check(as_query<float, EdgeEdgeQuery<float>>(t), params);
+      }
+  std::printf("  certified filter: %zu queries decided (%zu undecided from a noted time; the whole search: %zu misses), %zu searched "
+              "whole, %zu wrong\n", excluded, noted_lower, refine_misses, whole, wrong);
+  CHECK(excluded > 100);
+  CHECK(noted_lower > 0);
+  CHECK(whole > 0);
+  CHECK(wrong == 0);
 }
 
 TEST_CASE("certified path: a refinement stopped at a level, then run whole, gives the whole answer", "[narrow][certified]") {

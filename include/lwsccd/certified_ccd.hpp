@@ -58,6 +58,16 @@ struct CertifiedPolicy {
   /// once. The windows are fixed, so the answer does not depend on the order of work.
   static constexpr int kEarliestFirst = 16;
   static constexpr int kEarliestStep = 8;
+  /// Certain descent: an interval that is certainly inside and over which every perturbed cubic
+  /// has exactly one root is narrowed to the tolerance by halvings that keep only the half holding
+  /// the root, decided by the sign of f at the middle alone (no stack, no more inside tests).
+  static constexpr bool kCertainDescent = true;
+  /// Whether a refinement stopped at a defer level (a GPU batch's first pass) may still run the
+  /// certain descent, which goes below that level but costs only the halvings.
+  static constexpr bool kDescentBeforeDefer = true;
+  /// Look-ahead: at the inside-test levels an interval whose halves both keep one sign beyond
+  /// their perturbed bounds is dropped without the inside test (no perturbed root lies in it).
+  static constexpr bool kLookAhead = false;
 };
 
 /// What the certified fast path decided about one query.
@@ -127,6 +137,32 @@ LWSCCD_HD LWSCCD_HOST_INLINE void bernstein_halves(const BernsteinPiece<T>& p, B
   const T bound = fadd(p.bound, added), exact = fadd(p.exact, added);
   left = {{p.c[0], m01, m012, mid}, bound, exact};
   right = {{mid, m123, m23, p.c[3]}, bound, exact};
+}
+
+/// -1, 0 or 1: the sign of x when |x| > bound, else 0.
+template <class T>
+LWSCCD_HD LWSCCD_HOST_INLINE int sign_beyond(T x, T bound) {
+  return x > bound ? 1 : (x < -bound ? -1 : 0);
+}
+
+/// True when every cubic whose Bernstein coefficients lie within `bound` of c has exactly one root
+/// in the interval: the end values have certain, opposite signs, and the coefficients change sign
+/// once whatever the uncertain middle ones are (c1 certainly of c0's sign, or c2 of c3's), so by
+/// Descartes' rule for the Bernstein basis there is at most one root, and an odd number.
+template <class T>
+LWSCCD_HD LWSCCD_HOST_INLINE bool single_crossing(const T c[4], T bound) {
+  const int first = sign_beyond(c[0], bound), last = sign_beyond(c[3], bound);
+  if (first == 0 || last != -first) return false;
+  return sign_beyond(c[1], bound) == first || sign_beyond(c[2], bound) == last;
+}
+
+/// True when both halves of the piece keep one sign beyond their perturbed bound: no perturbed
+/// cubic has a root in it, so no inside test is needed there.
+template <class Policy, class T>
+LWSCCD_HD LWSCCD_HOST_INLINE bool halves_keep_sign(const BernsteinPiece<T>& p) {
+  BernsteinPiece<T> left, right;
+  bernstein_halves<Policy>(p, left, right);
+  return same_sign_beyond(left.c, left.bound) && same_sign_beyond(right.c, right.bound);
 }
 
 template <class T>
@@ -426,6 +462,21 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   return same_sign_beyond(piece.c, piece.bound);
 }
 
+/// The cubic's Bernstein piece on [0, 1] with its perturbed and as-given bounds (the coefficient
+/// bound of ccd_filters.hpp, plus underflow's share for differences up to `mag`); false when a
+/// value is not finite (overflow: the caller leaves the query undecided).
+template <class Policy, class Q, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool cubic_on_step(const Q& q, W mag, W perturbation, BernsteinPiece<W>& root) {
+  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
+  W rounding_bound = W(0);
+  const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound);
+  root.bound = fadd(fmul(k, coefficient_bound), slack);
+  root.exact = fadd(fmul(k, rounding_bound), slack);
+  bool finite = finite_value(root.bound);
+  for (int i = 0; i < 4; ++i) finite = finite && finite_value(root.c[i]);
+  return finite;
+}
+
 /// The certified classification of a query that certified_screen did not reject (see the file
 /// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
 /// query the screen would reject (it then finds the miss itself, at more cost).
@@ -446,15 +497,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   const Vec3<W> m = coordinate_magnitude(q);
   // The cubic and its coefficient bound (ccd_filters.hpp), plus underflow's share.
   const W mag = fmul(W(4), max_component(m));  // bounds every difference and its motion
-  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
   BernsteinPiece<W> root;
-  W rounding_bound = W(0);
-  const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound);
-  root.bound = fadd(fmul(k, coefficient_bound), slack);
-  root.exact = fadd(fmul(k, rounding_bound), slack);
-  bool finite = finite_value(root.bound);
-  for (int i = 0; i < 4; ++i) finite = finite && finite_value(root.c[i]);
-  if (!finite) return undecided;
+  if (!cubic_on_step<Policy>(q, mag, perturbation, root)) return undecided;
   if (same_sign_beyond(root.c, root.bound)) return {Certainty::miss, T(0), T(1)};
   const W inside_slack = underflow_slack(mag, 4);
   if (!finite_value(inside_slack)) return undecided;
@@ -476,6 +520,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   int top = 0, splits = 0, leaves = 0;
   T lower = T(0), open_from = T(0);  // earliest time not excluded for a perturbed query / as given
   bool has_lower = false, has_open = false, open_inside = true;
+  bool descent = Policy::kCertainDescent && !set_mode && (Policy::kDescentBeforeDefer || defer_level >= max_level);
   int open_sign = 0;  // sign of f (as given) at open_from, 0 when uncertain
   auto note_lower = [&](T t) {
     if (!has_lower) lower = t, has_lower = true;  // intervals come in time order
@@ -503,6 +548,9 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
                         (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
     const bool coplanar = all_within(c, exact);
     const W half = exact_pow2_neg<W>(e.level + 1);
+    // Both halves of one sign (a root of the control polygon, not of the cubic): no root here even
+    // perturbed, so the costly inside test is skipped (before it, the interval was only split).
+    if (Policy::kLookAhead && coarse && !leaf && !coplanar && halves_keep_sign<Policy>(e.piece)) continue;
     InsideVerdict inside = InsideVerdict::unknown;
     if (try_hit || coarse || coplanar) {
       inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
@@ -511,6 +559,55 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
         if (leaf && ++leaves > Policy::kMaxLeaves) return {Certainty::undecided, has_lower ? lower : lo, T(1)};
         continue;
       }
+    }
+    // Certain descent: over this interval every perturbed cubic has one root and a root is a
+    // contact of the query as given. Halving keeps the half that holds the query's root, by the
+    // sign of f at the middle (the left half's last coefficient): of c[0]'s sign beyond the
+    // perturbed bound, no perturbed root lies in the left half; beyond only the as-given bound, the
+    // query's root is right of it but a perturbed one may not be (the lower bound stops there); of
+    // c[3]'s sign, the query's root is in the left half, and what lies right is later. A middle
+    // value within its as-given error (a root on the grid) ends the descent: everything it noted
+    // is undone and this interval is searched as usual.
+    if (descent && inside == InsideVerdict::inside && !leaf && !has_open && single_crossing(c, bound)) {
+      const int first = c[0] > W(0) ? 1 : -1;
+      const T saved_lower = lower;
+      const bool saved_has_lower = has_lower;
+      const int saved_splits = splits;
+      BernsteinPiece<W> piece = e.piece;
+      std::uint32_t index = e.index;
+      int level = e.level;
+      for (;;) {
+        const T step = exact_pow2_neg<T>(level);
+        const T from = static_cast<T>(index) * step, to = static_cast<T>(index + 1u) * step;
+        // Within the tolerance; an interval past the caller's time limit is narrowed to the leaves,
+        // where the limit cuts as it does in the search (a root past it is no answer).
+        if ((to - from <= params.tolerance && to <= params.time_limit) || level >= max_level) {
+          note_lower(from);
+          return {Certainty::hit, lower, to};
+        }
+        if (++splits > Policy::kMaxSplits) return {Certainty::undecided, has_lower ? lower : from, T(1)};
+        BernsteinPiece<W> left, right;
+        bernstein_halves<Policy>(piece, left, right);
+        const W middle = left.c[3];
+        const int sign = sign_beyond(middle, left.exact);
+        if (sign == 0) break;  // the only way out of the loop but a return
+        ++level;
+        if (sign == first) {
+          if (sign_beyond(middle, left.bound) == 0) note_lower(from);
+          piece = right;
+          index = 2u * index + 1u;
+          // The query's root is past the caller's time limit; so is everything still stacked.
+          if (static_cast<T>(index) * exact_pow2_neg<T>(level) >= params.time_limit)
+            return has_lower ? CertifiedAnswer<T>{Certainty::undecided, lower, T(1)} : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
+        } else {
+          piece = left;
+          index = 2u * index;
+        }
+      }
+      lower = saved_lower, has_lower = saved_has_lower, splits = saved_splits;
+      descent = false;
+      stack[top++] = e;
+      continue;
     }
     if (try_hit) {
       // A root is certain across this leaf, or from the start of the unresolved leaves before it
@@ -553,6 +650,98 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   if (has_lower) return {Certainty::undecided, lower, T(1)};
   return {Certainty::miss, T(0), T(1)};
 }
+
+/// The refinement's first levels as a filter without a stack, for batches that run the inside
+/// tests apart (a GPU thread per test keeps its warp's lanes busy; the search proper diverges).
+/// The cubic's pieces down to level Policy::kInsideFrom are pruned exactly as certified_refine
+/// prunes them (past the time limit, or of one sign beyond the perturbed bound); a piece it would
+/// treat otherwise before that level (set mode's early hit test) makes the whole search necessary;
+/// a piece excluded only as given lowers `lower` as it would there. What is left are the intervals that certified_refine tests for inside
+/// next: those of that level, less the ones whose halves both keep a sign (it skips their test),
+/// and pieces of coplanar motion above it. A query whose every such interval is `outside` is a
+/// miss there too (undecided from `lower` when `noted`: the fallback's case), by the same tests on
+/// the same values; any other query is searched whole. Returns -1 (search whole) or the number of those intervals, as the bits of `mask`: bit
+/// 2^level + k for interval [k, k + 1] 2^-level (a binary heap's numbering).
+/// A lower bound noted by CertifiedFilter: the earliest piece excluded only for the query as given.
+template <class T>
+struct Noted {
+  bool any = false;
+  T lower = T(0);
+};
+
+template <class Policy>
+struct CertifiedFilter {
+  static constexpr int kLevel = Policy::kInsideFrom;
+  static constexpr int kMaxIntervals = 1 << kLevel;
+  static_assert(kLevel >= 1 && kLevel <= 4, "lwsccd: the certified filter runs to levels 1 to 4 (kInsideFrom)");
+  static_assert(Policy::kInsideEvery > 0, "lwsccd: the certified filter needs the inside tests at kInsideFrom");
+
+  template <int kAt, class W, class T>
+  LWSCCD_HD static bool visit(const BernsteinPiece<W>& p, std::uint32_t index, const CcdParams<T>& params, std::uint32_t& mask,
+                              Noted<T>& noted) {
+    const T lo = static_cast<T>(index) * exact_pow2_neg<T>(kAt);
+    if (lo >= params.time_limit) return true;
+    if (same_sign_beyond(p.c, p.bound)) return true;
+    if (same_sign_beyond(p.c, p.exact)) {  // the search notes a lower bound here and goes on
+      if (!noted.any || lo < noted.lower) noted = {true, lo};
+      return true;
+    }
+    const bool coplanar = all_within(p.c, p.exact);  // tested for inside at any level
+    if constexpr (kAt == kLevel) {
+      if (Policy::kLookAhead && !coplanar && halves_keep_sign<Policy>(p)) return true;
+      mask |= 1u << ((1u << kAt) + index);
+      return true;
+    } else {
+      if (coplanar) {
+        mask |= 1u << ((1u << kAt) + index);
+        return true;
+      }
+      const bool crossing = (p.c[0] < -p.exact && p.c[3] > p.exact) || (p.c[0] > p.exact && p.c[3] < -p.exact);
+      if ((kAt & 3) == 0 && params.mode == CcdMode::set && crossing) return false;  // set mode's hit test
+      BernsteinPiece<W> left, right;
+      bernstein_halves<Policy>(p, left, right);
+      return visit<kAt + 1>(left, 2u * index, params, mask, noted) && visit<kAt + 1>(right, 2u * index + 1u, params, mask, noted);
+    }
+  }
+
+  template <class Q, class T>
+  LWSCCD_HD static int intervals(const Q& q_in, const CcdParams<T>& params, std::uint32_t& mask, Noted<T>& noted) {
+    using W = typename certified_compute<T>::type;
+    mask = 0;
+    noted = {};
+    if (params.min_separation > T(0)) return -1;
+    if (certified_max_level(params.tolerance) <= kLevel) return -1;  // leaves within the filter's levels
+    const auto q = q_in.template cast<W>();
+    const W perturbation = unit_roundoff<T>();
+    const Vec3<W> m = coordinate_magnitude(q);
+    const W mag = fmul(W(4), max_component(m));
+    BernsteinPiece<W> root;
+    if (!cubic_on_step<Policy>(q, mag, perturbation, root)) return -1;
+    if (same_sign_beyond(root.c, root.bound)) return 0;
+    if (!finite_value(underflow_slack(mag, 4))) return -1;
+    if (!visit<0>(root, 0u, params, mask, noted)) return -1;
+    int n = 0;
+    for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
+    return n;
+  }
+
+  /// True when the query is certainly outside over the interval numbered `node` (the inside test
+  /// certified_refine runs there, on the same values).
+  template <class Q, class T>
+  LWSCCD_HD static bool excluded(const Q& q_in, const CcdParams<T>& /*params: their T*/, unsigned node) {
+    int level = 0;
+    while ((node >> (level + 1)) != 0u) ++level;
+    const unsigned index = node - (1u << level);
+    using W = typename certified_compute<T>::type;
+    const auto q = q_in.template cast<W>();
+    const W perturbation = unit_roundoff<T>();
+    const Vec3<W> m = coordinate_magnitude(q);
+    const W inside_slack = underflow_slack(fmul(W(4), max_component(m)), 4);
+    const T lo = static_cast<T>(index) * exact_pow2_neg<T>(level);
+    const W half = exact_pow2_neg<W>(level + 1);
+    return inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack) == InsideVerdict::outside;
+  }
+};
 
 /// The whole certified classification of one query: the screen, then the refinement.
 template <class Policy, class Q, class T>

@@ -3,6 +3,7 @@
 
 #include <cooperative_groups.h>
 #include <cooperative_groups/reduce.h>
+#include <cooperative_groups/scan.h>
 
 #include <cstring>
 
@@ -61,6 +62,7 @@ enum NarrowCounter : int {
   kHits,            // hits appended (more than the room: the run is repeated with more)
   kGaveUp,
   kEarliestBits,    // the smallest TOI of a hit, as the bits of a double (ordered like unsigned words for t >= 0)
+  kIntervals,       // CertifiedCcd's filter: intervals listed for the inside test (more than the room: deferred)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.
@@ -228,6 +230,67 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
         Method::template refine_until<kDeferLevel>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
     if (later) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
     else settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// CertifiedCcd's refinement with the filter (CertifiedPolicy's CertifiedFilter), first kernel: a
+// thread per screened pair runs the filter's levels; a pair to be searched whole is deferred, the
+// others list their intervals for the inside test (a word each: pair index << 8 | interval). The
+// list's room grows from run to run (kIntervals counts what was asked); a pair whose intervals do
+// not fit is deferred instead, and the slots it took are marked empty, so nothing reruns.
+constexpr unsigned long long kNoInterval = ~0ull;
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
+                              std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* undecided,
+                              unsigned* deferred) {
+  namespace cg = cooperative_groups;
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    std::uint32_t found = 0;
+    lwsccd::detail::Noted<T> noted;
+    const int count = Filter::intervals(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, found, noted);
+    // A lower bound noted: with no interval left the search's answer is undecided from it (the
+    // fallback's); with some, the whole search decides (rare).
+    bool whole = count < 0 || (count > 0 && noted.any);
+    if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
+    if (count > 0 && !whole) {
+      // Consecutive slots for the converged threads' intervals: one atomic per group.
+      const cg::coalesced_group g = cg::coalesced_threads();
+      const unsigned long long offset = cg::exclusive_scan(g, static_cast<unsigned long long>(count));
+      unsigned long long base = 0;
+      if (g.thread_rank() == g.size() - 1) base = atomicAdd(counters + kIntervals, offset + static_cast<unsigned long long>(count));
+      base = g.shfl(base, g.size() - 1) + offset;
+      whole = base + static_cast<unsigned long long>(count) > interval_room;
+      for (int k = 0; k < count; ++k, found &= found - 1u)
+        if (base + k < interval_room)
+          intervals[base + k] = whole ? kNoInterval : (static_cast<unsigned long long>(i) << 8) | static_cast<unsigned>(__ffs(found) - 1);
+    }
+    if (whole) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
+  }
+}
+
+// Second kernel: a thread per listed interval runs the inside test there; a pair not certainly
+// outside is deferred to the whole search, once (the first of its intervals to say so sets its
+// bit in `listed`, cleared before the run).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, CcdParams<T> params,
+                                     const unsigned long long* control, unsigned long long* counters,
+                                     const unsigned long long* intervals, std::size_t interval_room, unsigned* listed,
+                                     unsigned* deferred) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kIntervals] < interval_room ? static_cast<std::size_t>(counters[kIntervals]) : interval_room;
+  LWSCCD_GRID_STRIDE(j, n) {
+    const unsigned long long item = intervals[j];
+    if (item == kNoInterval) continue;
+    const auto i = static_cast<unsigned>(item >> 8);
+    if (Filter::excluded(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, static_cast<unsigned>(item & 255u))) continue;
+    const unsigned bit = 1u << (i & 31u);
+    if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
   }
 }
 
@@ -475,6 +538,11 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     if (kCertified) {
       l.undecided.resize_discard(l.work_room);
       l.deferred.resize_discard(l.work_room);
+      if (Policy::kRefineFilter) {
+        l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
+        l.intervals.resize_discard(l.interval_room);
+        l.listed.resize_discard((l.work_room + 31) / 32);
+      }
     }
     if (lwsccd::detail::inclusion_search_of<FullTest>::value) l.open.resize_discard(l.work_room);
   }
@@ -532,11 +600,26 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
   }
   if constexpr (kCertified) {
     const std::size_t room = std::min(l.work_room, in.count.room);
+    // Mode set tries hits on the way down (from level 0), which the filter leaves to the whole
+    // search: there the levels-to-kRefineDeferLevel kernel decides more at once.
+    if (Policy::kRefineFilter && params.mode != CcdMode::set) {
+      detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+          mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
+          l.interval_room, l.undecided.data(), l.deferred.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
+      detail::filter_inside_kernel<Method, kVertexFace, T, P>
+          <<<grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), l.intervals.data(), l.interval_room,
+              l.listed.data(), l.deferred.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    } else {
     detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
         <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
             mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
             l.undecided.data(), l.deferred.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
+    }
     detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
         l.hit_room, l.undecided.data());
@@ -592,6 +675,9 @@ bool NarrowPhase<Method, T, Policy>::collect() {
       l.hit_room = detail::grown_room(c[detail::kHits]);
       complete = false;
     }
+    // The filter's intervals that did not fit went to the whole search (same answers): more room
+    // for the next run, no rerun.
+    if (c[detail::kIntervals] > l.interval_room) l.interval_room = detail::grown_room(c[detail::kIntervals]);
   }
   if (!complete) {
     ++reruns_;
