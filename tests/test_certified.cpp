@@ -330,26 +330,24 @@ TEST_CASE("certified filter: a query it decides gets the whole search's answer, 
   settings[1].mode = CcdMode::set;
   settings[2].time_limit = 0.3;
   settings[3].tolerance = 0.2;
-  std::size_t excluded = 0, whole = 0, wrong = 0, refine_misses = 0, noted_lower = 0;
+  std::size_t excluded = 0, whole = 0, wrong = 0, refine_misses = 0, noted_lower = 0, second_round = 0;
   auto check = [&](const auto& q, const CcdParams<double>& double_params) {
     using T = std::decay_t<decltype(q.points()[0].x)>;
     CcdParams<T> params;
     params.mode = double_params.mode;
     params.time_limit = static_cast<T>(double_params.time_limit);
     params.tolerance = static_cast<T>(double_params.tolerance);
-    std::uint32_t mask = 0;
     detail::Noted<T> noted;
-    const int n = Filter::intervals(q, params, mask, noted);
     const CertifiedAnswer<T> a = detail::certified_refine<CertifiedPolicy>(q, params);
     refine_misses += a.certainty == Certainty::miss;
-    if (n < 0) {
+    // The first round alone (the level-kInsideFrom intervals), then with the second (the
+    // intervals left unknown split to the next inside-test level, as the GPU runs it).
+    const bool first = Filter::decides(q, params, noted, false);
+    if (!first && !Filter::decides(q, params, noted)) {
       ++whole;
       return;
     }
-    bool all_outside = true;
-    for (unsigned k = 0; k < 32; ++k)
-      if (mask >> k & 1u) all_outside = all_outside && Filter::excluded(q, params, k);
-    if (!all_outside) return;
+    second_round += !first;
     ++excluded;
     noted_lower += noted.any;
     if (noted.any) wrong += a.certainty != Certainty::undecided || a.lo != noted.lower || a.hi != T(1);
@@ -362,9 +360,9 @@ TEST_CASE("certified filter: a query it decides gets the whole search's answer, 
         if (t.vertex_face) check(as_query<double, VertexFaceQuery<double>>(t), params), check(as_query<float, VertexFaceQuery<float>>(t), params);
         else check(as_query<double, EdgeEdgeQuery<double>>(t), params), check(as_query<float, EdgeEdgeQuery<float>>(t), params);
       }
-  std::printf("  certified filter: %zu queries decided (%zu undecided from a noted time; the whole search: %zu misses), %zu searched "
-              "whole, %zu wrong\n", excluded, noted_lower, refine_misses, whole, wrong);
-  CHECK(excluded > 100);
+  std::printf("  certified filter: %zu queries decided (%zu by the second round, %zu undecided from a noted time; the whole "
+              "search: %zu misses), %zu searched whole, %zu wrong\n", excluded, second_round, noted_lower, refine_misses, whole, wrong);
+  CHECK(excluded > 100);  // the second round: see test_narrow.cpp's folded cloth (none of these reach it)
   CHECK(noted_lower > 0);
   CHECK(whole > 0);
   CHECK(wrong == 0);

@@ -175,11 +175,8 @@ void certify_one(const Q& q, int truth, CertifiedTally& c) {
   const CertifiedAnswer<T> a = CertifiedCcd::classify(q, params);
   // The GPU's first refinement step decides only what the whole search answers the same way.
   using Filter = lwsccd::detail::CertifiedFilter<CertifiedPolicy>;
-  std::uint32_t mask = 0;
   lwsccd::detail::Noted<T> noted;
-  bool decided = Filter::intervals(q, params, mask, noted) >= 0;
-  for (unsigned k = 0; k < 32 && decided; ++k)
-    if (mask >> k & 1u) decided = Filter::excluded(q, params, k);
+  const bool decided = Filter::decides(q, params, noted);
   if (decided && !CertifiedCcd::screen(q, params)) {
     CHECK(a.certainty == (noted.any ? Certainty::undecided : Certainty::miss));
     if (noted.any) CHECK(a.lo == noted.lower);

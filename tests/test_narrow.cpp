@@ -371,3 +371,38 @@ TEST_CASE("mode earliest: growing time windows give the earliest TOI of mode con
     CHECK(r.vf_counts.certified_misses == 1);
   }
 }
+
+TEMPLATE_TEST_CASE("certified filter, both rounds: a folded cloth's pairs it decides get the whole search's answer", "[narrow][certified]",
+                   float, double) {
+  // The GPU's filter (CertifiedFilter::decides: intervals at level kInsideFrom, then those left
+  // unknown split to the next inside-test level) on every screened pair of a folded cloth, whole
+  // step and a time limit: a decided pair is a miss of certified_refine, or undecided from the
+  // same noted time; and the second round must decide pairs the first leaves to the search.
+  using T = TestType;
+  using Filter = detail::CertifiedFilter<CertifiedPolicy>;
+  const auto m = lwsccd_test::folded_cloth(24, 4);
+  const FeaturePairs fp = feature_pairs(m.mesh, brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1)));
+  const MeshFeatures features = mesh_features(m.mesh);
+  for (const T limit : {T(1), T(0.3)}) {
+    CcdParams<T> params;
+    params.time_limit = limit;
+    std::size_t screened = 0, first = 0, second = 0, wrong = 0;
+    auto check = [&](const auto& q) {
+      if (CertifiedCcd::screen(q, params)) return;
+      ++screened;
+      detail::Noted<T> noted;
+      const bool by_first = Filter::decides(q, params, noted, false);
+      if (!by_first && !Filter::decides(q, params, noted)) return;
+      (by_first ? first : second) += 1;
+      const CertifiedAnswer<T> a = CertifiedCcd::refine(q, params);
+      if (noted.any) wrong += a.certainty != Certainty::undecided || a.lo != noted.lower;
+      else wrong += a.certainty != Certainty::miss;
+    };
+    for (const auto& p : fp.vf) check(gather_vertex_face<T>(features, m.x0.data(), m.x1.data(), p.first, p.second));
+    for (const auto& p : fp.ee) check(gather_edge_edge<T>(features, m.x0.data(), m.x1.data(), p.first, p.second));
+    std::printf("  filter rounds (%s, time limit %.1f): %zu screened pairs, %zu decided by the first round, %zu by the second, %zu wrong\n",
+                sizeof(T) == 4 ? "float" : "double", double(limit), screened, first, second, wrong);
+    CHECK(wrong == 0);
+    CHECK(second > 0);
+  }
+}

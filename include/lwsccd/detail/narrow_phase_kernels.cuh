@@ -63,6 +63,8 @@ enum NarrowCounter : int {
   kGaveUp,
   kEarliestBits,    // the smallest TOI of a hit, as the bits of a double (ordered like unsigned words for t >= 0)
   kIntervals,       // CertifiedCcd's filter: intervals listed for the inside test (more than the room: deferred)
+  kExpanded,        // the filter's second round: intervals whose test was unknown, to split further
+  kDeepIntervals,   // the second round's intervals listed for the inside test (more than the room: deferred)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.
@@ -235,16 +237,43 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
 
 // CertifiedCcd's refinement with the filter (CertifiedPolicy's CertifiedFilter), first kernel: a
 // thread per screened pair runs the filter's levels; a pair to be searched whole is deferred, the
-// others list their intervals for the inside test (a word each: pair index << 8 | interval). The
-// list's room grows from run to run (kIntervals counts what was asked); a pair whose intervals do
-// not fit is deferred instead, and the slots it took are marked empty, so nothing reruns.
+// others list their intervals for the inside test (a word each: filter_item). The list's room
+// grows from run to run (kIntervals counts what was asked); a pair whose intervals do not fit is
+// deferred instead, and the slots it took are marked empty, so nothing reruns.
 constexpr unsigned long long kNoInterval = ~0ull;
+// A listed interval: the pair's index, whether its search may take the filter's second round
+// (CertifiedFilter::expandable), and the interval's heap number (< 256: levels <= 7).
+__device__ inline unsigned long long filter_item(std::size_t pair, bool expandable, unsigned node) {
+  return (static_cast<unsigned long long>(pair) << 9) | (expandable ? 256u : 0u) | node;
+}
+__device__ inline unsigned item_pair_index(unsigned long long item) { return static_cast<unsigned>(item >> 9); }
+__device__ inline bool item_expandable(unsigned long long item) { return (item >> 8) & 1u; }
+__device__ inline unsigned item_node(unsigned long long item) { return static_cast<unsigned>(item & 255u); }
+
+// Appends `count` words to a list with `room` slots (one atomic per converged group) and returns
+// the first one's slot; `fits` is false when they do not all fit (the slots that do are then the
+// caller's to mark empty).
+__device__ inline unsigned long long append_run(unsigned long long* counter, unsigned count, std::size_t room, bool& fits) {
+  namespace cg = cooperative_groups;
+  const cg::coalesced_group g = cg::coalesced_threads();
+  const unsigned long long offset = cg::exclusive_scan(g, static_cast<unsigned long long>(count));
+  unsigned long long base = 0;
+  if (g.thread_rank() == g.size() - 1) base = atomicAdd(counter, offset + static_cast<unsigned long long>(count));
+  base = g.shfl(base, g.size() - 1) + offset;
+  fits = base + count <= room;
+  return base;
+}
+
+// Defers pair `i` to the whole search once (its bit in `listed` marks it; cleared before the run).
+__device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long long* counters, unsigned* deferred) {
+  const unsigned bit = 1u << (i & 31u);
+  if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
+}
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
                               std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
                               unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* undecided,
                               unsigned* deferred) {
-  namespace cg = cooperative_groups;
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
@@ -257,40 +286,74 @@ __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
     bool whole = count < 0 || (count > 0 && noted.any);
     if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
     if (count > 0 && !whole) {
-      // Consecutive slots for the converged threads' intervals: one atomic per group.
-      const cg::coalesced_group g = cg::coalesced_threads();
-      const unsigned long long offset = cg::exclusive_scan(g, static_cast<unsigned long long>(count));
-      unsigned long long base = 0;
-      if (g.thread_rank() == g.size() - 1) base = atomicAdd(counters + kIntervals, offset + static_cast<unsigned long long>(count));
-      base = g.shfl(base, g.size() - 1) + offset;
-      whole = base + static_cast<unsigned long long>(count) > interval_room;
+      bool fits = true;
+      const unsigned long long base = append_run(counters + kIntervals, static_cast<unsigned>(count), interval_room, fits);
+      whole = !fits;
+      const bool expandable = Filter::expandable(count);
       for (int k = 0; k < count; ++k, found &= found - 1u)
         if (base + k < interval_room)
-          intervals[base + k] = whole ? kNoInterval : (static_cast<unsigned long long>(i) << 8) | static_cast<unsigned>(__ffs(found) - 1);
+          intervals[base + k] = whole ? kNoInterval : filter_item(i, expandable, static_cast<unsigned>(__ffs(found) - 1));
     }
     if (whole) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
   }
 }
 
 // Second kernel: a thread per listed interval runs the inside test there; a pair not certainly
-// outside is deferred to the whole search, once (the first of its intervals to say so sets its
-// bit in `listed`, cleared before the run).
+// outside is deferred to the whole search, once (defer_once). In the first round
+// (`expanded` not null) an interval of the filter's level whose test is unknown is listed in
+// `expanded` for the second round instead, when its pair may take it; in the second round
+// (`counter` kDeepIntervals) every interval must be outside.
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void filter_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                      const std::pair<index_t, index_t>* kept, CcdParams<T> params,
-                                     const unsigned long long* control, unsigned long long* counters,
+                                     const unsigned long long* control, unsigned long long* counters, int counter,
                                      const unsigned long long* intervals, std::size_t interval_room, unsigned* listed,
-                                     unsigned* deferred) {
+                                     unsigned* deferred, unsigned long long* expanded) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  using lwsccd::detail::InsideVerdict;
   if (control[kSkip]) return;
-  const std::size_t n = counters[kIntervals] < interval_room ? static_cast<std::size_t>(counters[kIntervals]) : interval_room;
+  const std::size_t n = counters[counter] < interval_room ? static_cast<std::size_t>(counters[counter]) : interval_room;
   LWSCCD_GRID_STRIDE(j, n) {
     const unsigned long long item = intervals[j];
     if (item == kNoInterval) continue;
-    const auto i = static_cast<unsigned>(item >> 8);
-    if (Filter::excluded(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, static_cast<unsigned>(item & 255u))) continue;
-    const unsigned bit = 1u << (i & 31u);
-    if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
+    const unsigned i = item_pair_index(item), node = item_node(item);
+    const InsideVerdict verdict = Filter::inside_verdict(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, node);
+    if (verdict == InsideVerdict::outside) continue;
+    // Its own slot in `expanded`, whose room is the first round's list's.
+    if (expanded && verdict == InsideVerdict::unknown && item_expandable(item) && (node >> Filter::kLevel) == 1u)
+      expanded[append_index(counters + kExpanded)] = item;
+    else
+      defer_once(i, listed, counters, deferred);
+  }
+}
+
+// The filter's second round: a thread per interval left unknown by the first lists the intervals
+// below it that the search would test next (CertifiedFilter::expand), in the list of the second
+// round's inside tests; a pair already deferred is skipped, one the round cannot take (or whose
+// intervals do not fit: slots marked empty, room grown for the next run) is deferred.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, CcdParams<T> params,
+                                     const unsigned long long* control, unsigned long long* counters,
+                                     const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
+                                     unsigned* listed, unsigned* deferred) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kExpanded]);
+  LWSCCD_GRID_STRIDE(j, n) {
+    const unsigned long long item = expanded[j];
+    const unsigned i = item_pair_index(item), node = item_node(item);
+    if ((listed[i >> 5] >> (i & 31u)) & 1u) continue;  // deferred already (a racing read is only a missed shortcut)
+    std::uint32_t below = 0;
+    const int count = Filter::expand(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, node, below);
+    bool fits = count >= 0;
+    if (count > 0) {
+      const unsigned long long base = append_run(counters + kDeepIntervals, static_cast<unsigned>(count), deep_room, fits);
+      for (int k = 0; k < count; ++k, below &= below - 1u)
+        if (base + k < deep_room)
+          deep[base + k] = fits ? filter_item(i, false, Filter::deep_node(node, static_cast<unsigned>(__ffs(below) - 1))) : kNoInterval;
+    }
+    if (!fits) defer_once(i, listed, counters, deferred);
   }
 }
 
@@ -538,10 +601,15 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     if (kCertified) {
       l.undecided.resize_discard(l.work_room);
       l.deferred.resize_discard(l.work_room);
-      if (Policy::kRefineFilter) {
+      if (Policy::kRefineFilter && params.mode != CcdMode::set) {  // mode set does not run the filter
         l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
         l.intervals.resize_discard(l.interval_room);
         l.listed.resize_discard((l.work_room + 31) / 32);
+        if (second_round(params.mode)) {
+          l.expanded.resize_discard(l.interval_room);
+          l.deep_room = std::max(l.deep_room, std::max<std::size_t>(l.work_room / 100 * Policy::kDeepRoomPercent, 1));
+          l.deep.resize_discard(l.deep_room);
+        }
       }
     }
     if (lwsccd::detail::inclusion_search_of<FullTest>::value) l.open.resize_discard(l.work_room);
@@ -608,17 +676,29 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
           l.interval_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
-      detail::filter_inside_kernel<Method, kVertexFace, T, P>
-          <<<grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), l.intervals.data(), l.interval_room,
-              l.listed.data(), l.deferred.data());
+      const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
+      const bool deeper = second_round(params.mode);
+      detail::filter_inside_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
+          mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
+          l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
       LWSCCD_CUDA_CHECK_LAUNCH();
+      if (deeper) {
+        detail::filter_expand_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
+            l.deep_room, l.listed.data(), l.deferred.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+        detail::filter_inside_kernel<Method, kVertexFace, T, P>
+            <<<grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), detail::kDeepIntervals,
+                l.deep.data(), l.deep_room, l.listed.data(), l.deferred.data(), nullptr);
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      }
     } else {
-    detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
-        <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-            mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
-            l.undecided.data(), l.deferred.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
+      detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
+          <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
+              l.hit_room, l.undecided.data(), l.deferred.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
     }
     detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
@@ -678,6 +758,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     // The filter's intervals that did not fit went to the whole search (same answers): more room
     // for the next run, no rerun.
     if (c[detail::kIntervals] > l.interval_room) l.interval_room = detail::grown_room(c[detail::kIntervals]);
+    if (c[detail::kDeepIntervals] > l.deep_room) l.deep_room = detail::grown_room(c[detail::kDeepIntervals]);
   }
   if (!complete) {
     ++reruns_;
@@ -691,6 +772,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.count = static_cast<std::size_t>(c[detail::kHits]);
     l.num_full = static_cast<std::size_t>(kCertified ? c[detail::kUndecided] : kTwoPass ? c[detail::kSurvivors] : pairs);
     l.warp_searches = static_cast<std::size_t>(c[detail::kOpen]);
+    l.whole_searches = static_cast<std::size_t>(c[detail::kDeferred]);
     l.counts = {};
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
