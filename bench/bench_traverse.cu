@@ -1,8 +1,11 @@
 // lwsccd-bench-traverse — BVTT self-collision traversal time per scheduler x BV (CUDA events,
 // medians) on the real scenes (from the root and from the recorded front) and over every step of
 // horse-gallop with front tracking; BVTT nodes, front sizes, candidate pairs, and the lazy
-// scheduler's per-block busy/idle cycles.
+// scheduler's per-block busy/idle cycles. With --timeline DIR, instead: the lazy scheduler's
+// per-block timelines (TraversalOutput::record_timeline) as CSV files, for bench/plot_timeline.py.
+#include <algorithm>
 #include <cstdio>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -134,6 +137,9 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 0>, BV>("lazy-seeds0", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 1>, BV>("lazy-seeds1", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 256, 256, 2, 1>, BV>("lazy-seeds1-p256", bv_name, name, step, reps, rows);
+  // The idle blocks' sleep between searches doubling up to 4 us, and up to 16 us (default: 256 ns).
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 4096>, BV>("lazy-sleep4k", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 16384>, BV>("lazy-sleep16k", bv_name, name, step, reps, rows);
 }
 
 template <class BV>
@@ -154,11 +160,64 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
   }
 }
 
+// One recorded traversal per scene and start (AABB float, the lazy scheduler's defaults, after a
+// warm-up): DIR/timeline_<scene>_<start>.csv with a row per event (block, time in ns from the
+// launch's first event, phase, items), and a summary line each.
+void write_timelines(const std::string& dir, const std::vector<std::pair<std::string, Step>>& scenes) {
+  using Task = SelfCollisionTask<Aabbf>;
+  for (const auto& [name, step] : scenes) {
+    gpu::DeviceStep<float> dstep(*step.mesh, step.x0, step.x1);
+    gpu::Bvh<Aabbf> bvh;
+    bvh.build(dstep);
+    gpu::DeviceBuffer<Face> faces;
+    faces.upload(step.mesh->faces());
+    const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+    gpu::TraversalOutput<Task> out;
+    gpu::DeviceBuffer<NodePair> root;
+    root.upload(std::vector<NodePair>{NodePair{0, 0}});
+    gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, out, true);  // warm-up, and the front
+    const std::vector<NodePair> front = out.download_front();
+    gpu::DeviceBuffer<NodePair> d_front;
+    d_front.upload(front);
+    out.record_timeline(1 << 16);
+    for (const char* start : {"root", "front"}) {
+      const bool from_root = std::string(start) == "root";
+      gpu::traverse<gpu::LazyStealScheduler<>>(task, from_root ? root.data() : d_front.data(), from_root ? 1 : front.size(), out, true);
+      const std::vector<gpu::BlockTimeline> timeline = out.download_timeline();
+      unsigned long long first = ~0ull, last = 0, working = 0, dropped = 0, steals = 0;
+      for (const auto& b : timeline) {
+        dropped += b.recorded - b.events.size();
+        for (std::size_t k = 0; k < b.events.size(); ++k) {
+          first = std::min(first, b.events[k].time_ns);
+          last = std::max(last, b.events[k].time_ns);
+          steals += b.events[k].phase == gpu::BlockPhase::steal;
+          const bool works = b.events[k].phase == gpu::BlockPhase::own || b.events[k].phase == gpu::BlockPhase::steal;
+          if (works && k + 1 < b.events.size()) working += b.events[k + 1].time_ns - b.events[k].time_ns;
+        }
+      }
+      const std::string path = dir + "/timeline_" + name + "_" + start + ".csv";
+      std::FILE* f = std::fopen(path.c_str(), "w");
+      if (!f) throw std::runtime_error("cannot write " + path);
+      std::fprintf(f, "block,time_ns,phase,items\n");
+      static const char* phases[] = {"seek", "own", "steal", "done"};
+      for (std::size_t b = 0; b < timeline.size(); ++b)
+        for (const auto& e : timeline[b].events)
+          std::fprintf(f, "%zu,%llu,%s,%u\n", b, e.time_ns - first, phases[static_cast<int>(e.phase)], e.items);
+      std::fclose(f);
+      const double span = last > first ? double(last - first) : 1.0;
+      std::printf("%-18s %-5s: %zu blocks, lazy kernel %.1f us (first to last event), working %.1f%% of block time, %llu "
+                  "steals, %llu events dropped -> %s\n", name.c_str(), start, timeline.size(), span / 1e3,
+                  100.0 * double(working) / (span * double(timeline.size())), steals, dropped, path.c_str());
+    }
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const lwsccd_bench::BenchArgs args =
-      lwsccd_bench::parse_bench_args(argc, argv, 11, {}, "usage: lwsccd-bench-traverse [--data DIR] [--reps N] [--json FILE]");
+      lwsccd_bench::parse_bench_args(argc, argv, 11, {"--timeline="},
+                                     "usage: lwsccd-bench-traverse [--data DIR] [--reps N] [--json FILE] [--timeline DIR]");
   cudaDeviceProp prop{};
   if (!lwsccd_bench::first_gpu(prop, "lwsccd-bench-traverse")) return 77;
   try {
@@ -166,6 +225,12 @@ int main(int argc, char** argv) {
     std::vector<std::pair<std::string, Step>> scenes;
     for (const char* name : {"cloth-ball", "cloth-funnel", "armadillo-rollers"})
       scenes.emplace_back(name, load_scene(dir + "/scenes/" + name).step);
+    for (const auto& [flag, value] : args.values)
+      if (flag == "--timeline") {
+        std::printf("GPU: %s; lazy stealing timelines (AABB float, default knobs)\n", prop.name);
+        write_timelines(value, scenes);
+        return 0;
+      }
     const Sequence horse = load_sequence(dir + "/sequences/horse-gallop");
     std::vector<Row> rows;
     all_schedulers<Aabbf>("AABB float", scenes, horse, args.reps, rows);

@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <stdexcept>
 
 #include "lwsccd/bvh.cuh"
 #include "lwsccd/bvtt.hpp"
@@ -221,6 +222,62 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
     CHECK(a.failed_steals >= 1);
   }
   CHECK(busy > 0);
+}
+
+TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees with the activity counters", "[gpu][traverse]") {
+  const MovingMesh m = lwsccd_test::folded_cloth(40, 3);
+  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+  gpu::Bvh<Aabbf> bvh;
+  bvh.build(step);
+  gpu::DeviceBuffer<Face> faces;
+  faces.upload(m.mesh.faces());
+  const SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
+  // Small batches and deques: many phases per block, steals, and a relaunch or two.
+  const auto plain = gpu_pairs<TinyLazy>(task, {NodePair{0, 0}}, out);
+  REQUIRE(out.download_timeline().empty());  // not recorded unless asked
+  CHECK_THROWS_AS(out.record_timeline(-1), std::invalid_argument);
+  out.record_timeline(1 << 14);
+  REQUIRE(gpu_pairs<TinyLazy>(task, {NodePair{0, 0}}, out) == plain);
+  const auto timeline = out.download_timeline();
+  const auto activity = out.download_block_activity();
+  REQUIRE(timeline.size() == activity.size());
+  std::size_t steals = 0, events = 0, items = 0;
+  for (std::size_t b = 0; b < timeline.size(); ++b) {
+    const auto& e = timeline[b].events;
+    REQUIRE(timeline[b].recorded == e.size());  // all fit
+    REQUIRE(e.size() >= 2);
+    // Every block starts by looking for work and ends when none is left anywhere; a phase of
+    // work follows each search that found some, and time never goes back.
+    CHECK(e.front().phase == gpu::BlockPhase::seek);
+    CHECK(e.back().phase == gpu::BlockPhase::done);
+    std::size_t block_steals = 0;
+    for (std::size_t k = 0; k < e.size(); ++k) {
+      if (k > 0) CHECK(e[k].time_ns >= e[k - 1].time_ns);
+      const bool found = e[k].phase == gpu::BlockPhase::own || e[k].phase == gpu::BlockPhase::steal;
+      if (found) {
+        CHECK(e[k].items > 0);
+        CHECK(e[k - 1].phase == gpu::BlockPhase::seek);
+        items += e[k].items;
+      }
+      block_steals += e[k].phase == gpu::BlockPhase::steal;
+    }
+    CHECK(block_steals == activity[b].steals);
+    steals += block_steals;
+    events += e.size();
+  }
+  std::printf("  timeline: %zu blocks, %zu events, %zu steals, %zu items taken from deques\n", timeline.size(), events, steals,
+              items);
+  CHECK(steals > 0);
+  // The room per block bounds what is kept, not what is counted.
+  out.record_timeline(2);
+  REQUIRE(gpu_pairs<TinyLazy>(task, {NodePair{0, 0}}, out) == plain);
+  std::size_t over = 0;
+  for (const auto& t : out.download_timeline()) {
+    CHECK(t.events.size() <= 2);
+    over += t.recorded > t.events.size();
+  }
+  CHECK(over > 0);
 }
 
 TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with front tracking", "[gpu][traverse][data]") {

@@ -28,6 +28,8 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <cstdint>
+#include <stdexcept>
 #include <vector>
 
 #include "lwsccd/device_buffer.cuh"
@@ -66,7 +68,7 @@ struct GProximityBalancer {
 /// per SM, batches of 512, a start from the root expanded to only 8 items per block. Blocks of 128
 /// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
 template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
-          int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8>
+          int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
@@ -77,6 +79,10 @@ struct LazyStealScheduler {
   /// A start from few seeds (the root) first expands them breadth first to about this many items
   /// per block (each level a launch and a host sync); stealing spreads the rest.
   static constexpr int kSeedsPerBlock = SeedsPerBlock;
+  /// A block that found nothing to steal sleeps before it looks again, from 256 ns, doubling up
+  /// to this (ns). Doubling up to 4 or 16 us was no faster on an H100 (docs/TRAVERSAL.md), so
+  /// the default keeps a fixed 256 ns.
+  static constexpr int kMaxBackoffNs = MaxBackoffNs;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };
@@ -88,6 +94,42 @@ struct BlockActivity {
   unsigned long long steals = 0;         ///< batches taken from another block's deque
   unsigned long long failed_steals = 0;  ///< searches that found nothing to take (or lost the race for it)
 };
+
+/// LazyStealScheduler with TraversalOutput::record_timeline: what a persistent block turned to,
+/// and when (the GPU's global timer, ns, comparable across SMs). A block's phase lasts until its
+/// next event: `seek` (out of items: its own deque, then steals, then waiting), `own` / `steal`
+/// (found `items` there and works on them, pushing surplus to its deque), `done` (no work left;
+/// `items`: how many looks its last search took).
+enum class BlockPhase : std::uint32_t { seek = 0, own = 1, steal = 2, done = 3 };
+struct TimelineEvent {
+  unsigned long long time_ns = 0;
+  BlockPhase phase = BlockPhase::seek;
+  std::uint32_t items = 0;
+};
+/// One block's events in the last launch; `recorded` can exceed events.size() when the room per
+/// block ran out (the later events are dropped).
+struct BlockTimeline {
+  std::vector<TimelineEvent> events;
+  std::size_t recorded = 0;
+};
+
+namespace detail {
+/// Where the lazy kernel writes the timeline (events null: off).
+struct TimelineSink {
+  TimelineEvent* events = nullptr;
+  unsigned* counts = nullptr;
+  int capacity = 0;
+#ifdef __CUDACC__
+  __device__ void record(int block, BlockPhase phase, std::uint32_t items) const {
+    if (!events) return;
+    unsigned long long now = 0;
+    asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(now));
+    const unsigned k = counts[block]++;  // one thread per block records
+    if (k < static_cast<unsigned>(capacity)) events[static_cast<std::size_t>(block) * capacity + k] = {now, phase, items};
+  }
+#endif
+};
+}  // namespace detail
 
 /// Owning device outputs of a traversal (reused across calls; they only grow).
 template <class Task>
@@ -105,13 +147,36 @@ class TraversalOutput {
   std::vector<BlockActivity> download_block_activity(cudaStream_t stream = nullptr) const {
     return prefix(block_activity_, block_activity_.size(), stream);
   }
+  /// LazyStealScheduler: record every block's timeline in the following traversals, up to
+  /// `events_per_block` events per block (0, the default: off). Costs a global-timer read and a
+  /// store per phase change; for measuring, not for production runs.
+  void record_timeline(int events_per_block) {
+    if (events_per_block < 0) throw std::invalid_argument("lwsccd: record_timeline: events_per_block must be >= 0");
+    timeline_capacity_ = events_per_block;
+  }
+  /// The timelines of the last launch of the lazy kernel (empty when not recorded).
+  std::vector<BlockTimeline> download_timeline(cudaStream_t stream = nullptr) const {
+    std::vector<BlockTimeline> blocks;
+    if (timeline_capacity_ == 0 || timeline_counts_.size() == 0) return blocks;
+    const std::vector<unsigned> counts = prefix(timeline_counts_, timeline_counts_.size(), stream);
+    const std::vector<TimelineEvent> events = prefix(timeline_, timeline_.size(), stream);
+    const auto room = static_cast<std::size_t>(timeline_capacity_);
+    blocks.resize(counts.size());
+    for (std::size_t b = 0; b < counts.size(); ++b) {
+      blocks[b].recorded = counts[b];
+      const std::size_t kept = std::min<std::size_t>(counts[b], room);
+      blocks[b].events.assign(events.begin() + static_cast<std::ptrdiff_t>(b * room),
+                              events.begin() + static_cast<std::ptrdiff_t>(b * room + kept));
+    }
+    return blocks;
+  }
   std::vector<result_type> download_results(cudaStream_t stream = nullptr) const { return prefix(results_, num_results_, stream); }
   std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(front_, num_front_, stream); }
   std::size_t device_bytes() const {
     return results_.capacity_bytes() + front_.capacity_bytes() + work_.capacity_bytes() + next_.capacity_bytes() +
            stacks_.capacity_bytes() + stacks_alt_.capacity_bytes() + sizes_.capacity_bytes() + sizes_alt_.capacity_bytes() +
            locks_.capacity_bytes() + deque_ends_.capacity_bytes() + block_activity_.capacity_bytes() +
-           counters_.capacity_bytes();
+           timeline_.capacity_bytes() + timeline_counts_.capacity_bytes() + counters_.capacity_bytes();
   }
   /// Caps the bytes the results and front outputs may grow to (0: no cap). A traversal whose
   /// outputs would need more stops without growing them and reports complete() == false; the
@@ -129,6 +194,9 @@ class TraversalOutput {
   DeviceBuffer<int> sizes_, sizes_alt_, locks_;
   DeviceBuffer<unsigned long long> deque_ends_;    ///< per block: top, bottom (monotonic)
   DeviceBuffer<BlockActivity> block_activity_;  ///< per block (LazyStealScheduler)
+  DeviceBuffer<TimelineEvent> timeline_;         ///< per block, timeline_capacity_ each (record_timeline)
+  DeviceBuffer<unsigned> timeline_counts_;       ///< events per block in the last launch
+  int timeline_capacity_ = 0;
   DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
   PinnedBuffer<unsigned long long> host_counters_;  ///< their last reading (pinned: the copy does not block)
   std::uint64_t counter_reads_ = 0;                 ///< readings so far (traverse() reuses a final one)
