@@ -29,6 +29,22 @@ struct Row {
   unsigned long long steals = 0, failed_steals = 0;  ///< lazy scheduler, summed over the blocks (last run)
 };
 
+// A scene's BVTT self-collision task on the GPU (float positions) and the buffers it points to.
+template <class BV>
+struct DeviceScene {
+  gpu::DeviceStep<float> step;
+  gpu::Bvh<BV> bvh;
+  gpu::DeviceBuffer<Face> faces;
+  gpu::DeviceBuffer<NodePair> root;
+  template <class Positions>
+  DeviceScene(const TriangleMesh& mesh, const Positions& x0, const Positions& x1) : step(mesh, x0, x1) {
+    bvh.build(step);
+    faces.upload(mesh.faces());
+    root.upload(std::vector<NodePair>{NodePair{0, 0}});
+  }
+  SelfCollisionTask<BV> task() const { return {bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}}; }
+};
+
 // The lazy scheduler's per-block activity of the last run, summed into the row.
 template <class Task>
 void add_activity(const gpu::TraversalOutput<Task>& out, bool lazy, Row& row) {
@@ -45,16 +61,10 @@ template <class Scheduler, class BV>
 void scene_rows(const char* scheduler, const char* bv_name, const std::string& name, const Step& step, int reps,
                 std::vector<Row>& rows) {
   using Task = SelfCollisionTask<BV>;
-  gpu::DeviceStep<float> dstep(*step.mesh, step.x0, step.x1);
-  gpu::Bvh<BV> bvh;
-  bvh.build(dstep);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(step.mesh->faces());
-  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  const DeviceScene<BV> scene(*step.mesh, step.x0, step.x1);
+  const Task task = scene.task();
   gpu::TraversalOutput<Task> out;
-  gpu::DeviceBuffer<NodePair> root;
-  root.upload(std::vector<NodePair>{NodePair{0, 0}});
-  auto from_root = [&] { gpu::traverse<Scheduler>(task, root.data(), 1, out, true); };
+  auto from_root = [&] { gpu::traverse<Scheduler>(task, scene.root.data(), 1, out, true); };
   from_root();
   const auto ms = lwsccd_bench::time_with_events(reps, from_root);
   const bool lazy = std::string(scheduler).rfind("lazy", 0) == 0;
@@ -77,12 +87,8 @@ void scene_rows(const char* scheduler, const char* bv_name, const std::string& n
 template <class BV>
 void independent_rows(const char* bv_name, const std::string& name, const Step& step, int reps, std::vector<Row>& rows) {
   using Task = SelfCollisionTask<BV>;
-  gpu::DeviceStep<float> dstep(*step.mesh, step.x0, step.x1);
-  gpu::Bvh<BV> bvh;
-  bvh.build(dstep);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(step.mesh->faces());
-  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  const DeviceScene<BV> scene(*step.mesh, step.x0, step.x1);
+  const Task task = scene.task();
   gpu::TraversalOutput<Task> out;
   auto run = [&] { gpu::independent_self_traversal(task, out); };
   run();
@@ -94,12 +100,10 @@ void independent_rows(const char* bv_name, const std::string& name, const Step& 
 template <class Scheduler, class BV>
 void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& seq, std::vector<Row>& rows) {
   using Task = SelfCollisionTask<BV>;
-  gpu::DeviceStep<float> dstep(*seq.mesh(), seq.frame(0), seq.frame(1));
-  gpu::Bvh<BV> bvh;
-  bvh.build(dstep);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(seq.mesh()->faces());
-  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  DeviceScene<BV> scene(*seq.mesh(), seq.frame(0), seq.frame(1));
+  gpu::DeviceStep<float>& dstep = scene.step;
+  gpu::Bvh<BV>& bvh = scene.bvh;
+  const Task task = scene.task();
   gpu::TraversalOutput<Task> out;
   FrontTracker tracker;
   gpu::DeviceBuffer<NodePair> seeds;
@@ -166,23 +170,18 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
 void write_timelines(const std::string& dir, const std::vector<std::pair<std::string, Step>>& scenes) {
   using Task = SelfCollisionTask<Aabbf>;
   for (const auto& [name, step] : scenes) {
-    gpu::DeviceStep<float> dstep(*step.mesh, step.x0, step.x1);
-    gpu::Bvh<Aabbf> bvh;
-    bvh.build(dstep);
-    gpu::DeviceBuffer<Face> faces;
-    faces.upload(step.mesh->faces());
-    const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+    const DeviceScene<Aabbf> scene(*step.mesh, step.x0, step.x1);
+    const Task task = scene.task();
+    const NodePair* root = scene.root.data();
     gpu::TraversalOutput<Task> out;
-    gpu::DeviceBuffer<NodePair> root;
-    root.upload(std::vector<NodePair>{NodePair{0, 0}});
-    gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, out, true);  // warm-up, and the front
+    gpu::traverse<gpu::LazyStealScheduler<>>(task, root, 1, out, true);  // warm-up, and the front
     const std::vector<NodePair> front = out.download_front();
     gpu::DeviceBuffer<NodePair> d_front;
     d_front.upload(front);
     out.record_timeline(1 << 16);
     for (const char* start : {"root", "front"}) {
       const bool from_root = std::string(start) == "root";
-      gpu::traverse<gpu::LazyStealScheduler<>>(task, from_root ? root.data() : d_front.data(), from_root ? 1 : front.size(), out, true);
+      gpu::traverse<gpu::LazyStealScheduler<>>(task, from_root ? root : d_front.data(), from_root ? 1 : front.size(), out, true);
       const std::vector<gpu::BlockTimeline> timeline = out.download_timeline();
       unsigned long long first = ~0ull, last = 0, working = 0, dropped = 0, steals = 0;
       for (const auto& b : timeline) {
