@@ -144,6 +144,10 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   // The idle blocks' sleep between searches doubling up to 4 us, and up to 16 us (default: 256 ns).
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 4096>, BV>("lazy-sleep4k", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 16384>, BV>("lazy-sleep16k", bv_name, name, step, reps, rows);
+  // Thieves trying a victim's lock 4, 16 or 64 times before they look again (default: they wait for it).
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16>, BV>("lazy-lock16", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 4>, BV>("lazy-lock4", bv_name, name, step, reps, rows);
+  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 64>, BV>("lazy-lock64", bv_name, name, step, reps, rows);
 }
 
 template <class BV>
