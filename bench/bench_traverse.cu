@@ -144,8 +144,7 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   // The idle blocks' sleep between searches doubling up to 4 us, and up to 16 us (default: 256 ns).
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 4096>, BV>("lazy-sleep4k", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 16384>, BV>("lazy-sleep16k", bv_name, name, step, reps, rows);
-  // Thieves trying a victim's lock 4, 16 or 64 times before they look again (default: they wait for it).
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16>, BV>("lazy-lock16", bv_name, name, step, reps, rows);
+  // Thieves trying a victim's lock 4 or 64 times before they look again (default 16).
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 4>, BV>("lazy-lock4", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 64>, BV>("lazy-lock64", bv_name, name, step, reps, rows);
 }
@@ -160,6 +159,17 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
     lazy_variants<BV>(bv_name, name, step, reps, rows);
     independent_rows<BV>(bv_name, name, step, reps, rows);
   }
+  // The steals before 2026-11-24 (the fullest victim, waiting for its lock), and each of the two
+  // changes alone (both BVs: the OBB fronts are where thieves contend most).
+  for (const auto& [name, step] : scenes) {
+    scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false>, BV>("lazy-before", bv_name, name, step, reps,
+                                                                                            rows);
+    scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, true>, BV>("lazy-rand-wait", bv_name, name, step, reps,
+                                                                                           rows);
+    scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, false>, BV>("lazy-fullest-lock16", bv_name, name, step,
+                                                                                             reps, rows);
+  }
+  sequence_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false>, BV>("lazy-before", bv_name, horse, rows);
   sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
   sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
   sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);

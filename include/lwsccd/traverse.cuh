@@ -69,7 +69,7 @@ struct GProximityBalancer {
 /// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
 template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
           int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256,
-          int StealLockAttempts = 0>
+          int StealLockAttempts = 16, bool RandomVictim = true>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
@@ -84,11 +84,15 @@ struct LazyStealScheduler {
   /// to this (ns). Doubling up to 4 or 16 us was no faster on an H100 (docs/TRAVERSAL.md), so
   /// the default keeps a fixed 256 ns.
   static constexpr int kMaxBackoffNs = MaxBackoffNs;
-  /// A thief tries its victim's lock this many times (64 ns apart) before it looks again (0, the
-  /// default: it waits for the lock). On an H100 4-16 tries removed the end-of-traversal convoy and
-  /// made AABB traversals from a front 1.2-1.5x faster, but OBB ones from a front 1.1-1.6x slower
-  /// (they steal ~13 K batches and lose to the retries); docs/TRAVERSAL.md.
+  /// A thief tries its victim's lock this many times (64 ns apart) before it looks again (0: it
+  /// waits for the lock, as before 2026-11-24). With kRandomVictim, 16 tries removed the
+  /// end-of-traversal convoy and made every traversal of the benchmark as fast or faster on an
+  /// H100 (fronts 1.2-1.8x); alone it made OBB fronts slower (docs/TRAVERSAL.md).
   static constexpr int kStealLockAttempts = StealLockAttempts;
+  /// A thief picks its victim at random among the deques within a factor of two of the fullest
+  /// (false, as before 2026-11-24: the fullest, ties to the nearest after it), so that thieves
+  /// that all saw the same fullest deque do not all contend for its lock.
+  static constexpr bool kRandomVictim = RandomVictim;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };

@@ -477,8 +477,8 @@ __device__ inline void lock_deque(int* lock) {
 // A thief's lock: up to `attempts` tries (0: until it has it). One that cannot get the lock soon
 // looks again instead of queueing: at the end of a traversal every idle block queues on the lock
 // of the one deque it saw fullest, each finding it empty in turn (100-180 us on cloth-ball's front,
-// seen in the timelines). Off by default: OBB traversals from a front, which steal much more, lost
-// more to the retries (LazyStealScheduler::kStealLockAttempts).
+// seen in the timelines). LazyStealScheduler::kStealLockAttempts (16 by default, with victims
+// drawn at random among the fullest: alone, the retries cost OBB fronts more than they saved).
 __device__ inline bool lock_deque_within(int* lock, int attempts) {
   if (attempts <= 0) {
     lock_deque(lock);
@@ -574,8 +574,11 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
       if (action == 0) {
         // The lazy steal reads every deque's size at once: the whole block reads them (a thread
         // alone would wait on hundreds of loads one after another) and picks the fullest, ties to
-        // the nearest after this block (so that thieves spread over equal victims).
+        // the nearest after this block (so that thieves spread over equal victims). With
+        // kRandomVictim, any of those within a factor of two of the fullest, at random: thieves
+        // that all saw the same fullest deque no longer all queue on its lock.
         unsigned long long key = 0;
+        const unsigned salt = static_cast<unsigned>(clock64()) * 0x9E3779B1u ^ static_cast<unsigned>(me) * 0x85EBCA77u;
         for (int v = t; v < blocks; v += kThreads) {
           if (v == me) continue;
           const unsigned long long vt =
@@ -584,7 +587,14 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
               cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>(ends[2 * v + 1]).load(cuda::memory_order_relaxed);
           if (vb <= vt) continue;
           const unsigned long long distance = static_cast<unsigned long long>((v - me + blocks) % blocks);
-          const unsigned long long candidate = ((vb - vt) << 24) | (0xFFFFFFull - distance);
+          unsigned long long candidate = ((vb - vt) << 24) | (0xFFFFFFull - distance);
+          if (Policy::kRandomVictim) {  // size class (bit length), a random tie-break, the distance
+            unsigned h = salt ^ static_cast<unsigned>(v) * 0xC2B2AE3Du;
+            h = (h ^ (h >> 15)) * 0x2C1B3C6Du;
+            h ^= h >> 13;
+            candidate = (static_cast<unsigned long long>(64 - __clzll(vb - vt)) << 48) |
+                        (static_cast<unsigned long long>(h & 0xFFFFFFu) << 24) | (0xFFFFFFull - distance);
+          }
           key = candidate > key ? candidate : key;
         }
         const unsigned long long best_key = Reduce(reduce_storage).Reduce(key, LargerOf{});
