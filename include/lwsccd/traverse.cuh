@@ -69,7 +69,7 @@ struct GProximityBalancer {
 /// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
 template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
           int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256,
-          int StealLockAttempts = 16, bool RandomVictim = true>
+          int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
@@ -93,6 +93,15 @@ struct LazyStealScheduler {
   /// (false, as before 2026-11-24: the fullest, ties to the nearest after it), so that thieves
   /// that all saw the same fullest deque do not all contend for its lock.
   static constexpr bool kRandomVictim = RandomVictim;
+  /// Whether the kernel is compiled to fit kBlocksPerSm blocks per SM (__launch_bounds__ with that
+  /// minimum: registers capped, spilled if need be; false: the compiler's choice). Either way the
+  /// launch has only as many blocks as can be resident at once (at most kBlocksPerSm per SM, by
+  /// cudaOccupancyMaxActiveBlocksPerMultiprocessor): a persistent block waiting for a slot would
+  /// start only when the others were done. Before 2026-11-24 neither held, and the kernels that
+  /// took more than 64 registers (OBB: 113, rays: 88-94) ran half their blocks after the others.
+  /// Fitting (OBB: 64 registers, 104 bytes spilled) was faster than one block per SM on every
+  /// OBB traversal and ray set on an H100 (docs/TRAVERSAL.md); AABB takes 64 either way.
+  static constexpr bool kFitBlocksPerSm = FitBlocksPerSm;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };
@@ -155,8 +164,11 @@ class TraversalOutput {
   const TraversalStats& stats() const { return stats_; }
   /// LazyStealScheduler: what each persistent block did in the last launch.
   std::vector<BlockActivity> download_block_activity(cudaStream_t stream = nullptr) const {
-    return prefix(block_activity_, block_activity_.size(), stream);
+    return prefix(block_activity_, std::min<std::size_t>(launched_blocks_, block_activity_.size()), stream);
   }
+  /// LazyStealScheduler: the persistent blocks of the last launch (SMs x the blocks per SM that
+  /// its kernel can keep resident, at most the policy's kBlocksPerSm).
+  int launched_blocks() const { return launched_blocks_; }
   /// LazyStealScheduler: record every block's timeline in the following traversals, up to
   /// `events_per_block` events per block (0, the default: off). Costs a global-timer read and a
   /// store per phase change; for measuring, not for production runs.
@@ -168,7 +180,8 @@ class TraversalOutput {
   std::vector<BlockTimeline> download_timeline(cudaStream_t stream = nullptr) const {
     std::vector<BlockTimeline> blocks;
     if (timeline_capacity_ == 0 || timeline_counts_.size() == 0) return blocks;
-    const std::vector<unsigned> counts = prefix(timeline_counts_, timeline_counts_.size(), stream);
+    const std::vector<unsigned> counts =
+        prefix(timeline_counts_, std::min<std::size_t>(launched_blocks_, timeline_counts_.size()), stream);
     const std::vector<TimelineEvent> events = prefix(timeline_, timeline_.size(), stream);
     const auto room = static_cast<std::size_t>(timeline_capacity_);
     blocks.resize(counts.size());
@@ -207,6 +220,7 @@ class TraversalOutput {
   DeviceBuffer<TimelineEvent> timeline_;         ///< per block, timeline_capacity_ each (record_timeline)
   DeviceBuffer<unsigned> timeline_counts_;       ///< events per block in the last launch
   int timeline_capacity_ = 0;
+  int launched_blocks_ = 0;  ///< LazyStealScheduler: blocks of the last launch
   DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
   PinnedBuffer<unsigned long long> host_counters_;  ///< their last reading (pinned: the copy does not block)
   std::uint64_t counter_reads_ = 0;                 ///< readings so far (traverse() reuses a final one)

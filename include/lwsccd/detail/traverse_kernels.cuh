@@ -6,9 +6,12 @@
 #include <cuda/atomic>
 
 #include <algorithm>
+#include <atomic>
 #include <cassert>
+#include <string>
 #include <type_traits>
 
+#include "lwsccd/error.hpp"
 #include "lwsccd/traverse.cuh"
 
 namespace lwsccd::gpu {
@@ -324,6 +327,24 @@ inline int resident_blocks(int blocks_per_sm) {
   return std::max(1, sms * blocks_per_sm);
 }
 
+// Blocks of `kernel` that are resident at once, at most blocks_per_sm per SM: persistent blocks
+// beyond that would wait for a slot (registers or shared memory) and start only when others end.
+// `cache` (one per kernel, per device id; 0: not asked yet) spares the query on later calls
+// (a traversal from a small front takes tens of microseconds).
+template <class Kernel>
+int co_resident_blocks(Kernel kernel, int threads, int blocks_per_sm, std::atomic<int>* cache, int cache_size) {
+  int device = 0;
+  LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
+  int fit = device < cache_size ? cache[device].load(std::memory_order_relaxed) : 0;
+  if (fit == 0) {
+    LWSCCD_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&fit, kernel, threads, 0));
+    if (fit < 1) throw Error("lwsccd: LazyStealScheduler: its kernel cannot run a block of " + std::to_string(threads) +
+                             " threads on this GPU (registers or shared memory)");
+    if (device < cache_size) cache[device].store(fit, std::memory_order_relaxed);
+  }
+  return resident_blocks(std::min(fit, blocks_per_sm));
+}
+
 // Reads the counters (one synchronisation; pinned target). The reading stays in host_counters_,
 // so that traverse() need not read again what the scheduler's last read saw.
 template <class Task>
@@ -508,8 +529,10 @@ __global__ void seed_deques_kernel(const Item* seeds, std::size_t n, Item* deque
   }
 }
 
+// A minimum of 0 blocks per SM is no minimum (no .minnctapersm): the compiler's own choice, which
+// differs from an explicit 1 (AABB: 64 registers against 93).
 template <class Task, class Policy>
-__global__ void __launch_bounds__(Policy::kBlockThreads)
+__global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm ? Policy::kBlocksPerSm : 0)
     lazy_steal_kernel(Task task, typename Task::item_type* deques, unsigned long long* ends, int* locks, int capacity,
                       unsigned long long* pending, Outputs<Task> out, typename Task::item_type* hand_back,
                       BlockActivity* activity, TimelineSink timeline) {
@@ -698,7 +721,10 @@ template <class Task, class Policy>
 void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
                     TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
   using Item = typename Task::item_type;
-  const int blocks = resident_blocks(Policy::kBlocksPerSm);
+  static std::atomic<int> fit_per_device[16];  // zero-initialized (static storage)
+  const int blocks = co_resident_blocks(lazy_steal_kernel<Task, Policy>, Policy::kBlockThreads, Policy::kBlocksPerSm,
+                                        fit_per_device, 16);
+  out.launched_blocks_ = blocks;
   int capacity = Policy::kDequeCapacity;
   ensure(out.locks_, blocks);
   ensure(out.deque_ends_, 2 * static_cast<std::size_t>(blocks));
