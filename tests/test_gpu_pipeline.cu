@@ -367,26 +367,28 @@ TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts 
 }
 
 // At this size the schedulers' own lists, which no split reduces, are most of what a step holds
-// beyond the scene's data (H100: the lazy one's 13-14 MB of 30; the static one's 21 MB), and they
-// grow in a step from a kept front and stay grown. At half of it the pipeline said the budget left
-// the parts no room; at three quarters, mode set's second step was 0.3% short (the error names the
-// bytes it needs; it split the steps into 3-8 narrow parts). Hence 0.85, without the static
-// scheduler. Under racecheck this case too is slow (unfinished after 170 s on an H100).
+// beyond the scene's data (H100: the lazy one's 13-14 MB of 30; the static one's 21 MB), hence no
+// static scheduler here. At three quarters, mode set's second step (the first from a front) was
+// refused until 2026-11-24, 0.3% short: the front being recorded for the next step now goes before
+// the pipeline refuses. Under racecheck it finished in 321 s on an H100 (0 hazards).
 TEST_CASE("GPU pipeline under a device-memory budget answers as without one on a small scene (sanitizer-sized)",
           "[gpu][pipeline][streaming]") {
-  require_budgeted_cloth_ball_agrees(24000, 0.85, false);
+  require_budgeted_cloth_ball_agrees(24000, 0.75, false);
 }
 
-TEST_CASE("GPU pipeline in parts (part_pairs) equals the CPU pipeline in parts and whole, step after step",
-          "[gpu][pipeline][streaming]") {
-  ClothBallSimulation simulation(12000);
+namespace {
+
+// A cloth-ball simulation of `triangles` stepped in parts of at most 500 candidate or feature
+// pairs, on the GPU and on the CPU, against the CPU pipeline whole, `steps` steps.
+void require_parts_agree(std::size_t triangles, int steps) {
+  ClothBallSimulation simulation(triangles);
   simulation.advance(30);
   PipelineParams params;
   params.part_pairs = 500;
   gpu::CcdPipeline<> gpu_parts(simulation.mesh(), simulation.layout(), params);
   cpu::CcdPipeline<> cpu_parts(simulation.mesh(), simulation.layout(), params);
   cpu::CcdPipeline<> cpu_whole(simulation.mesh(), simulation.layout());
-  for (int s = 0; s < 4; ++s) {
+  for (int s = 0; s < steps; ++s) {
     INFO("step " << s);
     const Step step = simulation.next_step();
     const auto g = gpu_parts.step(step.x0, step.x1);
@@ -395,8 +397,23 @@ TEST_CASE("GPU pipeline in parts (part_pairs) equals the CPU pipeline in parts a
     require_same_contacts(g, c);
     CHECK(g.stats.front_size == c.stats.front_size);
     REQUIRE(g.stats.narrow_parts > g.stats.triangle_pairs / 500);
-    REQUIRE(g.stats.traversal_parts > 1);
+    // From the root a small tree can be all cut (its candidates met by the expansion, no part).
+    if (!g.stats.restarted_from_root) REQUIRE(g.stats.traversal_parts > 1);
   }
+}
+
+}  // namespace
+
+// [large]: compute-sanitizer's racecheck did not finish it in 430 s on an H100 (thousands of parts,
+// each a few launches and a synchronisation); the sanitizer runs take the small one below.
+TEST_CASE("GPU pipeline in parts (part_pairs) equals the CPU pipeline in parts and whole, step after step",
+          "[gpu][pipeline][streaming][large]") {
+  require_parts_agree(12000, 4);
+}
+
+TEST_CASE("GPU pipeline in parts (part_pairs) equals the CPU pipeline in parts and whole on a small scene (sanitizer-sized)",
+          "[gpu][pipeline][streaming]") {
+  require_parts_agree(2000, 2);
 }
 
 TEST_CASE("GPU pipeline: a device-memory budget below the mesh's own data is refused with the numbers",

@@ -321,7 +321,8 @@ class CcdPipeline {
 
     const Task task = traversal_task();
     const std::uint64_t generation = bvh_.generation();
-    bool record = params_.front_tracking && front_refused_generation_ != generation;
+    recording_front_ = params_.front_tracking && front_refused_generation_ != generation;
+    bool& record = recording_front_;
     const bool restart = !params_.front_tracking || generation != generation_ || front_size_ == 0 || reset_next_;
     generation_ = generation;
     const std::size_t front_room = static_cast<std::size_t>(StreamingPolicy::kFrontShare * static_cast<double>(room));
@@ -336,9 +337,7 @@ class CcdPipeline {
       // an optimisation: the parts' narrow phase does not leave room for it).
       const std::size_t grows = (next_front + n) * sizeof(NodePair) > next_front_.capacity_bytes() ? wanted : 0;
       if (kept_seeds + wanted > front_room || device_bytes() + grows > budget) {
-        record = false;  // the next step starts from the root (and this tree keeps no front)
-        front_refused_generation_ = generation;
-        next_front_ = DeviceBuffer<NodePair>();
+        give_up_next_front();
         return;
       }
       next_front_.resize_keep(next_front + n, (next_front + n) * 5 / 4);
@@ -442,6 +441,17 @@ class CcdPipeline {
     test_candidates(traversal_.results(), traversal_.num_results(), false, ccd, stats);
   }
 
+  // Stops recording this step's front for the next one (which then starts from the root; this tree
+  // keeps no front) and frees what it held. False when none was being recorded.
+  bool give_up_next_front() {
+    if (!recording_front_) return false;
+    recording_front_ = false;
+    front_refused_generation_ = bvh_.generation();
+    next_front_ = DeviceBuffer<NodePair>();
+    traversal_.front_ = DeviceBuffer<NodePair>();  // regrown to one entry by a traversal without a front
+    return true;
+  }
+
   // The bytes one traversal part's outputs may grow to under the budget.
   std::size_t traversal_output_limit() const {
     return static_cast<std::size_t>(StreamingPolicy::kTraversalShare * static_cast<double>(room_));
@@ -508,8 +518,11 @@ class CcdPipeline {
       LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
       const auto counted = emitter_.counted();
       const std::size_t pairs = counted.first + counted.second;
-      const std::size_t allowed = narrow_allowance();
+      std::size_t allowed = narrow_allowance();
       const std::size_t need = pairs * bytes_per_pair + count * StreamingPolicy::kBytesPerCandidate;
+      // Before refusing, the front being recorded for the next step goes (it is an optimisation:
+      // a budget that earlier steps met, a step from a grown front could otherwise refuse).
+      if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed && give_up_next_front()) allowed = narrow_allowance();
       if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed)
         throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(params_.device_memory_budget) +
                     " bytes leaves " + std::to_string(allowed) + " for the feature pairs and the narrow phase (the mesh's data take " +
@@ -596,6 +609,7 @@ class CcdPipeline {
   DeviceBuffer<TrianglePair> met_;         ///< candidates the expansion below the root met
   std::size_t met_size_ = 0;
   std::uint64_t front_refused_generation_ = ~std::uint64_t(0);  ///< the tree on which a front did not fit
+  bool recording_front_ = false;           ///< this streamed step records the front for the next one
 };
 
 }  // namespace lwsccd::gpu
