@@ -277,6 +277,16 @@ __global__ void __launch_bounds__(Policy::kBlockThreads) balanced_traverse_kerne
   }
 }
 
+// Moves each block's queue (its first sizes[b] items) into queues of a larger capacity. Only the
+// items are read: the rest of a queue was never written (compute-sanitizer's initcheck flagged
+// the whole-queue copy this replaced).
+template <class Item>
+__global__ void grow_queues_kernel(const Item* queues, const int* sizes, int capacity, Item* grown, int grown_capacity) {
+  const int b = blockIdx.x, n = sizes[b];
+  for (int i = threadIdx.x; i < n; i += blockDim.x)
+    grown[static_cast<std::size_t>(b) * grown_capacity + i] = queues[static_cast<std::size_t>(b) * capacity + i];
+}
+
 // gProximity balancing kernel (one block): prefix sums of the queue sizes, then every item moves
 // to its even share in the other set of queues; handed-back items are appended after the queues.
 template <class Item>
@@ -460,8 +470,8 @@ void run_balanced(const Task& task, const typename Task::item_type* seeds, std::
       ++out.stats_.relaunches;
       const int grown = capacity * 2;
       DeviceBuffer<Item> bigger(static_cast<std::size_t>(blocks) * grown);
-      LWSCCD_CUDA_CHECK(cudaMemcpy2DAsync(bigger.data(), grown * sizeof(Item), out.stacks_.data(), capacity * sizeof(Item),
-                                          capacity * sizeof(Item), blocks, cudaMemcpyDeviceToDevice, stream));
+      grow_queues_kernel<Item><<<blocks, 256, 0, stream>>>(out.stacks_.data(), out.sizes_.data(), capacity, bigger.data(), grown);
+      LWSCCD_CUDA_CHECK_LAUNCH();
       out.stacks_ = std::move(bigger);
       out.stacks_alt_ = DeviceBuffer<Item>(static_cast<std::size_t>(blocks) * grown);
       capacity = grown;
@@ -731,7 +741,13 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
   ensure(out.block_activity_, static_cast<std::size_t>(blocks));
   TimelineSink timeline;
   if (out.timeline_capacity_ > 0) {
-    ensure(out.timeline_, static_cast<std::size_t>(blocks) * out.timeline_capacity_);
+    // Zeroed when (re)allocated: download_timeline copies whole rows, whose tails no launch writes
+    // (compute-sanitizer's initcheck flagged the copy of never-written bytes).
+    const std::size_t events = static_cast<std::size_t>(blocks) * out.timeline_capacity_;
+    if (out.timeline_.size() < events) {
+      out.timeline_.resize_discard(events);
+      LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.timeline_.data(), 0, events * sizeof(TimelineEvent), stream));
+    }
     ensure(out.timeline_counts_, static_cast<std::size_t>(blocks));
     timeline = {out.timeline_.data(), out.timeline_counts_.data(), out.timeline_capacity_};
   }
