@@ -371,8 +371,8 @@ TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts 
 // static scheduler here. At three quarters, mode set's second step (the first from a front) was
 // refused until 2026-11-24, 0.3% short; the front being recorded for the next step now goes before
 // the pipeline refuses, and 0.75 passed twice on an H100, but a third run's peak passed the budget
-// by 332 bytes (step 1 of the moving sequence: the scheduler's lists grow with its relaunches,
-// which depend on timing). Hence 0.85. Under racecheck: 344 s at 0.85, 321 s at 0.75 (0 hazards).
+// by 332 bytes (step 1 of the moving sequence; a growth that depends on timing, not traced).
+// Hence 0.85. Under racecheck: 344 s at 0.85, 321 s at 0.75 (0 hazards).
 TEST_CASE("GPU pipeline under a device-memory budget answers as without one on a small scene (sanitizer-sized)",
           "[gpu][pipeline][streaming]") {
   require_budgeted_cloth_ball_agrees(24000, 0.85, false);
