@@ -520,8 +520,8 @@ class CcdPipeline {
       const std::size_t pairs = counted.first + counted.second;
       std::size_t allowed = narrow_allowance();
       const std::size_t need = pairs * bytes_per_pair + count * StreamingPolicy::kBytesPerCandidate;
-      // Before refusing, the front being recorded for the next step goes (it is an optimisation:
-      // a budget that earlier steps met, a step from a grown front could otherwise refuse).
+      // Before refusing, the front being recorded for the next step goes: it is an optimisation,
+      // and without this a step from a grown front could refuse a budget that earlier steps met.
       if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed && give_up_next_front()) allowed = narrow_allowance();
       if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed)
         throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(params_.device_memory_budget) +
