@@ -341,16 +341,16 @@ inline int resident_blocks(int blocks_per_sm) {
 // beyond that would wait for a slot (registers or shared memory) and start only when others end.
 // `cache` (one per kernel, per device id; 0: not asked yet) spares the query on later calls
 // (a traversal from a small front takes tens of microseconds).
-template <class Kernel>
-int co_resident_blocks(Kernel kernel, int threads, int blocks_per_sm, std::atomic<int>* cache, int cache_size) {
+template <class Kernel, int kDevices>
+int co_resident_blocks(Kernel kernel, int threads, int blocks_per_sm, std::atomic<int> (&cache)[kDevices]) {
   int device = 0;
   LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
-  int fit = device < cache_size ? cache[device].load(std::memory_order_relaxed) : 0;
+  int fit = device < kDevices ? cache[device].load(std::memory_order_relaxed) : 0;
   if (fit == 0) {
     LWSCCD_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&fit, kernel, threads, 0));
     if (fit < 1) throw Error("lwsccd: LazyStealScheduler: its kernel cannot run a block of " + std::to_string(threads) +
                              " threads on this GPU (registers or shared memory)");
-    if (device < cache_size) cache[device].store(fit, std::memory_order_relaxed);
+    if (device < kDevices) cache[device].store(fit, std::memory_order_relaxed);
   }
   return resident_blocks(std::min(fit, blocks_per_sm));
 }
@@ -732,8 +732,8 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
                     TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
   using Item = typename Task::item_type;
   static std::atomic<int> fit_per_device[16];  // zero-initialized (static storage)
-  const int blocks = co_resident_blocks(lazy_steal_kernel<Task, Policy>, Policy::kBlockThreads, Policy::kBlocksPerSm,
-                                        fit_per_device, 16);
+  const int blocks =
+      co_resident_blocks(lazy_steal_kernel<Task, Policy>, Policy::kBlockThreads, Policy::kBlocksPerSm, fit_per_device);
   out.launched_blocks_ = blocks;
   int capacity = Policy::kDequeCapacity;
   ensure(out.locks_, blocks);
