@@ -293,11 +293,16 @@ void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>
   params.mode = mode;
   std::vector<StepResult<double>> expected;
   std::size_t resident = 0, held = 0;
+  // A budget is kept by the pipeline's own count of what it holds (device_bytes): that count
+  // must be every byte it holds (until 2026-11-24 a streamed step's list of the pairs met below
+  // the root was left out, 4.8-15 KB here, and a step's peak passed a budget by 332 bytes once).
+  const std::size_t held_elsewhere = gpu::memory_stats().in_use;
   {
     gpu::CcdPipeline<Aabbf, Scheduler> whole(mesh, layout, params);
     for (const auto& s : steps) expected.push_back(whole.step(s.first, s.second));
     resident = whole.resident_bytes();
     held = whole.device_bytes();
+    CHECK(gpu::memory_stats().in_use - held_elsewhere == held);
   }
   // A share of what the unstreamed steps held beyond the resident data.
   params.device_memory_budget = resident + static_cast<std::size_t>(budget_share * static_cast<double>(held - resident));
@@ -315,6 +320,7 @@ void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>
       lwsccd_test::require_same_counts(r.contacts.vf_counts, expected[i].contacts.vf_counts);
       lwsccd_test::require_same_counts(r.contacts.ee_counts, expected[i].contacts.ee_counts);
     }
+    CHECK(gpu::memory_stats().in_use - held_elsewhere == streamed.device_bytes());
     CHECK(streamed.device_bytes() <= params.device_memory_budget);
     if (i > 0) CHECK(r.stats.peak_device_bytes <= params.device_memory_budget);  // the first builds the BVH
     parts = std::max(parts, r.stats.narrow_parts);
@@ -369,13 +375,13 @@ TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts 
 // At this size the schedulers' own lists, which no split reduces, are most of what a step holds
 // beyond the scene's data (H100: the lazy one's 13-14 MB of 30; the static one's 21 MB), hence no
 // static scheduler here. At three quarters, mode set's second step (the first from a front) was
-// refused until 2026-11-24, 0.3% short; the front being recorded for the next step now goes before
-// the pipeline refuses, and 0.75 passed twice on an H100, but a third run's peak passed the budget
-// by 332 bytes (step 1 of the moving sequence; a growth that depends on timing, not traced).
-// Hence 0.85. Under racecheck: 344 s at 0.85, 321 s at 0.75 (0 hazards).
+// refused until 2026-11-24, 0.3% short (the front being recorded for the next step now goes before
+// the pipeline refuses), and one H100 run's peak passed the budget by 332 bytes: the pairs met
+// below the root were not in the pipeline's count of its bytes (now they are, and checked above).
+// Under racecheck: 344 s at 0.85, 321 s at 0.75 (0 hazards).
 TEST_CASE("GPU pipeline under a device-memory budget answers as without one on a small scene (sanitizer-sized)",
           "[gpu][pipeline][streaming]") {
-  require_budgeted_cloth_ball_agrees(24000, 0.85, false);
+  require_budgeted_cloth_ball_agrees(24000, 0.75, false);
 }
 
 namespace {

@@ -126,7 +126,8 @@ class CcdPipeline {
   std::size_t device_bytes() const {
     return resident_bytes() + traversal_.device_bytes() + seeds_.capacity_bytes() + root_.capacity_bytes() +
            cut_.capacity_bytes() + next_front_.capacity_bytes() + scratch_.capacity_bytes() + emitter_.list_bytes() +
-           narrow_.device_bytes() + gathered_[0].capacity_bytes() + gathered_[1].capacity_bytes() + gathered_sorter_.device_bytes();
+           narrow_.device_bytes() + gathered_[0].capacity_bytes() + gathered_[1].capacity_bytes() + gathered_sorter_.device_bytes() +
+           met_.capacity_bytes();
   }
   /// Of those, what no split of a step can reduce: topology, positions, the BVH, the feature boxes.
   std::size_t resident_bytes() const {
@@ -411,6 +412,7 @@ class CcdPipeline {
     seeds_per_part_ = part;
     if (met_size_) test_candidates(met_.data(), met_size_, false, ccd, stats);
     met_size_ = 0;
+    met_ = DeviceBuffer<TrianglePair>();  // tested: its room goes back to the orphans' parts
     // The orphans (pairs no candidate emits), in parts of their own.
     test_candidates(nullptr, 0, true, ccd, stats);
     // The front for the next step, when it was kept whole.
