@@ -78,7 +78,8 @@ struct LazyStealScheduler {
   static constexpr int kPushThreshold = PushThreshold;  ///< shared stack size above which a batch goes to the deque
   static constexpr int kBlocksPerSm = BlocksPerSm;      ///< persistent blocks per SM (occupancy hides memory latency)
   /// A start from few seeds (the root) first expands them breadth first to about this many items
-  /// per block (each level a launch and a host sync); stealing spreads the rest.
+  /// per block (levels under 2,048 items in one single-block launch, larger ones a launch and a
+  /// host sync each); stealing spreads the rest.
   static constexpr int kSeedsPerBlock = SeedsPerBlock;
   /// A block that found nothing to steal sleeps before it looks again, from 256 ns, doubling up
   /// to this (ns). Doubling up to 4 or 16 us was no faster on an H100 (docs/TRAVERSAL.md), so
@@ -246,11 +247,12 @@ template <class Scheduler, class Task>
 void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
               bool record_front, cudaStream_t stream = nullptr);
 
-/// Expands the seeds breadth first, a level per launch, until at least `target` items remain (or
-/// none): returns their number; they are at out.expanded() and form a cut of the traversal, so
-/// traversing them (in any grouping) gives the results that traversing the seeds would, less the
-/// results and front entries met on the way, which are in out.results() and out.front(). Splits
-/// one traversal into independent parts (gpu::CcdPipeline's streaming under a memory budget).
+/// Expands the seeds breadth first (levels under 2,048 items in one launch) until at least
+/// `target` items remain (or none): returns their number; they are at out.expanded() and form a
+/// cut of the traversal, so traversing them (in any grouping) gives the results that traversing
+/// the seeds would, less the results and front entries met on the way, which are in
+/// out.results() and out.front(). Splits one traversal into independent parts
+/// (gpu::CcdPipeline's streaming under a memory budget).
 /// Honours out's output limit as traverse() does. Synchronizes.
 template <class Task>
 std::size_t expand(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, std::size_t target,

@@ -25,6 +25,7 @@ enum Counter : int {
   kAppended = 3,   ///< items appended to the next list (expansion) or handed back (resume)
   kIdle = 4,       ///< blocks that ran out of work (gProximity)
   kHalted = 5,     ///< blocks that stopped because their global stack was full
+  kLevels = 6,     ///< breadth-first levels one block expanded in one launch (expand_small_levels_kernel)
   kCounters = 8
 };
 
@@ -108,6 +109,53 @@ __global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typen
   for (int c = 0; c < e.count; ++c) next[base + offset + c] = e.children[c];
   __syncthreads();
   flush_outputs<Task, Scan>(e, out, storage, base);
+}
+
+// The first breadth-first levels of a small start (the root) in one block and one launch:
+// level after level, from `a` into `b` and back, while a level holds fewer than `stop_at` items
+// (a level per launch cost a launch and a host synchronisation each: 6-7 of them from a root).
+// Writes the last level's size to kAppended and the number of levels to kLevels (odd: the last
+// level is in `b`). Both buffers hold `room` items, at least stop_at * kMaxChildren.
+template <class Task, int kThreads>
+__global__ void __launch_bounds__(kThreads)
+    expand_small_levels_kernel(Task task, typename Task::item_type* a, typename Task::item_type* b, std::size_t n,
+                               std::size_t stop_at, std::size_t room, Outputs<Task> out) {
+  using Item = typename Task::item_type;
+  using Scan = cub::BlockScan<int, kThreads>;
+  __shared__ typename Scan::TempStorage storage;
+  __shared__ unsigned long long level_size, flush_base;
+  Item* in = a;
+  Item* next = b;
+  unsigned long long levels = 0;
+  while (n > 0 && n < stop_at) {
+    assert(n * Task::kMaxChildren <= room && "expand_small_levels_kernel: a level's children overflow their buffer");
+    if (threadIdx.x == 0) level_size = 0;
+    __syncthreads();
+    for (std::size_t first = 0; first < n; first += kThreads) {
+      const std::size_t i = first + threadIdx.x;
+      DeviceEmitter<Task> e;
+      e.record_front = out.record_front;
+      if (i < n) task.process(in[i], e);
+      int offset = 0, total = 0;
+      Scan(storage).ExclusiveSum(e.count, offset, total);
+      const unsigned long long base = level_size;  // read by all before thread 0 moves it on
+      __syncthreads();
+      if (threadIdx.x == 0) level_size += static_cast<unsigned long long>(total);
+      for (int c = 0; c < e.count; ++c) next[base + offset + c] = e.children[c];
+      flush_outputs<Task, Scan>(e, out, storage, flush_base);  // synchronises the block
+    }
+    if (threadIdx.x == 0) out.counters[kProcessed] += n;
+    n = static_cast<std::size_t>(level_size);
+    Item* done = in;
+    in = next;
+    next = done;
+    ++levels;
+    __syncthreads();  // level_size read by all before the next level resets it
+  }
+  if (threadIdx.x == 0) {
+    out.counters[kAppended] = n;
+    out.counters[kLevels] = levels;
+  }
 }
 
 // Drops the `count` oldest items of a shared stack (they were copied elsewhere): the rest moves
@@ -379,11 +427,26 @@ template <class Task>
 std::size_t expand_breadth_first(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
                                  std::size_t target, TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
   using Item = typename Task::item_type;
-  ensure(out.work_, std::max<std::size_t>(num_seeds, 1));
+  std::size_t n = num_seeds;
+  const std::size_t stop_at = target / Task::kMaxChildren;
+  // Small levels in one launch (a single block of kOneBlockThreads), up to a few items per thread.
+  constexpr int kOneBlockThreads = 512;
+  const std::size_t one_block_stop = std::min<std::size_t>(stop_at, 4 * kOneBlockThreads);
+  const bool one_block = n > 0 && n < one_block_stop;
+  const std::size_t room = one_block ? one_block_stop * Task::kMaxChildren : 0;
+  ensure(out.work_, std::max<std::size_t>({num_seeds, room, 1}));
   if (num_seeds)
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.work_.data(), seeds, num_seeds * sizeof(Item), cudaMemcpyDeviceToDevice, stream));
-  std::size_t n = num_seeds;
-  while (n > 0 && n < target / Task::kMaxChildren) {
+  if (one_block) {
+    ensure(out.next_, room);
+    expand_small_levels_kernel<Task, kOneBlockThreads><<<1, kOneBlockThreads, 0, stream>>>(
+        task, out.work_.data(), out.next_.data(), n, one_block_stop, room, outputs_of(out, record_front));
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    const auto c = read_counters(out, stream);
+    n = static_cast<std::size_t>(c[kAppended]);
+    if (c[kLevels] % 2 == 1) std::swap(out.work_, out.next_);
+  }
+  while (n > 0 && n < stop_at) {
     ensure(out.next_, n * Task::kMaxChildren);
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
     expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, out.work_.data(), n,
