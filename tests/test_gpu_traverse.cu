@@ -30,6 +30,23 @@ V sorted(V v) {
   return v;
 }
 
+// A folded cloth on the device - positions, a BVH over them, the faces - and its self-collision
+// task (adjacent triangle pairs skipped unless `keep_adjacent`), as several cases set it up.
+template <class BV>
+struct DeviceFoldedCloth {
+  DeviceFoldedCloth(int n, int folds) : cloth(lwsccd_test::folded_cloth(n, folds)), step(cloth.mesh, cloth.x0, cloth.x1) {
+    bvh.build(step);
+    faces.upload(cloth.mesh.faces());
+  }
+  SelfCollisionTask<BV> task(bool keep_adjacent = false) const {
+    return {bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), keep_adjacent}};
+  }
+  MovingMesh cloth;
+  gpu::DeviceStep<double> step;
+  gpu::Bvh<BV> bvh;
+  gpu::DeviceBuffer<Face> faces;
+};
+
 template <class Scheduler, class Task>
 std::vector<TrianglePair> gpu_pairs(const Task& task, const std::vector<NodePair>& seeds, gpu::TraversalOutput<Task>& out,
                                     bool record_front = false) {
@@ -99,13 +116,8 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
 }
 
 TEST_CASE("device memory budget: exceeding it is a clear error, not a crash", "[gpu][traverse]") {
-  const MovingMesh m = lwsccd_test::folded_cloth(60, 1);
-  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
-  gpu::Bvh<Aabbf> bvh;
-  bvh.build(step);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(m.mesh.faces());
-  SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  const DeviceFoldedCloth<Aabbf> cloth(60, 1);
+  const SelfCollisionTask<Aabbf> task = cloth.task();
   const std::size_t previous = gpu::memory_budget();
   gpu::set_memory_budget(gpu::memory_stats().in_use + 4096);  // almost nothing more
   gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
@@ -123,14 +135,9 @@ TEST_CASE("device memory budget: exceeding it is a clear error, not a crash", "[
 
 TEST_CASE("GPU traversal split into parts: a cut below the root, traversed a part at a time, gives the whole traversal",
           "[gpu][traverse][streaming]") {
-  const MovingMesh m = lwsccd_test::folded_cloth(80, 2);
-  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
-  gpu::Bvh<Aabbf> bvh;
-  bvh.build(step);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(m.mesh.faces());
+  const DeviceFoldedCloth<Aabbf> cloth(80, 2);
   using Task = SelfCollisionTask<Aabbf>;
-  const Task task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), true}};
+  const Task task = cloth.task(true);
   gpu::DeviceBuffer<NodePair> root;
   root.upload(std::vector<NodePair>{NodePair{0, 0}});
   gpu::TraversalOutput<Task> whole;
@@ -226,13 +233,8 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
 }
 
 TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees with the activity counters", "[gpu][traverse]") {
-  const MovingMesh m = lwsccd_test::folded_cloth(40, 3);
-  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
-  gpu::Bvh<Aabbf> bvh;
-  bvh.build(step);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(m.mesh.faces());
-  const SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  const DeviceFoldedCloth<Aabbf> cloth(40, 3);
+  const SelfCollisionTask<Aabbf> task = cloth.task();
   gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
   // Small batches and deques: many phases per block, steals, and a relaunch or two.
   const auto plain = gpu_pairs<TinyLazy>(task, {NodePair{0, 0}}, out);
@@ -291,13 +293,9 @@ TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees w
 // OBB tasks (113 registers, one 512-thread block per SM of two launched) before 2026-11-24. The
 // launch must hold only co-resident blocks: every block starts before any block is done.
 TEMPLATE_TEST_CASE("GPU lazy stealing launches only blocks that are resident at once", "[gpu][traverse]", Aabbf, Obbf) {
-  const MovingMesh m = lwsccd_test::folded_cloth(40, 3);
-  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
-  gpu::Bvh<TestType> bvh;
-  bvh.build(step);
-  gpu::DeviceBuffer<Face> faces;
-  faces.upload(m.mesh.faces());
-  const SelfCollisionTask<TestType> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
+  const DeviceFoldedCloth<TestType> cloth(40, 3);
+  const SelfCollisionTask<TestType> task = cloth.task();
+  const MovingMesh& m = cloth.cloth;
   cpu::Bvh<TestType> cbvh(m.mesh, m.x0, m.x1);
   const SelfCollisionTask<TestType> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, m.mesh.faces().data(), false}};
   const auto expected = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
