@@ -323,14 +323,13 @@ class CcdPipeline {
     const Task task = traversal_task();
     const std::uint64_t generation = bvh_.generation();
     recording_front_ = params_.front_tracking && front_refused_generation_ != generation;
-    bool& record = recording_front_;
     const bool restart = !params_.front_tracking || generation != generation_ || front_size_ == 0 || reset_next_;
     generation_ = generation;
     const std::size_t front_room = static_cast<std::size_t>(StreamingPolicy::kFrontShare * static_cast<double>(room));
     std::size_t next_front = 0;
     // Keeps the part's front entries for the next step while they fit their share.
     auto keep_front = [&] {
-      if (!record) return;
+      if (!recording_front_) return;
       const std::size_t n = traversal_.num_front();
       const std::size_t kept_seeds = restart ? 0 : seeds_.capacity_bytes();
       const std::size_t wanted = (next_front + n) * sizeof(NodePair) * 5 / 4;
@@ -354,7 +353,7 @@ class CcdPipeline {
       t = clock::now();
       root_.upload(std::vector<NodePair>{NodePair{0, 0}});
       traversal_.set_output_limit(traversal_output_limit());
-      num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, record);
+      num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, recording_front_);
       if (!traversal_.complete())
         throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
                     " bytes cannot hold the first levels of the traversal; give it more");
@@ -382,7 +381,7 @@ class CcdPipeline {
       const std::size_t n = std::min(part, num_seeds - first);
       t = clock::now();
       traversal_.set_output_limit(traversal_output_limit());
-      traverse<Scheduler>(task, seeds + first, n, traversal_, record);
+      traverse<Scheduler>(task, seeds + first, n, traversal_, recording_front_);
       stats.traverse_ms += ms_since(t);
       const std::size_t cap = params_.part_pairs;
       if (traversal_.complete() && cap && traversal_.num_results() > cap && n > 1) {
@@ -416,7 +415,7 @@ class CcdPipeline {
     // The orphans (pairs no candidate emits), in parts of their own.
     test_candidates(nullptr, 0, true, ccd, stats);
     // The front for the next step, when it was kept whole.
-    if (record) {
+    if (recording_front_) {
       std::swap(seeds_, next_front_);
       front_size_ = next_front;
       if (restart) size_at_restart_ = front_size_;
