@@ -130,6 +130,10 @@ void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& s
                   pairs / seq.num_steps(), front});
 }
 
+// The default lazy scheduler with another kFlatStartPerBlock (0: no flat start, as before 2026-11-24).
+template <int kPerBlock>
+using FlatFrom = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, kPerBlock>;
+
 // Variants of the lazy scheduler's occupancy and batch knobs (AABB only: the knobs do not depend
 // on the BV), beside its defaults.
 template <class BV>
@@ -147,6 +151,9 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   // Thieves trying a victim's lock 4 or 64 times before they look again (default 16).
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 4>, BV>("lazy-lock4", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 64>, BV>("lazy-lock64", bv_name, name, step, reps, rows);
+  // A flat first launch for starts of at least 128 or 2,048 items per block (default 512).
+  scene_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, name, step, reps, rows);
+  scene_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, name, step, reps, rows);
 }
 
 template <class BV>
@@ -156,13 +163,15 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
     scene_rows<gpu::StaticTaskList<>, BV>("static", bv_name, name, step, reps, rows);
     scene_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, name, step, reps, rows);
     scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
+    scene_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, name, step, reps, rows);
     lazy_variants<BV>(bv_name, name, step, reps, rows);
     independent_rows<BV>(bv_name, name, step, reps, rows);
   }
-  // The steals before 2026-11-24 (the fullest victim, waiting for its lock; the variants of each
-  // change alone are in docs/TRAVERSAL.md), and the kernel left to the compiler's register choice
-  // (OBB: 113, so one block per SM) instead of compiled to fit the default's two.
-  using Before = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false>;
+  // The steals before 2026-11-24 (the fullest victim, waiting for its lock, no flat start; the
+  // variants of each change alone are in docs/TRAVERSAL.md), and the kernel left to the
+  // compiler's register choice (OBB: 113, so one block per SM) instead of compiled to fit the
+  // default's two.
+  using Before = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false, true, 0>;
   using NoFit = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>;
   for (const auto& [name, step] : scenes) {
     scene_rows<Before, BV>("lazy-before", bv_name, name, step, reps, rows);
@@ -173,7 +182,10 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
   sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
   sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
   sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);
+  sequence_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, horse, rows);
   if (std::string(bv_name) == "AABB float") {
+    sequence_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, horse, rows);
+    sequence_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, horse, rows);
     sequence_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, horse, rows);
   }
 }

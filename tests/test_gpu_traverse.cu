@@ -23,11 +23,22 @@ namespace {
 using TinyStatic = gpu::StaticTaskList<32, 192, 64, 8>;
 using TinyBalanced = gpu::GProximityBalancer<32, 192, 64, 30>;
 using TinyLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64>;
+// A flat first launch for any start of at least one item per block (the default asks 512).
+using FlatLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
+using TinyFlatLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
 
 template <class V>
 V sorted(V v) {
   std::sort(v.begin(), v.end());
   return v;
+}
+
+// Node pairs (a front) as sorted (a, b) pairs, to compare as sets.
+std::vector<std::pair<index_t, index_t>> as_pairs(const std::vector<NodePair>& items) {
+  std::vector<std::pair<index_t, index_t>> pairs;
+  for (const NodePair& p : items) pairs.emplace_back(p.a, p.b);
+  std::sort(pairs.begin(), pairs.end());
+  return pairs;
 }
 
 // A folded cloth on the device - positions, a BVH over them, the faces - and its self-collision
@@ -143,12 +154,6 @@ TEST_CASE("GPU traversal split into parts: a cut below the root, traversed a par
   gpu::TraversalOutput<Task> whole;
   gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, whole, true);
   std::vector<TrianglePair> expected_results = whole.download_results();
-  auto as_pairs = [](const std::vector<NodePair>& items) {
-    std::vector<std::pair<index_t, index_t>> pairs;
-    for (const NodePair& p : items) pairs.emplace_back(p.a, p.b);
-    std::sort(pairs.begin(), pairs.end());
-    return pairs;
-  };
   const auto expected_front = as_pairs(whole.download_front());
   std::sort(expected_results.begin(), expected_results.end());
   REQUIRE(!expected_results.empty());
@@ -219,6 +224,7 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   SelfCollisionTask<Aabbf> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, m0.mesh.faces().data(), false}};
   const auto fresh = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
   REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, front, self_out, true) == fresh);
+  const auto next_front = as_pairs(self_out.download_front());
   REQUIRE(gpu_pairs<TinyStatic>(task, front, self_out, true) == fresh);
   REQUIRE(gpu_pairs<TinyLazy>(task, front, self_out, true) == fresh);
   // Every block of the lazy scheduler reports its activity; a block leaves only after a search
@@ -230,6 +236,17 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
     CHECK(a.failed_steals >= 1);
   }
   CHECK(busy > 0);
+  // The flat start (one launch over the whole front, the blocks sharing only its children): same
+  // pairs and the same next front, with the default capacities and with tiny ones.
+  REQUIRE(gpu_pairs<FlatLazy>(task, front, self_out, true) == fresh);
+  CHECK(self_out.stats().flat_start_items == front.size());
+  CHECK(as_pairs(self_out.download_front()) == next_front);
+  REQUIRE(gpu_pairs<TinyFlatLazy>(task, front, self_out, true) == fresh);
+  CHECK(self_out.stats().flat_start_items == front.size());
+  CHECK(as_pairs(self_out.download_front()) == next_front);
+  // From the root (one item) there is no flat start.
+  gpu_pairs<FlatLazy>(task, {NodePair{0, 0}}, self_out, true);
+  CHECK(self_out.stats().flat_start_items == 0);
 }
 
 TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees with the activity counters", "[gpu][traverse]") {

@@ -95,6 +95,9 @@ struct TraversalStats {
   std::size_t results = 0;
   std::size_t front = 0;
   std::size_t relaunches = 0;  ///< GPU: restarts after an output grew
+  /// GPU, lazy stealing: items of the start processed by one flat launch before the persistent
+  /// blocks (LazyStealScheduler::kFlatStartPerBlock; 0: the blocks shared the whole start)
+  std::size_t flat_start_items = 0;
 };
 
 }  // namespace lwsccd

@@ -69,7 +69,7 @@ struct GProximityBalancer {
 /// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
 template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
           int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256,
-          int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true>
+          int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true, int FlatStartPerBlock = 512>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
@@ -103,6 +103,14 @@ struct LazyStealScheduler {
   /// Fitting (OBB: 64 registers, 104 bytes spilled) was faster than one block per SM on every
   /// OBB traversal and ray set on an H100 (docs/TRAVERSAL.md); AABB takes 64 either way.
   static constexpr bool kFitBlocksPerSm = FitBlocksPerSm;
+  /// A start of at least this many items per launched block (a front kept from the last step)
+  /// is processed first by one flat launch, a thread per item, and the blocks share only the
+  /// children it leaves (0: never, as before 2026-11-24). From a front most items end at once
+  /// (leaf pairs, or boxes that no longer overlap: horse-gallop processes ~1.06 items per front
+  /// item), so the persistent blocks' rounds of kPopSize items were the cost. On an H100 (AABB
+  /// fronts): cloth-ball 0.56 -> 0.21 ms, cloth-funnel 0.058 -> 0.030 (512 per block; 2,048
+  /// left it out), horse-gallop 0.32 -> 0.23 (docs/TRAVERSAL.md).
+  static constexpr int kFlatStartPerBlock = FlatStartPerBlock;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };

@@ -421,6 +421,22 @@ Outputs<Task> outputs_of(TraversalOutput<Task>& out, bool record_front) {
   return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front};
 }
 
+// One breadth-first level in one launch, a thread per item: in[0, n) processed, their children
+// left in out.work_ (`in` may be out.work_ itself); returns how many (one host synchronisation).
+template <class Task>
+std::size_t expand_level(const Task& task, const typename Task::item_type* in, std::size_t n, TraversalOutput<Task>& out,
+                         bool record_front, cudaStream_t stream) {
+  ensure(out.next_, n * Task::kMaxChildren);
+  LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
+  expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, in, n, out.next_.data(),
+                                                                                        outputs_of(out, record_front));
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  const auto c = read_counters(out, stream);
+  out.stats_.items_processed += n;
+  std::swap(out.work_, out.next_);
+  return static_cast<std::size_t>(c[kAppended]);
+}
+
 // Breadth-first expansion of the seeds (copied to out.work_) until there are at least `target`
 // items or none; returns their count (in out.work_).
 template <class Task>
@@ -446,18 +462,7 @@ std::size_t expand_breadth_first(const Task& task, const typename Task::item_typ
     n = static_cast<std::size_t>(c[kAppended]);
     if (c[kLevels] % 2 == 1) std::swap(out.work_, out.next_);
   }
-  while (n > 0 && n < stop_at) {
-    ensure(out.next_, n * Task::kMaxChildren);
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
-    expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, out.work_.data(), n,
-                                                                                          out.next_.data(),
-                                                                                          outputs_of(out, record_front));
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    const auto c = read_counters(out, stream);
-    out.stats_.items_processed += n;
-    n = static_cast<std::size_t>(c[kAppended]);
-    std::swap(out.work_, out.next_);
-  }
+  while (n > 0 && n < stop_at) n = expand_level(task, out.work_.data(), n, out, record_front, stream);
   return n;
 }
 
@@ -814,9 +819,15 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     ensure(out.timeline_counts_, static_cast<std::size_t>(blocks));
     timeline = {out.timeline_.data(), out.timeline_counts_.data(), out.timeline_capacity_};
   }
-  // A few items for every block to start with (a fresh traversal starts from one root item).
-  std::size_t n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out,
-                                       record_front, stream);
+  // A few items for every block to start with (a fresh traversal starts from one root item); a
+  // start of many items (a front) is processed once by a flat launch instead, and the blocks
+  // share only what it left (LazyStealScheduler::kFlatStartPerBlock).
+  const bool flat_start = Policy::kFlatStartPerBlock > 0 &&
+                          num_seeds >= static_cast<std::size_t>(blocks) * static_cast<std::size_t>(Policy::kFlatStartPerBlock);
+  std::size_t n = flat_start ? expand_level(task, seeds, num_seeds, out, record_front, stream)
+                             : expand_breadth_first(task, seeds, num_seeds,
+                                                    static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out, record_front, stream);
+  out.stats_.flat_start_items = flat_start ? num_seeds : 0;
   while (n > 0) {
     while ((n + blocks - 1) / blocks > static_cast<std::size_t>(capacity) / 2) capacity *= 2;  // seeds fit
     ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
