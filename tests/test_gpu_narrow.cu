@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 
 #include <cstring>
+#include <random>
 
 #include "lwsccd/certified_ccd.hpp"
 #include "lwsccd/cubic_ccd.hpp"
@@ -91,6 +92,36 @@ TEST_CASE("GPU narrow phase: the filter's second round leaves fewer pairs to the
   const std::size_t first = compare_backends<CertifiedCcd, double, FirstRoundOnly>(m.mesh, m.x0, m.x1, fp, 1 << 16);
   std::printf("  whole refinements: %zu with the second round, %zu with the first only\n", both, first);
   CHECK(both < first);
+}
+
+TEST_CASE("GPU hit sort: by (first, second) over only the bits the feature ids take", "[gpu][narrow]") {
+  // Limits at and around powers of two (the key packs first above second by the ids' bit width),
+  // ids up to the largest below the limit, duplicates of first, and n = 0, 1 (left as they are).
+  std::mt19937 rng(7);
+  for (const std::size_t limit : {std::size_t(1), std::size_t(2), std::size_t(3), std::size_t(1) << 16, (std::size_t(1) << 16) + 1,
+                                  std::size_t(50021), std::size_t(1) << 31})
+    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), std::size_t(777), std::size_t(20000)}) {
+      INFO("limit " << limit << ", n " << n);
+      std::uniform_int_distribution<std::size_t> id(0, limit - 1), few(0, std::min<std::size_t>(limit - 1, 9));
+      std::vector<FeatureHit<double>> hits(n);
+      for (std::size_t i = 0; i < n; ++i)
+        hits[i] = {static_cast<index_t>(i % 3 ? id(rng) : few(rng)), static_cast<index_t>(i % 5 ? id(rng) : limit - 1),
+                   static_cast<double>(i)};
+      gpu::DeviceBuffer<FeatureHit<double>> d;
+      d.upload(hits);
+      gpu::HitSorter<double> sorter;
+      sorter.sort(d, n, limit);
+      LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+      const std::vector<FeatureHit<double>> got = d.download_prefix(n);
+      std::vector<FeatureHit<double>> expected = hits;
+      std::stable_sort(expected.begin(), expected.end());  // CUB's radix sort is stable too
+      REQUIRE(got.size() == n);
+      for (std::size_t i = 0; i < n; ++i) {
+        REQUIRE(got[i].first == expected[i].first);
+        REQUIRE(got[i].second == expected[i].second);
+        REQUIRE(got[i].toi == expected[i].toi);
+      }
+    }
 }
 
 TEST_CASE("GPU narrow phase equals the CPU backend on the real scenes' candidate pairs", "[gpu][narrow][data]") {

@@ -74,9 +74,11 @@ struct NarrowPhasePolicy {
 template <class T>
 class HitSorter {
  public:
-  /// Sorts the first n hits of `hits` on `stream`. The sorted hits end up in `hits` by an exchange
-  /// of buffers (the old one becomes this sorter's scratch), so `hits` keeps at least its size.
-  void sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, cudaStream_t stream = nullptr);
+  /// Sorts the first n hits of `hits` by (first, second) on `stream`; every id is below
+  /// `id_limit` (the mesh's feature count: only the bits that takes are sorted). The sorted hits
+  /// end up in `hits` by an exchange of buffers (the old one becomes this sorter's scratch), so
+  /// `hits` keeps at least its size.
+  void sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::size_t id_limit, cudaStream_t stream = nullptr);
   std::size_t device_bytes() const {
     return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes();
   }
@@ -227,6 +229,7 @@ class NarrowPhase {
   List lists_[2];  ///< vertex-face, edge-edge
   cudaEvent_t start_ = nullptr, joined_ = nullptr;
   cudaStream_t stream_ = nullptr;  ///< the last enqueue's
+  std::size_t id_limit_ = 0;       ///< the last enqueue's mesh: its feature count (ids are below it)
   DeviceBuffer<unsigned long long> control_;  ///< detail::NarrowControl words
   std::size_t gave_up_ = 0, reruns_ = 0;
   T earliest_ = T(1);

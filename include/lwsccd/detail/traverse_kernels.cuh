@@ -180,30 +180,53 @@ __device__ void drop_oldest(Item* s_items, int& s_size, int count) {
 }
 
 // One round: the top `take` items of the shared stack are processed, one per thread; their
-// children go back on the stack (block scan), results and front entries to the outputs. Returns
-// (on thread 0) how many children were pushed. All threads call it.
+// children go back on the stack, results and front entries to the outputs. Returns (on thread 0)
+// how many children were pushed. All threads call it; Scan is a cub::BlockScan of 64-bit words.
+//
+// A round is latency-bound where a block holds few items (a subtree's last levels, one level a
+// round), so it is kept short: the three counts of a thread (children, results, front entries)
+// go through one block scan as fields of one word, and the results' and the front's places are
+// reserved by two threads at once - instead of a scan and a synchronisation per list and two
+// atomics one after the other.
 template <class Task, class Scan>
 __device__ int process_round(const Task& task, typename Task::item_type* s_items, int& s_size, int take,
-                             typename Scan::TempStorage& storage, unsigned long long& out_base, const Outputs<Task>& out) {
+                             typename Scan::TempStorage& storage, unsigned long long (&out_base)[2], const Outputs<Task>& out) {
+  constexpr int kField = 21;  // bits per count: a block's totals stay far below 2^21
+  constexpr unsigned long long kMask = (1ull << kField) - 1;
+  static_assert(Task::kMaxChildren < 1024 && Task::kMaxResults < 1024, "lwsccd: process_round packs counts in 21-bit fields");
   DeviceEmitter<Task> e;
   e.record_front = out.record_front;
   typename Task::item_type item;
   const bool active = static_cast<int>(threadIdx.x) < take;
   if (active) item = s_items[s_size - take + threadIdx.x];
-  __syncthreads();
+  __syncthreads();  // taken: the children may overwrite those slots
   if (threadIdx.x == 0) s_size -= take;
   if (active) task.process(item, e);
-  int offset = 0, total = 0;
-  Scan(storage).ExclusiveSum(e.count, offset, total);
-  __syncthreads();  // s_size updated, scan storage free
-  for (int c = 0; c < e.count; ++c) s_items[s_size + offset + c] = e.children[c];
-  __syncthreads();
-  flush_outputs<Task, Scan>(e, out, storage, out_base);
+  const unsigned long long counts = static_cast<unsigned long long>(e.count) |
+                                    (static_cast<unsigned long long>(e.num_results) << kField) |
+                                    (static_cast<unsigned long long>(e.num_front) << (2 * kField));
+  unsigned long long offsets = 0, totals = 0;
+  Scan(storage).ExclusiveSum(counts, offsets, totals);
+  const int total_children = static_cast<int>(totals & kMask), total_results = static_cast<int>((totals >> kField) & kMask),
+            total_front = static_cast<int>(totals >> (2 * kField));
+  if (threadIdx.x == 0 && total_results)
+    out_base[0] = atomicAdd(&out.counters[kResults], static_cast<unsigned long long>(total_results));
+  if (threadIdx.x == 32 % blockDim.x && total_front)
+    out_base[1] = atomicAdd(&out.counters[kFront], static_cast<unsigned long long>(total_front));
+  __syncthreads();  // s_size updated, places reserved, scan storage free
+  const int child_at = s_size + static_cast<int>(offsets & kMask);
+  for (int c = 0; c < e.count; ++c) s_items[child_at + c] = e.children[c];
+  const unsigned long long result_at = out_base[0] + ((offsets >> kField) & kMask);
+  for (int r = 0; r < e.num_results; ++r)
+    if (result_at + r < out.result_capacity) out.results[result_at + r] = e.results[r];
+  const unsigned long long front_at = out_base[1] + (offsets >> (2 * kField));
+  if (e.num_front && front_at < out.front_capacity) out.front[front_at] = e.front;
+  __syncthreads();  // children stored (and out_base read) before the stack grows
   if (threadIdx.x == 0) {
-    s_size += total;
+    s_size += total_children;
     atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
   }
-  return total;
+  return total_children;
 }
 
 // The per-block two-level stack loop shared by the schedulers. `region` is this block's global
@@ -219,11 +242,11 @@ __device__ void run_block_stack(const Task& task, typename Task::item_type* regi
   constexpr int kShared = Policy::kSharedStack;
   constexpr int kK = Task::kMaxChildren;
   static_assert(kShared >= 2 * kThreads * kK, "lwsccd: kSharedStack must hold at least 2 * kBlockThreads * kMaxChildren items");
-  using Scan = cub::BlockScan<int, kThreads>;
+  using Scan = cub::BlockScan<unsigned long long, kThreads>;
   __shared__ Item s_items[kShared];
   __shared__ typename Scan::TempStorage scan_storage;
   __shared__ int s_size, g_size, take, refill, spill, stop;  // stop: 0 run, 1 done, 2 pause, 3 full
-  __shared__ unsigned long long out_base;
+  __shared__ unsigned long long out_base[2];
   const int t = threadIdx.x;
   if (t == 0) {
     s_size = 0;
@@ -557,7 +580,11 @@ void run_balanced(const Task& task, const typename Task::item_type* seeds, std::
 // any item exists or can still be created (only processing an item creates items, and that item
 // is counted until then). Items handed back to the host leave the count when they are handed
 // back. A block exits only after finding its own deque and every other deque empty and reading
-// pending == 0 (acquire), so no block leaves while work is in flight anywhere.
+// pending == 0 (acquire), so no block leaves while work is in flight anywhere. The rounds' updates
+// are relaxed (and skipped when a round adds as many as it retires): the count is only ever read
+// for its value - a block that reads zero leaves without reading anything else, one that reads
+// more looks in the deques, whose contents their locks order - and an acquire-release update
+// cost each round a wait for the atomic's return (a round is latency-bound near a subtree's end).
 //
 // ABA: the deques' ends are monotonic 64-bit counters (positions in a ring are taken modulo the
 // capacity), never reused, and every change of a deque's ends happens under that deque's lock,
@@ -622,13 +649,13 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   constexpr int kPushAbove = Policy::kPushThreshold;
   static_assert(kPushAbove + kThreads * kK <= kShared, "lwsccd: kSharedStack must hold kPushThreshold plus one round of children");
   static_assert(kPop <= kPushAbove, "lwsccd: kPopSize must not exceed kPushThreshold");
-  using Scan = cub::BlockScan<int, kThreads>;
+  using Scan = cub::BlockScan<unsigned long long, kThreads>;
   using Reduce = cub::BlockReduce<unsigned long long, kThreads>;
   __shared__ Item s_items[kShared];
   __shared__ typename Scan::TempStorage scan_storage;
   __shared__ typename Reduce::TempStorage reduce_storage;
   __shared__ int s_size, take, action, count, source, moved;
-  __shared__ unsigned long long from, out_base;
+  __shared__ unsigned long long from, out_base[2];
   const int t = threadIdx.x, me = blockIdx.x, blocks = static_cast<int>(gridDim.x);
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(*pending);
   long long busy = 0, idle = 0;
@@ -784,9 +811,9 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
     if (t == 0) take = s_size < kThreads ? s_size : kThreads;
     __syncthreads();
     const int total = process_round<Task, Scan>(task, s_items, s_size, take, scan_storage, out_base, out);
-    if (t == 0) {
+    if (t == 0 && total != take) {
       // Children counted and parents retired in one update (see the termination note above).
-      live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_acq_rel);
+      live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_relaxed);
     }
     busy += clock64() - start;
     __syncthreads();
