@@ -28,6 +28,8 @@ struct DeviceMeshFeatures {
     edges.upload(mesh.edges(), stream);
   }
   MeshFeatures view() const { return {faces.data(), edges.data(), num_vertices, num_edges}; }
+  /// Vertices, edges and faces together: every feature id is below this.
+  std::size_t num_features() const { return static_cast<std::size_t>(num_vertices) + num_edges + faces.size(); }
 };
 
 /// Knobs of the GPU narrow phase.

@@ -430,9 +430,7 @@ class CcdPipeline {
     // The gathered hits in (first, second) order, as an unstreamed step gives them.
     t = clock::now();
     if (params_.mode != CcdMode::earliest)
-      for (int k = 0; k < 2; ++k)
-        gathered_sorter_.sort(gathered_[k], gathered_outcome_.num_hits[k],
-                              static_cast<std::size_t>(mesh_->num_vertices()) + mesh_->num_edges() + mesh_->num_faces());
+      for (int k = 0; k < 2; ++k) gathered_sorter_.sort(gathered_[k], gathered_outcome_.num_hits[k], features_.num_features());
     for (int k = 0; k < 2; ++k) gathered_outcome_.hits[k] = gathered_[k].data();
     LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
     stats.narrow_ms += ms_since(t);

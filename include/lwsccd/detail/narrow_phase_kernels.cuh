@@ -595,7 +595,7 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
                                              PairList ee, const CcdParams<T>& params, cudaStream_t stream) {
   ensure_streams();
   stream_ = stream;
-  id_limit_ = static_cast<std::size_t>(mesh.num_vertices) + mesh.num_edges + mesh.faces.size();
+  id_limit_ = mesh.num_features();
   const MeshFeatures view = mesh.view();
   const PairList inputs[2] = {vf, ee};
   for (int k = 0; k < 2; ++k) {

@@ -180,8 +180,8 @@ __device__ void drop_oldest(Item* s_items, int& s_size, int count) {
 }
 
 // One round: the top `take` items of the shared stack are processed, one per thread; their
-// children go back on the stack, results and front entries to the outputs. Returns (on thread 0)
-// how many children were pushed. All threads call it; Scan is a cub::BlockScan of 64-bit words.
+// children go back on the stack, results and front entries to the outputs. Returns (on every
+// thread) how many children were pushed. All threads call it; Scan is a cub::BlockScan of 64-bit words.
 //
 // A round is latency-bound where a block holds few items (a subtree's last levels, one level a
 // round), so it is kept short: the three counts of a thread (children, results, front entries)
