@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 
 #include "lwsccd/dataset.hpp"
 #include "lwsccd/pipeline.cuh"
@@ -65,6 +66,20 @@ void require_gpu_emission_equals_cpu(const TriangleMesh& mesh, const std::vector
   const FeaturePairs unwaited_pairs = unwaited.download();
   REQUIRE(unwaited_pairs.vf == cpu.vf);
   REQUIRE(unwaited_pairs.ee == cpu.ee);
+  // The candidates' number read on the device (as after gpu::traverse_async), with launches sized
+  // for more: half of the list gives the CPU's emission over that half.
+  const std::size_t half = candidates.size() / 2;
+  gpu::DeviceBuffer<unsigned long long> count;
+  count.upload(std::vector<unsigned long long>{half});
+  unwaited.enqueue(d_x0.data(), d_x1.data(), d_candidates.data(),
+                   gpu::DeviceCount{count.data(), gpu::DeviceCount::Part::whole, candidates.size() + 100}, nullptr,
+                   gpu::FeatureEmitter<>::OrphanRange{0, unwaited.num_orphans()}, false);
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+  if (!unwaited.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+  const FeaturePairs half_pairs = unwaited.download();
+  const FeaturePairs cpu_half = emit_feature_pairs(rep, candidates.data(), half, boxes, true);
+  REQUIRE(half_pairs.vf == cpu_half.vf);
+  REQUIRE(half_pairs.ee == cpu_half.ee);
   FeaturePairs sorted = cpu;
   std::sort(sorted.vf.begin(), sorted.vf.end());
   std::sort(sorted.ee.begin(), sorted.ee.end());
@@ -173,6 +188,61 @@ TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth
       }
     }
   }
+}
+
+namespace {
+// A flat start for any front of at least one item per block (the default asks 512): the small
+// cloth's steps take the path without a host round trip inside the traversal; tiny deques make
+// blocks hand items back, which collect() reports and the pipeline reruns.
+using FlatFrontLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
+using TinyFlatFrontLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
+
+template <class Scheduler>
+void pipeline_from_fronts_equals_cpu() {
+  const auto first = lwsccd_test::folded_cloth(50, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  gpu::CcdPipeline<Aabbf, Scheduler> gpu_pipeline(mesh);
+  cpu::CcdPipeline<> cpu_pipeline(mesh);
+  std::size_t from_front = 0, reruns = 0;
+  for (int s = 0; s < 6; ++s) {
+    INFO("step " << s);
+    const auto m = lwsccd_test::folded_cloth(50, 1 + s / 2);  // pairs of equal steps: fronts that fit
+    const auto g = gpu_pipeline.step(m.x0, m.x1);
+    require_same_contacts(g, cpu_pipeline.step(m.x0, m.x1));
+    from_front += !g.stats.restarted_from_root;
+    reruns += g.stats.reruns;
+  }
+  CHECK(from_front >= 3);
+  std::printf("GPU pipeline from fronts (traversal enqueued): %zu of 6 steps from a front, %zu reruns\n", from_front, reruns);
+}
+}  // namespace
+
+TEST_CASE("GPU pipeline from a front without a host round trip equals the CPU pipeline; tiny deques rerun it",
+          "[gpu][pipeline][front]") {
+  pipeline_from_fronts_equals_cpu<FlatFrontLazy>();
+  pipeline_from_fronts_equals_cpu<TinyFlatFrontLazy>();
+}
+
+TEST_CASE("GPU pipeline: non-finite positions are an InputError at the step's end, and the next step starts afresh",
+          "[gpu][pipeline][front]") {
+  const auto m = lwsccd_test::folded_cloth(40, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  gpu::CcdPipeline<Aabbf, FlatFrontLazy> gpu_pipeline(mesh);
+  cpu::CcdPipeline<> cpu_pipeline(mesh);
+  const auto expected = cpu_pipeline.step(m.x0, m.x1);
+  require_same_contacts(gpu_pipeline.step(m.x0, m.x1), expected);
+  require_same_contacts(gpu_pipeline.step(m.x0, m.x1), expected);  // from the front
+  std::vector<Vec3d> bad = m.x1;
+  bad[7].y = std::numeric_limits<double>::infinity();
+  gpu::DeviceBuffer<Vec3d> x0, x1;
+  x0.upload(m.x0);
+  x1.upload(bad);
+  CHECK_THROWS_AS(gpu_pipeline.step_from_device(x0.data(), x1.data()), InputError);
+  x1.upload(m.x1);
+  const auto after = gpu_pipeline.step_from_device(x0.data(), x1.data());
+  CHECK(after.stats.restarted_from_root);  // the front recorded over non-finite boxes was dropped
+  require_same_contacts(after, expected);
+  require_same_contacts(gpu_pipeline.step_from_device(x0.data(), x1.data()), expected);
 }
 
 TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from device memory equal host ones",

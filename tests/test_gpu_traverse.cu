@@ -249,6 +249,74 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   CHECK(self_out.stats().flat_start_items == 0);
 }
 
+namespace {
+__global__ void read_device_count(gpu::DeviceCount count, std::size_t* value) { *value = count.get(); }
+
+// What a later stage on the stream reads as the number of results.
+template <class Task>
+std::size_t device_result_count(const gpu::TraversalOutput<Task>& out) {
+  gpu::DeviceBuffer<std::size_t> value(1);
+  read_device_count<<<1, 1>>>(out.result_count(), value.data());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  return value.download()[0];
+}
+}  // namespace
+
+TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_async, then collect", "[gpu][traverse][front]") {
+  const MovingMesh m1 = lwsccd_test::folded_cloth(40, 2);
+  DeviceFoldedCloth<Aabbf> cloth(40, 1);
+  const SelfCollisionTask<Aabbf> task = cloth.task();
+  gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
+  gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out, true);
+  const std::vector<NodePair> front = out.download_front();
+  REQUIRE(front.size() > 0);
+  cloth.step.set_positions(m1.x0, m1.x1);
+  cloth.bvh.refit(cloth.step);
+  const auto fresh = gpu_pairs<gpu::LazyStealScheduler<>>(task, front, out, true);
+  const auto next_front = as_pairs(out.download_front());
+  const std::size_t processed = out.stats().items_processed;
+  REQUIRE(fresh.size() > 10);
+  gpu::DeviceBuffer<NodePair> seeds;
+  seeds.upload(front);
+  // Enqueues, reads the count a later stage would, collects; traverse() again where it asks.
+  auto run_async = [&](auto scheduler, bool& complete, std::size_t& on_device) {
+    using Scheduler = decltype(scheduler);
+    gpu::traverse_async<Scheduler>(task, seeds.data(), front.size(), out, true);
+    on_device = device_result_count(out);  // synchronizes
+    complete = out.collect();
+    if (!complete) gpu::traverse<Scheduler>(task, seeds.data(), front.size(), out, true);
+    return sorted(out.download_results());
+  };
+  bool complete = false;
+  std::size_t on_device = 0;
+  REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
+  CHECK(complete);
+  CHECK(on_device == fresh.size());
+  CHECK(out.num_results() == fresh.size());
+  CHECK(as_pairs(out.download_front()) == next_front);
+  CHECK(out.stats().flat_start_items == front.size());
+  CHECK(out.stats().items_processed == processed);
+  // Tiny deques: blocks hand items back, which only the host relaunches; collect() says so.
+  REQUIRE(run_async(TinyFlatLazy{}, complete, on_device) == fresh);
+  CHECK(as_pairs(out.download_front()) == next_front);
+  // Outputs too small: the device's count stops at their room, collect() grows them and asks for
+  // traverse(), which then fits them without growing again.
+  out.results_.resize_discard(3);
+  out.front_.resize_discard(5);
+  REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
+  CHECK_FALSE(complete);
+  CHECK(on_device == 3);
+  CHECK(out.stats().relaunches == 0);
+  CHECK(as_pairs(out.download_front()) == next_front);
+  // A start the flat launch does not take (the root) runs as traverse() does: nothing to collect.
+  gpu::DeviceBuffer<NodePair> root;
+  root.upload(std::vector<NodePair>{NodePair{0, 0}});
+  gpu::traverse_async<FlatLazy>(task, root.data(), 1, out, true);
+  CHECK(out.collect());
+  CHECK(out.stats().flat_start_items == 0);
+  CHECK(device_result_count(out) == out.num_results());
+}
+
 TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees with the activity counters", "[gpu][traverse]") {
   const DeviceFoldedCloth<Aabbf> cloth(40, 3);
   const SelfCollisionTask<Aabbf> task = cloth.task();

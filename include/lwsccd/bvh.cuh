@@ -61,6 +61,16 @@ class Bvh {
   template <class P>
   bool refit_or_rebuild(const DeviceStep<P>& step, const RebuildPolicy& policy = {}, cudaStream_t stream = nullptr);
 
+  /// refit_or_rebuild without waiting: refits and enqueues the reads of the status flag and the
+  /// cost into pinned memory; collect_refit() reports them once `stream` has been synchronized.
+  /// The rebuild the cost calls for then comes a step later (gpu::CcdPipeline rebuilds before its
+  /// next traversal): a refitted tree is as exact as a rebuilt one, only slower to traverse.
+  template <class P>
+  void refit_enqueue(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// After refit_enqueue() and a synchronisation of its stream: throws InputError if the
+  /// positions were non-finite; otherwise returns whether `policy` says the tree decayed.
+  bool collect_refit(const RebuildPolicy& policy = {}, cudaStream_t stream = nullptr);
+
   /// Sum of internal surface areas over the root's, computed on the device (synchronizes).
   double sah_cost(cudaStream_t stream = nullptr) const;
   /// Synchronizes and throws InputError if positions seen since the last check were non-finite.

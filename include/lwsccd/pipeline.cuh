@@ -189,43 +189,82 @@ class CcdPipeline {
 
   CcdParams<T> ccd_params() const { return lwsccd::detail::ccd_params_of<T>(params_); }
 
-  // Refit, or rebuild when the tree decayed (or on the first step).
-  void refit_stage(StepStats& stats) {
-    if (!built_) {
+  // Build on the first step, or where the last step's refit found the tree decayed; refit
+  // otherwise. `wait` false leaves the refit's reads (positions' status, the cost) on their way to
+  // the host, for collect_refit() with the step's other counters: the rebuild the cost calls for
+  // then comes a step later. Returns whether reads await collect_refit().
+  bool refit_stage(StepStats& stats, bool wait) {
+    bool pending = false;
+    if (!built_ || rebuild_due_) {
       bvh_.build(*step_);
       built_ = stats.rebuilt = true;
-    } else {
+      rebuild_due_ = false;
+    } else if (wait) {
       stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
+    } else {
+      bvh_.refit_enqueue(*step_);
+      pending = true;
     }
     if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
+    return pending;
   }
 
-  // Every stage of a step on the device; the narrow phase's hits stay there (sorted on the
-  // default stream once collected).
+  // The refit's reads, once the step's stream has been synchronized. Non-finite positions throw
+  // InputError; the front this step recorded (over boxes that were not finite) is then dropped.
+  void collect_refit() {
+    try {
+      rebuild_due_ = bvh_.collect_refit(RebuildPolicy{params_.rebuild_factor});
+    } catch (...) {
+      front_size_ = 0;
+      throw;
+    }
+  }
+
+  // The feature pairs of the traversal's candidates, their number read on the device. The first
+  // step waits for their numbers (to size their buffers); later steps reuse the room earlier
+  // ones needed and leave the numbers on the device.
+  void enqueue_feature_pairs() {
+    using OrphanRange = typename FeatureEmitter<>::OrphanRange;
+    emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.result_count(), nullptr,
+                     OrphanRange{0, emitter_.num_orphans()}, false);
+    if (!emitter_sized_) {
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+      if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+    }
+    emitter_sized_ = true;
+  }
+
+  // Every stage of a step on the device, one host round trip at its end (the refit's reads, the
+  // traversal's, the feature pairs' and the narrow phase's counters); the narrow phase's hits
+  // stay there (sorted on the default stream once collected).
   void run_stages(StepStats& stats) {
     streamed_ = params_.device_memory_budget > 0 || params_.part_pairs > 0;
     if (streamed_) return run_streamed_stages(stats);
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
-    refit_stage(stats);
+    bool refit_pending = refit_stage(stats, false);
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
-    traverse_step(stats);
+    const bool restart = traverse_step();
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[2]));
-    // The feature pairs: the first step waits for their numbers (to size their buffers); later
-    // steps reuse the room earlier ones needed and leave the numbers on the device.
-    if (!emitter_sized_) emitter_.run(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
-    else emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.num_results());
-    emitter_sized_ = true;
+    enqueue_feature_pairs();
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[3]));
     const CcdParams<T> ccd = ccd_params();
-    // One host round trip for both stages: their counters, read once the narrow phase is done;
-    // a list that outgrew its buffer has it grown, and what read it runs again.
+    // Where a count outgrew its buffer, the buffer is grown and what read the short list runs again.
     while (true) {
       narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd);
       LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[4]));
       LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[4]));
+      if (refit_pending) collect_refit();
+      refit_pending = false;
+      if (!traversal_.collect()) {  // an output or a deque overflowed: the traversal again, waiting
+        traverse<Scheduler>(traversal_task(), seeds_.data(), front_size_, traversal_, params_.front_tracking);
+        enqueue_feature_pairs();
+        ++stats.reruns;
+        continue;
+      }
       if (emitter_.collect() && narrow_.collect()) break;
       ++stats.reruns;
     }
+    keep_front(restart, stats);
     stats.refit_ms = elapsed(mark_[0], mark_[1]);
     stats.traverse_ms = elapsed(mark_[1], mark_[2]);
     stats.features_ms = elapsed(mark_[2], mark_[3]);
@@ -266,8 +305,10 @@ class CcdPipeline {
                                         features_.faces.data(), true, bodies ? node_body_.data() : nullptr}};
   }
 
-  // Traversal from the front kept on the device (FrontTracker's policy, without a host copy).
-  void traverse_step(StepStats& stats) {
+  // Traversal from the front kept on the device (FrontTracker's policy, without a host copy), or
+  // from the root; from a front without a host round trip (its counts are read at the step's
+  // end). Returns whether it started from the root.
+  bool traverse_step() {
     const Task task = traversal_task();
     const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
     generation_ = bvh_.generation();
@@ -275,14 +316,18 @@ class CcdPipeline {
       root_.upload(std::vector<NodePair>{NodePair{0, 0}});
       traverse<Scheduler>(task, root_.data(), 1, traversal_, params_.front_tracking);
     } else {
-      traverse<Scheduler>(task, seeds_.data(), front_size_, traversal_, true);
+      traverse_async<Scheduler>(task, seeds_.data(), front_size_, traversal_, true);
     }
+    return restart;
+  }
+
+  // After the traversal's counts are read: its front becomes the next step's seeds (the buffers
+  // trade places; the one the seeds held takes the next front, with as much room).
+  void keep_front(bool restart, StepStats& stats) {
     if (params_.front_tracking) {
       front_size_ = traversal_.num_front();
-      seeds_.resize_discard(std::max<std::size_t>(front_size_, 1));
-      if (front_size_)
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(seeds_.data(), traversal_.front(), front_size_ * sizeof(NodePair),
-                                          cudaMemcpyDeviceToDevice));
+      std::swap(seeds_, traversal_.front_);
+      if (traversal_.front_.size() < seeds_.size()) traversal_.front_.resize_discard(seeds_.size());
       if (restart) size_at_restart_ = front_size_;
       reset_next_ = static_cast<double>(front_size_) > params_.front_growth_limit * static_cast<double>(size_at_restart_);
     }
@@ -302,7 +347,7 @@ class CcdPipeline {
     using clock = std::chrono::steady_clock;
     auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
     auto t = clock::now();
-    refit_stage(stats);
+    refit_stage(stats, true);
     LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
     stats.refit_ms = ms_since(t);
     const std::size_t budget = params_.device_memory_budget ? params_.device_memory_budget : kUnlimited;
@@ -590,6 +635,7 @@ class CcdPipeline {
   std::unique_ptr<DeviceStep<double>> step_;
   Bvh<BV> bvh_;
   bool built_ = false;
+  bool rebuild_due_ = false;  ///< the last refit found the tree decayed: build before the next traversal
   TraversalOutput<Task> traversal_;
   DeviceBuffer<NodePair> seeds_, root_;
   std::size_t front_size_ = 0, size_at_restart_ = 0;

@@ -72,12 +72,13 @@ __device__ inline unsigned long long mask_counts(unsigned mask) {
 // the block again, so only block totals need a device-wide scan).
 template <int kBlock, class Pair>
 __global__ void __launch_bounds__(kBlock)
-    emission_count_kernel(EmissionView m, const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf,
-                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t items, unsigned short* masks,
+    emission_count_kernel(EmissionView m, const TrianglePair* candidates, DeviceCount candidate_count, const Pair* orphan_vf,
+                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t num_orphan_ee, unsigned short* masks,
                           unsigned long long* block_totals) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   __shared__ typename Reduce::TempStorage storage;
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * kBlock + threadIdx.x;
+  const std::size_t n = candidate_count.get(), items = n + num_orphan_vf + num_orphan_ee;
   unsigned mask = 0;
   if (i < items) {
     mask = item_mask(m, candidates, n, orphan_vf, num_orphan_vf, orphan_ee, i);
@@ -91,13 +92,14 @@ __global__ void __launch_bounds__(kBlock)
 // pairs are decoded from the mask (no box is read again).
 template <int kBlock, class Pair>
 __global__ void __launch_bounds__(kBlock)
-    emission_write_kernel(EmissionView m, const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf,
-                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t items, const unsigned short* masks,
+    emission_write_kernel(EmissionView m, const TrianglePair* candidates, DeviceCount candidate_count, const Pair* orphan_vf,
+                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t num_orphan_ee, const unsigned short* masks,
                           const unsigned long long* block_inclusive, Pair* vf_out, std::size_t vf_room, Pair* ee_out,
                           std::size_t ee_room) {
   using Scan = cub::BlockScan<unsigned long long, kBlock>;
   __shared__ typename Scan::TempStorage storage;
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * kBlock + threadIdx.x;
+  const std::size_t n = candidate_count.get(), items = n + num_orphan_vf + num_orphan_ee;
   const unsigned mask = i < items ? masks[i] : 0u;
   unsigned long long offset = 0;
   Scan(storage).ExclusiveSum(mask_counts(mask), offset);
@@ -183,6 +185,16 @@ class FeatureEmitter {
   template <class P>
   void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream,
                OrphanRange orphans, bool boxes_current) {
+    enqueue(x0, x1, candidates, DeviceCount::known(n), stream, orphans, boxes_current);
+  }
+
+  /// As enqueue() above with the candidates' number on the device (e.g. TraversalOutput::
+  /// result_count() after traverse_async(): no host round trip between the stages). The launches
+  /// are sized for `count.room` candidates; those past the device's count do nothing.
+  template <class P>
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, DeviceCount count, cudaStream_t stream,
+               OrphanRange orphans, bool boxes_current) {
+    const std::size_t n = count.room;
     if (orphans.first > num_orphans() || orphans.count > num_orphans() - orphans.first)
       throw Error("gpu::FeatureEmitter::enqueue: orphan range [" + std::to_string(orphans.first) + ", " +
                   std::to_string(orphans.first + orphans.count) + ") is past the " + std::to_string(num_orphans()) +
@@ -195,7 +207,7 @@ class FeatureEmitter {
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
     candidates_ = candidates;
-    num_candidates_ = n;
+    candidate_count_ = count;
     // The range split at the boundary between the two orphan lists.
     const std::size_t vf_total = orphan_vf_.size(), end = orphans.first + orphans.count;
     orphan_vf_first_ = std::min(orphans.first, vf_total);
@@ -212,8 +224,8 @@ class FeatureEmitter {
       masks_.resize_discard(items);
       block_totals_.resize_discard(blocks_);
       detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-          m, candidates, n, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_, orphan_ee_.data() + orphan_ee_first_, items,
-          masks_.data(), block_totals_.data());
+          m, candidates, count, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_, orphan_ee_.data() + orphan_ee_first_,
+          num_orphan_ee_, masks_.data(), block_totals_.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       std::size_t bytes = 0;
       LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
@@ -293,11 +305,11 @@ class FeatureEmitter {
  private:
   // The writing pass of the last enqueue (the masks and the block totals are still there).
   void write(cudaStream_t stream) {
-    const std::size_t items = num_candidates_ + num_orphan_vf_ + num_orphan_ee_;
+    const std::size_t items = candidate_count_.room + num_orphan_vf_ + num_orphan_ee_;
     if (items == 0) return;
     detail::emission_write_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-        view(), candidates_, num_candidates_, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_,
-        orphan_ee_.data() + orphan_ee_first_, items, masks_.data(),
+        view(), candidates_, candidate_count_, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_,
+        orphan_ee_.data() + orphan_ee_first_, num_orphan_ee_, masks_.data(),
         block_totals_.data(), vf_.data(), vf_room_, ee_.data(), ee_room_);
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
@@ -318,7 +330,8 @@ class FeatureEmitter {
   DeviceBuffer<unsigned long long> total_{1};     ///< the last run's packed totals (read by the narrow phase)
   PinnedBuffer<unsigned long long> host_total_;  // allocated on first use
   const TrianglePair* candidates_ = nullptr;
-  std::size_t num_candidates_ = 0, blocks_ = 0;
+  DeviceCount candidate_count_;  ///< the last enqueue's (room: the bound its launches were sized for)
+  std::size_t blocks_ = 0;
   std::size_t num_orphan_vf_ = 0, num_orphan_ee_ = 0;      ///< orphans the last enqueue listed
   std::size_t orphan_vf_first_ = 0, orphan_ee_first_ = 0;  ///< and where they start in each list
   std::size_t vf_room_ = 0, ee_room_ = 0;         ///< room of vf_, ee_ (grown by collect())

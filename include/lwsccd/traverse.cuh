@@ -220,6 +220,15 @@ class TraversalOutput {
   /// gpu::expand: the items of the cut it produced (valid until the next traversal).
   const item_type* expanded() const { return work_.data(); }
 
+  /// The number of results as the device holds it (capped at the output's room): what a later
+  /// stage on the same stream reads where traverse_async() left the count on the device.
+  DeviceCount result_count() const;
+  /// After traverse_async() and a synchronisation of its stream: reads the counts (num_results(),
+  /// num_front(), stats()). False when the traversal did not complete in that pass - an output
+  /// overflowed (it is grown now) or a block's deque did (its items were handed back): run
+  /// traverse() from the same seeds. True, with nothing to do, after traverse().
+  bool collect();
+
   // Storage used by the schedulers.
   DeviceBuffer<result_type> results_;
   DeviceBuffer<item_type> front_, work_, next_, stacks_, stacks_alt_;
@@ -236,6 +245,8 @@ class TraversalOutput {
   std::size_t num_results_ = 0, num_front_ = 0;
   std::size_t output_limit_ = 0;
   bool complete_ = true;
+  bool awaiting_collect_ = false;  ///< traverse_async() left the counts on the device
+  bool awaiting_front_ = false;    ///< and recorded a front
   TraversalStats stats_;
 
  private:
@@ -254,6 +265,16 @@ class TraversalOutput {
 template <class Scheduler, class Task>
 void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
               bool record_front, cudaStream_t stream = nullptr);
+
+/// As traverse(), without a host round trip where the scheduler allows it: LazyStealScheduler
+/// from a start that its flat launch takes (at least kFlatStartPerBlock items per block, e.g. a
+/// front kept from the last step) with no output limit. The counts then stay on the device
+/// (out.result_count() for a later stage on `stream`); call out.collect() once `stream` has been
+/// synchronized, and traverse() again where it returns false. Other starts and schedulers run as
+/// traverse() does (synchronizing; collect() returns true).
+template <class Scheduler, class Task>
+void traverse_async(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                    TraversalOutput<Task>& out, bool record_front, cudaStream_t stream = nullptr);
 
 /// Expands the seeds breadth first (levels under 2,048 items in one launch) until at least
 /// `target` items remain (or none): returns their number; they are at out.expanded() and form a

@@ -253,15 +253,26 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
 template <class BV>
 template <class P>
 bool Bvh<BV>::refit_or_rebuild(const DeviceStep<P>& step, const RebuildPolicy& policy, cudaStream_t stream) {
-  refit(step, stream);
   // One synchronisation for both reads (status flag, then the cost), into pinned memory.
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
-  enqueue_cost(stream);
+  refit_enqueue(step, stream);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  throw_if_flagged(readback().status, stream);
-  if (!policy.should_rebuild(cost_from_readback(), cost_at_build_)) return false;
+  if (!collect_refit(policy, stream)) return false;
   build(step, stream);
   return true;
+}
+
+template <class BV>
+template <class P>
+void Bvh<BV>::refit_enqueue(const DeviceStep<P>& step, cudaStream_t stream) {
+  refit(step, stream);
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
+  enqueue_cost(stream);
+}
+
+template <class BV>
+bool Bvh<BV>::collect_refit(const RebuildPolicy& policy, cudaStream_t stream) {
+  throw_if_flagged(readback().status, stream);
+  return policy.should_rebuild(cost_from_readback(), cost_at_build_);
 }
 
 template <class BV>

@@ -26,7 +26,10 @@ enum Counter : int {
   kIdle = 4,       ///< blocks that ran out of work (gProximity)
   kHalted = 5,     ///< blocks that stopped because their global stack was full
   kLevels = 6,     ///< breadth-first levels one block expanded in one launch (expand_small_levels_kernel)
-  kCounters = 8
+  kPending = 7,    ///< LazyStealScheduler: the live items of a launch (see the termination note)
+  kStartItems = 8,  ///< LazyStealScheduler: the length of the launch's start list
+  kStartTaken = 9,  ///< LazyStealScheduler: how much of the start list blocks have taken
+  kCounters = 10
 };
 
 template <class Task>
@@ -621,16 +624,23 @@ __device__ inline void unlock_deque(int* lock) {
   cuda::atomic_ref<int, cuda::thread_scope_device>(*lock).store(0, cuda::memory_order_release);
 }
 
-template <class Item>
-__global__ void seed_deques_kernel(const Item* seeds, std::size_t n, Item* deques, unsigned long long* ends,
-                                   int capacity, unsigned long long* pending) {
-  if (blockIdx.x == 0 && threadIdx.x == 0) *pending = n;  // the live items: the seeds
-  const std::size_t begin = n * blockIdx.x / gridDim.x, end = n * (blockIdx.x + 1) / gridDim.x;
-  for (std::size_t i = begin + threadIdx.x; i < end; i += blockDim.x)
-    deques[static_cast<std::size_t>(blockIdx.x) * capacity + (i - begin)] = seeds[i];
+// Readies a lazy launch on the device: every deque empty and unlocked, the start list's length
+// (`n`, or where n is kCountOnDevice the count the last expansion left in kAppended, which the
+// host has not read) made the live count, and the hand-back counters zeroed.
+constexpr unsigned long long kCountOnDevice = ~0ull;
+template <int kThreads>
+__global__ void __launch_bounds__(kThreads) lazy_start_kernel(unsigned long long* counters, unsigned long long* ends, int* locks, int blocks,
+                                         unsigned long long n) {
+  for (int b = static_cast<int>(threadIdx.x); b < blocks; b += static_cast<int>(blockDim.x)) {
+    ends[2 * b] = ends[2 * b + 1] = 0;
+    locks[b] = 0;
+  }
   if (threadIdx.x == 0) {
-    ends[2 * blockIdx.x] = 0;
-    ends[2 * blockIdx.x + 1] = end - begin;
+    const unsigned long long items = n == kCountOnDevice ? counters[kAppended] : n;
+    counters[kStartItems] = items;
+    counters[kPending] = items;
+    counters[kStartTaken] = 0;
+    counters[kAppended] = counters[kHalted] = 0;
   }
 }
 
@@ -638,9 +648,9 @@ __global__ void seed_deques_kernel(const Item* seeds, std::size_t n, Item* deque
 // differs from an explicit 1 (AABB: 64 registers against 93).
 template <class Task, class Policy>
 __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm ? Policy::kBlocksPerSm : 0)
-    lazy_steal_kernel(Task task, typename Task::item_type* deques, unsigned long long* ends, int* locks, int capacity,
-                      unsigned long long* pending, Outputs<Task> out, typename Task::item_type* hand_back,
-                      BlockActivity* activity, TimelineSink timeline) {
+    lazy_steal_kernel(Task task, const typename Task::item_type* start_list, typename Task::item_type* deques,
+                      unsigned long long* ends, int* locks, int capacity, Outputs<Task> out,
+                      typename Task::item_type* hand_back, BlockActivity* activity, TimelineSink timeline) {
   using Item = typename Task::item_type;
   constexpr int kThreads = Policy::kBlockThreads;
   constexpr int kShared = Policy::kSharedStack;
@@ -657,7 +667,15 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   __shared__ int s_size, take, action, count, source, moved;
   __shared__ unsigned long long from, out_base[2];
   const int t = threadIdx.x, me = blockIdx.x, blocks = static_cast<int>(gridDim.x);
-  cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(*pending);
+  cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(out.counters[kPending]);
+  // The start list (written by earlier launches on the stream) is handed out in slices of about
+  // an even share per block, at most a pop: the first look of every block finds its share there.
+  const unsigned long long start_items = out.counters[kStartItems];
+  const unsigned long long slice = start_items == 0 ? 1
+                                   : (start_items + blocks - 1) / blocks < static_cast<unsigned long long>(kPop)
+                                       ? (start_items + blocks - 1) / blocks
+                                       : static_cast<unsigned long long>(kPop);
+  bool start_open = start_items > 0;  // thread 0: the start list may still hold items
   long long busy = 0, idle = 0;
   unsigned long long steals = 0, failed_steals = 0;
   bool seeking = false;  // thread 0: in a search for work (for the timeline: one event per search)
@@ -690,9 +708,20 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
           action = 1;
         } else {
           if (maybe_items) unlock_deque(&locks[me]);
+          if (start_open) {  // then the start list
+            const unsigned long long first = atomicAdd(&out.counters[kStartTaken], slice);
+            if (first < start_items) {
+              count = static_cast<int>(start_items - first < slice ? start_items - first : slice);
+              from = first;
+              source = -1;
+              action = 1;
+            } else {
+              start_open = false;
+            }
+          }
           // Nothing pending anywhere: done, without reading every deque (all blocks do this at the
           // end); counted as a search that found nothing.
-          if (live.load(cuda::memory_order_acquire) == 0) {
+          if (action == 0 && live.load(cuda::memory_order_acquire) == 0) {
             action = 3;
             ++failed_steals;
           }
@@ -763,12 +792,16 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
         __syncthreads();
         continue;
       }
-      const Item* deque = deques + static_cast<std::size_t>(source) * capacity;
-      for (int i = t; i < count; i += kThreads) s_items[i] = deque[(from + i) % capacity];
+      if (source < 0) {
+        for (int i = t; i < count; i += kThreads) s_items[i] = start_list[from + i];
+      } else {
+        const Item* deque = deques + static_cast<std::size_t>(source) * capacity;
+        for (int i = t; i < count; i += kThreads) s_items[i] = deque[(from + i) % capacity];
+      }
       __syncthreads();
       if (t == 0) {
         s_size = count;
-        unlock_deque(&locks[source]);
+        if (source >= 0) unlock_deque(&locks[source]);
         timeline.record(me, action == 1 ? BlockPhase::own : BlockPhase::steal, static_cast<std::uint32_t>(count));
         seeking = false;
         backoff = 256;
@@ -822,19 +855,17 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
     activity[me] = {static_cast<unsigned long long>(busy), static_cast<unsigned long long>(idle), steals, failed_steals};
 }
 
+// The launch shape of the lazy kernel (persistent blocks that fit at once) and its timeline's
+// storage; sizes the per-block arrays.
 template <class Task, class Policy>
-void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
-                    TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
-  using Item = typename Task::item_type;
+int prepare_lazy(TraversalOutput<Task>& out, TimelineSink& timeline, cudaStream_t stream) {
   static std::atomic<int> fit_per_device[16];  // zero-initialized (static storage)
   const int blocks =
       co_resident_blocks(lazy_steal_kernel<Task, Policy>, Policy::kBlockThreads, Policy::kBlocksPerSm, fit_per_device);
   out.launched_blocks_ = blocks;
-  int capacity = Policy::kDequeCapacity;
   ensure(out.locks_, blocks);
   ensure(out.deque_ends_, 2 * static_cast<std::size_t>(blocks));
   ensure(out.block_activity_, static_cast<std::size_t>(blocks));
-  TimelineSink timeline;
   if (out.timeline_capacity_ > 0) {
     // Zeroed when (re)allocated: download_timeline copies whole rows, whose tails no launch writes
     // (compute-sanitizer's initcheck flagged the copy of never-written bytes).
@@ -846,30 +877,50 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     ensure(out.timeline_counts_, static_cast<std::size_t>(blocks));
     timeline = {out.timeline_.data(), out.timeline_counts_.data(), out.timeline_capacity_};
   }
+  return blocks;
+}
+
+// One launch of the lazy kernel over the start list out.work_ of `n` items (kCountOnDevice: the
+// count the last expansion left on the device; `most` bounds it), deques of `capacity` items per
+// block. What halted blocks hand back goes to out.next_ (count in kAppended).
+template <class Task, class Policy>
+void launch_lazy(const Task& task, TraversalOutput<Task>& out, unsigned long long n, std::size_t most, int blocks,
+                 int capacity, const TimelineSink& timeline, bool record_front, cudaStream_t stream) {
+  ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
+  ensure(out.next_, static_cast<std::size_t>(blocks) * Policy::kSharedStack * 4 + most);
+  if (timeline.events) LWSCCD_CUDA_CHECK(cudaMemsetAsync(timeline.counts, 0, blocks * sizeof(unsigned), stream));
+  lazy_start_kernel<256><<<1, 256, 0, stream>>>(out.counters_.data(), out.deque_ends_.data(), out.locks_.data(), blocks, n);
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  lazy_steal_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
+      task, out.work_.data(), out.stacks_.data(), out.deque_ends_.data(), out.locks_.data(), capacity,
+      outputs_of(out, record_front), out.next_.data(), out.block_activity_.data(), timeline);
+  LWSCCD_CUDA_CHECK_LAUNCH();
+}
+
+// Whether a start of `num_seeds` items is processed first by one flat launch
+// (LazyStealScheduler::kFlatStartPerBlock).
+template <class Policy>
+bool lazy_flat_start(std::size_t num_seeds, int blocks) {
+  return Policy::kFlatStartPerBlock > 0 &&
+         num_seeds >= static_cast<std::size_t>(blocks) * static_cast<std::size_t>(Policy::kFlatStartPerBlock);
+}
+
+template <class Task, class Policy>
+void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                    TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+  TimelineSink timeline;
+  const int blocks = prepare_lazy<Task, Policy>(out, timeline, stream);
+  int capacity = Policy::kDequeCapacity;
   // A few items for every block to start with (a fresh traversal starts from one root item); a
   // start of many items (a front) is processed once by a flat launch instead, and the blocks
   // share only what it left (LazyStealScheduler::kFlatStartPerBlock).
-  const bool flat_start = Policy::kFlatStartPerBlock > 0 &&
-                          num_seeds >= static_cast<std::size_t>(blocks) * static_cast<std::size_t>(Policy::kFlatStartPerBlock);
+  const bool flat_start = lazy_flat_start<Policy>(num_seeds, blocks);
   std::size_t n = flat_start ? expand_level(task, seeds, num_seeds, out, record_front, stream)
                              : expand_breadth_first(task, seeds, num_seeds,
                                                     static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out, record_front, stream);
   out.stats_.flat_start_items = flat_start ? num_seeds : 0;
   while (n > 0) {
-    while ((n + blocks - 1) / blocks > static_cast<std::size_t>(capacity) / 2) capacity *= 2;  // seeds fit
-    ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
-    ensure(out.next_, static_cast<std::size_t>(blocks) * Policy::kSharedStack * 4 + n);
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.locks_.data(), 0, blocks * sizeof(int), stream));
-    LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, 4 * sizeof(unsigned long long), stream));
-    if (timeline.events) LWSCCD_CUDA_CHECK(cudaMemsetAsync(timeline.counts, 0, blocks * sizeof(unsigned), stream));
-    seed_deques_kernel<Item><<<blocks, 128, 0, stream>>>(out.work_.data(), n, out.stacks_.data(), out.deque_ends_.data(),
-                                                         capacity, out.counters_.data() + kCounters - 1);
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    lazy_steal_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
-        task, out.stacks_.data(), out.deque_ends_.data(), out.locks_.data(), capacity,
-        out.counters_.data() + kCounters - 1, outputs_of(out, record_front), out.next_.data(), out.block_activity_.data(),
-        timeline);
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    launch_lazy<Task, Policy>(task, out, n, n, blocks, capacity, timeline, record_front, stream);
     const auto c = read_counters(out, stream);
     n = static_cast<std::size_t>(c[kAppended]);
     if (c[kHalted] > 0) {
@@ -878,6 +929,29 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     }
     std::swap(out.work_, out.next_);
   }
+}
+
+// A start that the flat launch takes (see lazy_flat_start) enqueued whole, without a host round
+// trip: the flat launch leaves its children's count on the device and the lazy launch reads it
+// there. Returns false (nothing enqueued) for other starts. What the host would have done between
+// the launches - relaunch what halted blocks handed back, grow outputs that overflowed - is left
+// to TraversalOutput::collect(), which reports it.
+template <class Task, class Policy>
+bool enqueue_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                        TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+  TimelineSink timeline;
+  const int blocks = prepare_lazy<Task, Policy>(out, timeline, stream);
+  if (!lazy_flat_start<Policy>(num_seeds, blocks)) return false;
+  const std::size_t most = num_seeds * Task::kMaxChildren;
+  ensure(out.next_, most);
+  expand_kernel<Task, 256><<<static_cast<unsigned>((num_seeds + 255) / 256), 256, 0, stream>>>(
+      task, seeds, num_seeds, out.next_.data(), outputs_of(out, record_front));
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  std::swap(out.work_, out.next_);
+  launch_lazy<Task, Policy>(task, out, kCountOnDevice, most, blocks, Policy::kDequeCapacity, timeline, record_front, stream);
+  out.stats_.flat_start_items = num_seeds;
+  out.stats_.items_processed = num_seeds;  // the lazy launch's count is added by collect()
+  return true;
 }
 
 template <class S, class = void>
@@ -889,19 +963,38 @@ struct is_lazy_steal<S, std::void_t<decltype(S::kIsLazySteal)>> : std::bool_cons
 
 namespace detail {
 
+// Outputs sized for a traversal (first use: room for 2^16 entries each), counters allocated.
+template <class Task>
+void prepare_outputs(TraversalOutput<Task>& out, bool record_front) {
+  ensure(out.counters_, kCounters);
+  if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
+  if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
+  out.stats_ = {};
+  out.complete_ = true;
+  out.awaiting_collect_ = false;  // what an earlier traverse_async() left uncollected is superseded
+}
+
+// Grows the outputs that `results` and `front` entries overflowed to those counts and a quarter
+// more; false (nothing grown) where that would pass out's output limit.
+template <class Task>
+bool grow_outputs(TraversalOutput<Task>& out, std::size_t results, std::size_t front) {
+  using Item = typename Task::item_type;
+  using Result = typename Task::result_type;
+  const std::size_t results_room = results > out.results_.size() ? results + results / 4 : out.results_.size();
+  const std::size_t front_room = front > out.front_.size() ? front + front / 4 : out.front_.size();
+  if (out.output_limit_ && results_room * sizeof(Result) + front_room * sizeof(Item) > out.output_limit_) return false;
+  out.results_.resize_discard(results_room);
+  out.front_.resize_discard(front_room);
+  return true;
+}
+
 // Runs `attempt` (one complete pass that leaves the final counters in out.host_counters_ when it
 // read them) until the results and front fit their outputs, growing them in between (tasks are
 // deterministic, so a pass again from the same seeds gives the same outputs); stops without
 // growing past out's output limit (complete_ false).
 template <class Task, class Attempt>
 void run_until_outputs_fit(TraversalOutput<Task>& out, bool record_front, cudaStream_t stream, Attempt attempt) {
-  using Item = typename Task::item_type;
-  using Result = typename Task::result_type;
-  ensure(out.counters_, kCounters);
-  if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
-  if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
-  out.stats_ = {};
-  out.complete_ = true;
+  prepare_outputs(out, record_front);
   while (true) {
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, kCounters * sizeof(unsigned long long), stream));
     out.stats_.items_processed = 0;
@@ -923,16 +1016,12 @@ void run_until_outputs_fit(TraversalOutput<Task>& out, bool record_front, cudaSt
       return;
     }
     // An output overflowed: grow it to what was counted (a quarter more) and run again.
-    const std::size_t results_room = results > out.results_.size() ? results + results / 4 : out.results_.size();
-    const std::size_t front_room = front > out.front_.size() ? front + front / 4 : out.front_.size();
-    if (out.output_limit_ && results_room * sizeof(Result) + front_room * sizeof(Item) > out.output_limit_) {
+    if (!grow_outputs(out, results, front)) {
       out.complete_ = false;
       out.num_results_ = std::min(results, out.results_.size());
       out.num_front_ = std::min(front, out.front_.size());
       return;
     }
-    out.results_.resize_discard(results_room);
-    out.front_.resize_discard(front_room);
     ++out.stats_.relaunches;
   }
 }
@@ -949,6 +1038,51 @@ void traverse(const Task& task, const typename Task::item_type* seeds, std::size
       detail::run_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
     else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
   });
+}
+
+template <class Scheduler, class Task>
+void traverse_async(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+                    bool record_front, cudaStream_t stream) {
+  static_assert(require_traversal_task<Task>::value, "");
+  out.awaiting_collect_ = false;
+  if constexpr (detail::is_lazy_steal<Scheduler>::value) {
+    if (out.output_limit_ == 0) {  // a limit needs the host between launches to keep to it
+      detail::prepare_outputs(out, record_front);
+      LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
+      if (detail::enqueue_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream)) {
+        if (out.host_counters_.size() < static_cast<std::size_t>(detail::kCounters))
+          out.host_counters_ = PinnedBuffer<unsigned long long>(detail::kCounters);
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.host_counters_.data(), out.counters_.data(),
+                                          detail::kCounters * sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream));
+        out.awaiting_collect_ = true;
+        out.awaiting_front_ = record_front;
+        return;
+      }
+    }
+  }
+  traverse<Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+}
+
+template <class Task>
+bool TraversalOutput<Task>::collect() {
+  if (!awaiting_collect_) return true;
+  awaiting_collect_ = false;
+  const unsigned long long* c = host_counters_.data();
+  const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
+  const std::size_t front = awaiting_front_ ? static_cast<std::size_t>(c[detail::kFront]) : 0;
+  stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
+  num_results_ = std::min(results, results_.size());
+  num_front_ = std::min(front, front_.size());
+  stats_.results = num_results_;
+  stats_.front = num_front_;
+  const bool fits = results <= results_.size() && front <= front_.size();
+  if (!fits) detail::grow_outputs(*this, results, front);  // so that traverse() from the same seeds fits
+  return fits && c[detail::kHalted] == 0;
+}
+
+template <class Task>
+DeviceCount TraversalOutput<Task>::result_count() const {
+  return {counters_.data() + detail::kResults, DeviceCount::Part::whole, results_.size()};
 }
 
 template <class Task>
