@@ -40,6 +40,8 @@ struct Row {
   int steps_measured = 0;
   double total = 0, refit = 0, traverse = 0, features = 0, narrow = 0;
   double mean_total = 0;  // mean over the measured steps
+  std::size_t rebuilds = 0, restarts = 0;  // measured steps that rebuilt the BVH / traversed from the root
+  std::vector<double> step_totals;         // every measured step's total_ms, in order (what the mean averages)
   lwsccd::StepStats last;  // counts of the last measured step
   double earliest_toi = 1;
   bool has_truth = false;
@@ -90,7 +92,13 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       return lwsccd_bench::median(v);
     };
     r.total = med(&lwsccd::StepStats::total_ms);
-    for (std::size_t i = from; i < to; ++i) r.mean_total += outcomes[i].stats.total_ms / double(to - from);
+    for (std::size_t i = from; i < to; ++i) {
+      const lwsccd::StepStats& st = outcomes[i].stats;
+      r.mean_total += st.total_ms / double(to - from);
+      r.rebuilds += st.rebuilt;
+      r.restarts += st.restarted_from_root;
+      r.step_totals.push_back(st.total_ms);
+    }
     r.refit = med(&lwsccd::StepStats::refit_ms);
     r.traverse = med(&lwsccd::StepStats::traverse_ms);
     r.features = med(&lwsccd::StepStats::features_ms);
@@ -281,7 +289,9 @@ int main(int argc, char** argv) {
       std::fprintf(f, ", \"certified_hits\": %zu, \"certified_misses\": %zu, \"fallbacks\": %zu, \"screened\": %zu",
                    v.certified_hits + e.certified_hits, v.certified_misses + e.certified_misses, v.fallbacks + e.fallbacks,
                    v.screened + e.screened);
-      std::fprintf(f, "}");
+      std::fprintf(f, ", \"rebuilds\": %zu, \"restarts_from_root\": %zu, \"step_total_ms\": [", r.rebuilds, r.restarts);
+      for (std::size_t k = 0; k < r.step_totals.size(); ++k) std::fprintf(f, "%s%.4f", k ? ", " : "", r.step_totals[k]);
+      std::fprintf(f, "]}");
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-pipeline: error: %s\n", e.what());

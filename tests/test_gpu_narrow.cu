@@ -96,11 +96,13 @@ TEST_CASE("GPU narrow phase: the filter's second round leaves fewer pairs to the
 
 TEST_CASE("GPU hit sort: by (first, second) over only the bits the feature ids take", "[gpu][narrow]") {
   // Limits at and around powers of two (the key packs first above second by the ids' bit width),
-  // ids up to the largest below the limit, duplicates of first, and n = 0, 1 (left as they are).
+  // ids up to the largest below the limit, duplicates of first, n = 0, 1 (left as they are), and
+  // n on both sides of the one-block sort's limit (256).
   std::mt19937 rng(7);
   for (const std::size_t limit : {std::size_t(1), std::size_t(2), std::size_t(3), std::size_t(1) << 16, (std::size_t(1) << 16) + 1,
                                   std::size_t(50021), std::size_t(1) << 31})
-    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), std::size_t(777), std::size_t(20000)}) {
+    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), std::size_t(255), std::size_t(256),
+                                  std::size_t(257), std::size_t(777), std::size_t(20000)}) {
       INFO("limit " << limit << ", n " << n);
       std::uniform_int_distribution<std::size_t> id(0, limit - 1), few(0, std::min<std::size_t>(limit - 1, 9));
       std::vector<FeatureHit<double>> hits(n);

@@ -539,6 +539,35 @@ __global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id
   keys[i] = (static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) << id_bits) | static_cast<unsigned>(hits[i].second);
 }
 
+// A sort of at most kThreads hits in one block, a thread per hit: its place is the number of
+// keys below its own plus the equal ones before it (stable, as the radix sort). A step's few
+// hits (horse-gallop: a handful) took a radix sort's ~14 us single-tile pass plus the key
+// kernel; the block compares every pair of keys in shared memory instead.
+template <class T, int kThreads>
+__global__ void __launch_bounds__(kThreads)
+    small_hit_sort_kernel(const FeatureHit<T>* hits, int n, int id_bits, FeatureHit<T>* sorted) {
+  __shared__ unsigned long long keys[kThreads];
+  const int i = static_cast<int>(threadIdx.x);
+  FeatureHit<T> hit;
+  unsigned long long key = 0;
+  if (i < n) {
+    hit = hits[i];
+    assert(static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) >> id_bits == 0 &&
+           static_cast<unsigned long long>(static_cast<unsigned>(hit.second)) >> id_bits == 0 && "a feature id past the mesh's features");
+    key = (static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) << id_bits) | static_cast<unsigned>(hit.second);
+    keys[i] = key;
+  }
+  __syncthreads();
+  if (i >= n) return;
+  int place = 0;
+  for (int j = 0; j < n; ++j) {
+    const unsigned long long other = keys[j];
+    place += other < key || (other == key && j < i);
+  }
+  sorted[place] = hit;
+}
+constexpr int kSmallHitSort = 256;  ///< hits sorted by small_hit_sort_kernel (more: the radix sort)
+
 // Bits of the largest feature id below `id_limit` (at least 1, at most 32).
 inline int id_bits_below(std::size_t id_limit) {
   int bits = 1;
@@ -815,6 +844,13 @@ void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::s
   // Only the bits the ids use are sorted: horse-gallop's 50 K features take 32 of the 64, which
   // halves the radix passes (a sort of a few dozen hits took ~24 us per list on an H100).
   const int id_bits = detail::id_bits_below(id_limit);
+  if (n <= static_cast<std::size_t>(detail::kSmallHitSort)) {
+    detail::small_hit_sort_kernel<T, detail::kSmallHitSort>
+        <<<1, detail::kSmallHitSort, 0, stream>>>(hits.data(), static_cast<int>(n), id_bits, sorted_.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    std::swap(hits, sorted_);
+    return;
+  }
   detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(hits.data(), n, id_bits, keys_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::size_t bytes = 0;
