@@ -308,6 +308,25 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   CHECK(on_device == 3);
   CHECK(out.stats().relaunches == 0);
   CHECK(as_pairs(out.download_front()) == next_front);
+  // Lists too short for the flat start's children: the device counts what had no room, collect()
+  // asks for traverse(), which grows them until a pass fits; the same with tiny deques, whose
+  // hand-backs overflow too, and with traverse() alone.
+  REQUIRE(processed > front.size() + 1);  // the flat start leaves children
+  out.list_room_ = 1;
+  REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
+  CHECK_FALSE(complete);
+  CHECK(out.list_room_ > 1);
+  CHECK(as_pairs(out.download_front()) == next_front);
+  out.list_room_ = 1;
+  REQUIRE(run_async(TinyFlatLazy{}, complete, on_device) == fresh);
+  CHECK(as_pairs(out.download_front()) == next_front);
+  out.list_room_ = 1;
+  REQUIRE(gpu_pairs<TinyFlatLazy>(task, front, out, true) == fresh);
+  CHECK(out.stats().relaunches > 0);
+  CHECK(as_pairs(out.download_front()) == next_front);
+  const auto from_root = gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out, true);
+  out.list_room_ = 1;  // from the root: tiny deques hand items back into a list of one
+  REQUIRE(gpu_pairs<TinyLazy>(task, {NodePair{0, 0}}, out, true) == from_root);
   // A start the flat launch does not take (the root) runs as traverse() does: nothing to collect.
   gpu::DeviceBuffer<NodePair> root;
   root.upload(std::vector<NodePair>{NodePair{0, 0}});

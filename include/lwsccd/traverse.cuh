@@ -239,6 +239,7 @@ class TraversalOutput {
   DeviceBuffer<unsigned> timeline_counts_;       ///< events per block in the last launch
   int timeline_capacity_ = 0;
   int launched_blocks_ = 0;  ///< LazyStealScheduler: blocks of the last launch
+  std::size_t list_room_ = 0;  ///< LazyStealScheduler: items its start and hand-back lists hold (grown on overflow)
   DeviceBuffer<unsigned long long> counters_;  ///< see detail::Counter
   PinnedBuffer<unsigned long long> host_counters_;  ///< their last reading (pinned: the copy does not block)
   std::uint64_t counter_reads_ = 0;                 ///< readings so far (traverse() reuses a final one)

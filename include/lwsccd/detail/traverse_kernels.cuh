@@ -29,7 +29,8 @@ enum Counter : int {
   kPending = 7,    ///< LazyStealScheduler: the live items of a launch (see the termination note)
   kStartItems = 8,  ///< LazyStealScheduler: the length of the launch's start list
   kStartTaken = 9,  ///< LazyStealScheduler: how much of the start list blocks have taken
-  kCounters = 10
+  kLost = 10,       ///< LazyStealScheduler: items a list had no room for (the pass is rerun with more)
+  kCounters = 11
 };
 
 template <class Task>
@@ -97,7 +98,8 @@ __device__ void flush_outputs(const DeviceEmitter<Task>& e, const Outputs<Task>&
 // n * kMaxChildren by the caller, so it cannot overflow).
 template <class Task, int kThreads>
 __global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typename Task::item_type* in, std::size_t n,
-                                                          typename Task::item_type* next, Outputs<Task> out) {
+                                                          typename Task::item_type* next, std::size_t next_room,
+                                                          Outputs<Task> out) {
   using Scan = cub::BlockScan<int, kThreads>;
   __shared__ typename Scan::TempStorage storage;
   __shared__ unsigned long long base;
@@ -109,7 +111,8 @@ __global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typen
   Scan(storage).ExclusiveSum(e.count, offset, total);
   if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(total));
   __syncthreads();
-  for (int c = 0; c < e.count; ++c) next[base + offset + c] = e.children[c];
+  for (int c = 0; c < e.count; ++c)
+    if (base + offset + c < next_room) next[base + offset + c] = e.children[c];
   __syncthreads();
   flush_outputs<Task, Scan>(e, out, storage, base);
 }
@@ -454,8 +457,8 @@ std::size_t expand_level(const Task& task, const typename Task::item_type* in, s
                          bool record_front, cudaStream_t stream) {
   ensure(out.next_, n * Task::kMaxChildren);
   LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
-  expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(task, in, n, out.next_.data(),
-                                                                                        outputs_of(out, record_front));
+  expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(
+      task, in, n, out.next_.data(), n * Task::kMaxChildren, outputs_of(out, record_front));
   LWSCCD_CUDA_CHECK_LAUNCH();
   const auto c = read_counters(out, stream);
   out.stats_.items_processed += n;
@@ -630,13 +633,17 @@ __device__ inline void unlock_deque(int* lock) {
 constexpr unsigned long long kCountOnDevice = ~0ull;
 template <int kThreads>
 __global__ void __launch_bounds__(kThreads) lazy_start_kernel(unsigned long long* counters, unsigned long long* ends, int* locks, int blocks,
-                                         unsigned long long n) {
+                                         unsigned long long n, unsigned long long room) {
   for (int b = static_cast<int>(threadIdx.x); b < blocks; b += static_cast<int>(blockDim.x)) {
     ends[2 * b] = ends[2 * b + 1] = 0;
     locks[b] = 0;
   }
   if (threadIdx.x == 0) {
-    const unsigned long long items = n == kCountOnDevice ? counters[kAppended] : n;
+    unsigned long long items = n == kCountOnDevice ? counters[kAppended] : n;
+    if (items > room) {  // the expansion's children outgrew their list: a rerun has more room
+      counters[kLost] += items - room;
+      items = room;
+    }
     counters[kStartItems] = items;
     counters[kPending] = items;
     counters[kStartTaken] = 0;
@@ -650,7 +657,8 @@ template <class Task, class Policy>
 __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm ? Policy::kBlocksPerSm : 0)
     lazy_steal_kernel(Task task, const typename Task::item_type* start_list, typename Task::item_type* deques,
                       unsigned long long* ends, int* locks, int capacity, Outputs<Task> out,
-                      typename Task::item_type* hand_back, BlockActivity* activity, TimelineSink timeline) {
+                      typename Task::item_type* hand_back, std::size_t hand_back_room, BlockActivity* activity,
+                      TimelineSink timeline) {
   using Item = typename Task::item_type;
   constexpr int kThreads = Policy::kBlockThreads;
   constexpr int kShared = Policy::kSharedStack;
@@ -819,6 +827,8 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
           unlock_deque(&locks[me]);  // full: hand the batch back to the host instead
           from = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(moved));
           atomicAdd(&out.counters[kHalted], 1ull);
+          if (from + moved > hand_back_room)  // no room to hand them back: the pass reruns with more
+            atomicAdd(&out.counters[kLost], from + moved - (from > hand_back_room ? from : hand_back_room));
           live.fetch_sub(static_cast<unsigned long long>(moved), cuda::memory_order_acq_rel);
           action = 5;
         } else {
@@ -828,7 +838,8 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
       }
       __syncthreads();
       if (action == 5) {
-        for (int i = t; i < moved; i += kThreads) hand_back[from + i] = s_items[i];
+        for (int i = t; i < moved; i += kThreads)
+          if (from + i < hand_back_room) hand_back[from + i] = s_items[i];
       } else {
         Item* deque = deques + static_cast<std::size_t>(me) * capacity;
         for (int i = t; i < moved; i += kThreads) deque[(from + i) % capacity] = s_items[i];
@@ -881,19 +892,22 @@ int prepare_lazy(TraversalOutput<Task>& out, TimelineSink& timeline, cudaStream_
 }
 
 // One launch of the lazy kernel over the start list out.work_ of `n` items (kCountOnDevice: the
-// count the last expansion left on the device; `most` bounds it), deques of `capacity` items per
-// block. What halted blocks hand back goes to out.next_ (count in kAppended).
+// count the flat launch left on the device, at most out.list_room_ of them kept), deques of
+// `capacity` items per block. What halted blocks hand back goes to out.next_ (count in kAppended;
+// past out.list_room_ they are counted in kLost and the pass must run again).
 template <class Task, class Policy>
-void launch_lazy(const Task& task, TraversalOutput<Task>& out, unsigned long long n, std::size_t most, int blocks,
-                 int capacity, const TimelineSink& timeline, bool record_front, cudaStream_t stream) {
+void launch_lazy(const Task& task, TraversalOutput<Task>& out, unsigned long long n, int blocks, int capacity,
+                 const TimelineSink& timeline, bool record_front, cudaStream_t stream) {
   ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
-  ensure(out.next_, static_cast<std::size_t>(blocks) * Policy::kSharedStack * 4 + most);
+  ensure(out.next_, out.list_room_);
   if (timeline.events) LWSCCD_CUDA_CHECK(cudaMemsetAsync(timeline.counts, 0, blocks * sizeof(unsigned), stream));
-  lazy_start_kernel<256><<<1, 256, 0, stream>>>(out.counters_.data(), out.deque_ends_.data(), out.locks_.data(), blocks, n);
+  const unsigned long long start_room = n == kCountOnDevice ? out.list_room_ : n;
+  lazy_start_kernel<256><<<1, 256, 0, stream>>>(out.counters_.data(), out.deque_ends_.data(), out.locks_.data(), blocks, n,
+                                                start_room);
   LWSCCD_CUDA_CHECK_LAUNCH();
   lazy_steal_kernel<Task, Policy><<<blocks, Policy::kBlockThreads, 0, stream>>>(
       task, out.work_.data(), out.stacks_.data(), out.deque_ends_.data(), out.locks_.data(), capacity,
-      outputs_of(out, record_front), out.next_.data(), out.block_activity_.data(), timeline);
+      outputs_of(out, record_front), out.next_.data(), out.list_room_, out.block_activity_.data(), timeline);
   LWSCCD_CUDA_CHECK_LAUNCH();
 }
 
@@ -905,53 +919,87 @@ bool lazy_flat_start(std::size_t num_seeds, int blocks) {
          num_seeds >= static_cast<std::size_t>(blocks) * static_cast<std::size_t>(Policy::kFlatStartPerBlock);
 }
 
+// The lists the lazy scheduler's start and hand-backs use hold out.list_room_ items: at first a
+// shared stack's worth per block, then what earlier passes needed (a front's children are few:
+// horse-gallop's 911 K front items leave ~54 K, where a bound of kMaxChildren per item took 29 MB).
+template <class Task, class Policy>
+void size_lazy_lists(TraversalOutput<Task>& out, int blocks) {
+  if (out.list_room_ == 0) out.list_room_ = static_cast<std::size_t>(blocks) * Policy::kSharedStack;
+}
+
+// The flat launch of a front's start: every seed processed once, the children into out.work_
+// (their count left on the device, in kAppended; past out.list_room_ only counted).
+template <class Task>
+void enqueue_flat_start(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                        TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+  ensure(out.next_, out.list_room_);
+  expand_kernel<Task, 256><<<static_cast<unsigned>((num_seeds + 255) / 256), 256, 0, stream>>>(
+      task, seeds, num_seeds, out.next_.data(), out.list_room_, outputs_of(out, record_front));
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  std::swap(out.work_, out.next_);
+  out.stats_.flat_start_items = num_seeds;
+  out.stats_.items_processed += num_seeds;  // the lazy launch counts its own
+}
+
 template <class Task, class Policy>
 void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
                     TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
   TimelineSink timeline;
   const int blocks = prepare_lazy<Task, Policy>(out, timeline, stream);
+  size_lazy_lists<Task, Policy>(out, blocks);
   int capacity = Policy::kDequeCapacity;
   // A few items for every block to start with (a fresh traversal starts from one root item); a
   // start of many items (a front) is processed once by a flat launch instead, and the blocks
-  // share only what it left (LazyStealScheduler::kFlatStartPerBlock).
-  const bool flat_start = lazy_flat_start<Policy>(num_seeds, blocks);
-  std::size_t n = flat_start ? expand_level(task, seeds, num_seeds, out, record_front, stream)
-                             : expand_breadth_first(task, seeds, num_seeds,
-                                                    static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out, record_front, stream);
-  out.stats_.flat_start_items = flat_start ? num_seeds : 0;
-  while (n > 0) {
-    launch_lazy<Task, Policy>(task, out, n, n, blocks, capacity, timeline, record_front, stream);
+  // share only what it left (LazyStealScheduler::kFlatStartPerBlock), its count read on the device.
+  unsigned long long n = kCountOnDevice;
+  if (lazy_flat_start<Policy>(num_seeds, blocks)) {
+    enqueue_flat_start(task, seeds, num_seeds, out, record_front, stream);
+    // The host waits here (traverse_async does not): a front whose items all ended at once (no
+    // children, as is common) then needs no lazy launch (~14 us on cloth-funnel's front). The
+    // lazy launch still takes the count from the device, which keeps only what the list held.
+    if (read_counters(out, stream)[kAppended] == 0) return;
+  } else {
+    n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out,
+                             record_front, stream);
+    out.stats_.flat_start_items = 0;
+    if (n == 0) return;
+    out.list_room_ = std::max<std::size_t>(out.list_room_, n);
+  }
+  while (true) {
+    launch_lazy<Task, Policy>(task, out, n, blocks, capacity, timeline, record_front, stream);
     const auto c = read_counters(out, stream);
-    n = static_cast<std::size_t>(c[kAppended]);
-    if (c[kHalted] > 0) {
-      ++out.stats_.relaunches;
-      capacity *= 2;
-    }
+    if (c[kLost] > 0) return;  // a list had no room: run_until_outputs_fit grows it and runs the pass again
     std::swap(out.work_, out.next_);
+    n = c[kAppended];
+    if (n == 0) return;
+    ++out.stats_.relaunches;  // halted blocks handed items back: they start the next launch
+    capacity *= 2;
   }
 }
 
 // A start that the flat launch takes (see lazy_flat_start) enqueued whole, without a host round
 // trip: the flat launch leaves its children's count on the device and the lazy launch reads it
 // there. Returns false (nothing enqueued) for other starts. What the host would have done between
-// the launches - relaunch what halted blocks handed back, grow outputs that overflowed - is left
-// to TraversalOutput::collect(), which reports it.
+// the launches - relaunch what halted blocks handed back, grow outputs or lists that overflowed -
+// is left to TraversalOutput::collect(), which reports it.
 template <class Task, class Policy>
 bool enqueue_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
                         TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
   TimelineSink timeline;
   const int blocks = prepare_lazy<Task, Policy>(out, timeline, stream);
   if (!lazy_flat_start<Policy>(num_seeds, blocks)) return false;
-  const std::size_t most = num_seeds * Task::kMaxChildren;
-  ensure(out.next_, most);
-  expand_kernel<Task, 256><<<static_cast<unsigned>((num_seeds + 255) / 256), 256, 0, stream>>>(
-      task, seeds, num_seeds, out.next_.data(), outputs_of(out, record_front));
-  LWSCCD_CUDA_CHECK_LAUNCH();
-  std::swap(out.work_, out.next_);
-  launch_lazy<Task, Policy>(task, out, kCountOnDevice, most, blocks, Policy::kDequeCapacity, timeline, record_front, stream);
-  out.stats_.flat_start_items = num_seeds;
-  out.stats_.items_processed = num_seeds;  // the lazy launch's count is added by collect()
+  size_lazy_lists<Task, Policy>(out, blocks);
+  enqueue_flat_start(task, seeds, num_seeds, out, record_front, stream);
+  launch_lazy<Task, Policy>(task, out, kCountOnDevice, blocks, Policy::kDequeCapacity, timeline, record_front, stream);
   return true;
+}
+
+// After a pass that lost `lost` items for want of list room: room for them and a quarter more
+// (at least twice the room: hand-backs vary from run to run).
+template <class Task>
+void grow_lazy_lists(TraversalOutput<Task>& out, unsigned long long lost) {
+  const std::size_t needed = out.list_room_ + static_cast<std::size_t>(lost);
+  out.list_room_ = std::max(2 * out.list_room_, needed + needed / 4);
 }
 
 template <class S, class = void>
@@ -1008,6 +1056,15 @@ void run_until_outputs_fit(TraversalOutput<Task>& out, bool record_front, cudaSt
     out.stats_.items_processed += static_cast<std::size_t>(c[kProcessed]);
     const std::size_t results = static_cast<std::size_t>(c[kResults]);
     const std::size_t front = record_front ? static_cast<std::size_t>(c[kFront]) : 0;
+    if (c[kLost] > 0) {  // the lazy scheduler's lists had no room for some items: longer ones, again
+      grow_lazy_lists(out, c[kLost]);
+      if (!grow_outputs(out, results, front)) {
+        out.complete_ = false;
+        return;
+      }
+      ++out.stats_.relaunches;
+      continue;
+    }
     if (results <= out.results_.size() && front <= out.front_.size()) {
       out.num_results_ = results;
       out.num_front_ = front;
@@ -1077,7 +1134,8 @@ bool TraversalOutput<Task>::collect() {
   stats_.front = num_front_;
   const bool fits = results <= results_.size() && front <= front_.size();
   if (!fits) detail::grow_outputs(*this, results, front);  // so that traverse() from the same seeds fits
-  return fits && c[detail::kHalted] == 0;
+  if (c[detail::kLost] > 0) detail::grow_lazy_lists(*this, c[detail::kLost]);
+  return fits && c[detail::kHalted] == 0 && c[detail::kLost] == 0;
 }
 
 template <class Task>
