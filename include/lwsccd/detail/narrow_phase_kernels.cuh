@@ -838,8 +838,6 @@ bool NarrowPhase<Method, T, Policy>::collect() {
 template <class T>
 void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::size_t id_limit, cudaStream_t stream) {
   if (n < 2) return;
-  keys_.resize_discard(n);
-  sorted_keys_.resize_discard(n);
   sorted_.resize_discard(std::max(n, hits.size()));
   // Only the bits the ids use are sorted: horse-gallop's 50 K features take 32 of the 64, which
   // halves the radix passes (a sort of a few dozen hits took ~24 us per list on an H100).
@@ -851,6 +849,8 @@ void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::s
     std::swap(hits, sorted_);
     return;
   }
+  keys_.resize_discard(n);
+  sorted_keys_.resize_discard(n);
   detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(hits.data(), n, id_bits, keys_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::size_t bytes = 0;

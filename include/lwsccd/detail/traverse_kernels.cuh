@@ -94,8 +94,8 @@ __device__ void flush_outputs(const DeviceEmitter<Task>& e, const Outputs<Task>&
   __syncthreads();
 }
 
-// One breadth-first level: every item processed once, children appended to `next` (sized
-// n * kMaxChildren by the caller, so it cannot overflow).
+// One breadth-first level: every item processed once, children appended to `next`, which holds
+// `next_room` (kAppended counts them all: a caller that sized it below n * kMaxChildren checks).
 template <class Task, int kThreads>
 __global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typename Task::item_type* in, std::size_t n,
                                                           typename Task::item_type* next, std::size_t next_room,
@@ -432,14 +432,20 @@ int co_resident_blocks(Kernel kernel, int threads, int blocks_per_sm, std::atomi
   return resident_blocks(std::min(fit, blocks_per_sm));
 }
 
-// Reads the counters (one synchronisation; pinned target). The reading stays in host_counters_,
-// so that traverse() need not read again what the scheduler's last read saw.
+// Enqueues the counters' copy into host_counters_ (pinned: the copy does not block).
 template <class Task>
-std::vector<unsigned long long> read_counters(TraversalOutput<Task>& out, cudaStream_t stream) {
+void enqueue_counter_read(TraversalOutput<Task>& out, cudaStream_t stream) {
   if (out.host_counters_.size() < static_cast<std::size_t>(kCounters))
     out.host_counters_ = PinnedBuffer<unsigned long long>(kCounters);
   LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.host_counters_.data(), out.counters_.data(), kCounters * sizeof(unsigned long long),
                                     cudaMemcpyDeviceToHost, stream));
+}
+
+// Reads the counters (one synchronisation). The reading stays in host_counters_, so that
+// traverse() need not read again what the scheduler's last read saw.
+template <class Task>
+std::vector<unsigned long long> read_counters(TraversalOutput<Task>& out, cudaStream_t stream) {
+  enqueue_counter_read(out, stream);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
   ++out.counter_reads_;
   return std::vector<unsigned long long>(out.host_counters_.data(), out.host_counters_.data() + kCounters);
@@ -1101,23 +1107,19 @@ template <class Scheduler, class Task>
 void traverse_async(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
                     bool record_front, cudaStream_t stream) {
   static_assert(require_traversal_task<Task>::value, "");
-  out.awaiting_collect_ = false;
   if constexpr (detail::is_lazy_steal<Scheduler>::value) {
     if (out.output_limit_ == 0) {  // a limit needs the host between launches to keep to it
       detail::prepare_outputs(out, record_front);
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
       if (detail::enqueue_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream)) {
-        if (out.host_counters_.size() < static_cast<std::size_t>(detail::kCounters))
-          out.host_counters_ = PinnedBuffer<unsigned long long>(detail::kCounters);
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.host_counters_.data(), out.counters_.data(),
-                                          detail::kCounters * sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream));
+        detail::enqueue_counter_read(out, stream);
         out.awaiting_collect_ = true;
         out.awaiting_front_ = record_front;
         return;
       }
     }
   }
-  traverse<Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+  traverse<Scheduler>(task, seeds, num_seeds, out, record_front, stream);  // (clears awaiting_collect_)
 }
 
 template <class Task>
