@@ -13,6 +13,9 @@
 //               filtered inclusion (the method before it) in mode contacts: scenes, built-in 100K
 //   scaling     the default policies on the built-in scene at --sizes (default 1K..10M)
 //   default     the default policies on every scene (for the CPU backend: a short sweep)
+//   front       horse-gallop and built-in 100K, device-resident too, at several front growth
+//               limits (PipelineParams::front_growth_limit): restarts from the root against
+//               fronts that grow
 //   all         schedulers, methods and scaling
 #include <algorithm>
 #include <chrono>
@@ -41,7 +44,8 @@ struct Row {
   double total = 0, refit = 0, traverse = 0, features = 0, narrow = 0;
   double mean_total = 0;  // mean over the measured steps
   std::size_t rebuilds = 0, restarts = 0;  // measured steps that rebuilt the BVH / traversed from the root
-  std::vector<double> step_totals;         // every measured step's total_ms, in order (what the mean averages)
+  std::vector<lwsccd::StepStats> steps;    // every measured step's stats, in order (what the mean averages)
+  double front_growth_limit = 0;
   lwsccd::StepStats last;  // counts of the last measured step
   double earliest_toi = 1;
   bool has_truth = false;
@@ -63,9 +67,9 @@ const char* mode_name(lwsccd::CcdMode m) {
 }
 
 void measure(const Scenario& sc, const std::string& sweep, const ccd_app::PolicyChoice& policies, const std::string& device,
-             int reps, std::vector<Row>& rows, lwsccd::CcdMode mode = lwsccd::CcdMode::contacts, bool resident = false) {
+             int reps, std::vector<Row>& rows, lwsccd::CcdMode mode = lwsccd::CcdMode::contacts, bool resident = false,
+             lwsccd::PipelineParams params = {}) {
   const std::size_t first_row = rows.size();
-  lwsccd::PipelineParams params;
   params.mode = mode;
   auto pipeline = device == "gpu" ? ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies)
                                   : ccd_app::make_cpu_pipeline(sc.mesh, sc.layout, params, policies);
@@ -85,6 +89,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     r.triangles = sc.mesh->num_faces();
     r.policies = policies;
     r.mode = mode;
+    r.front_growth_limit = params.front_growth_limit;
     r.steps_measured = static_cast<int>(to - from);
     auto med = [&](double lwsccd::StepStats::*field) {
       std::vector<double> v;
@@ -97,7 +102,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       r.mean_total += st.total_ms / double(to - from);
       r.rebuilds += st.rebuilt;
       r.restarts += st.restarted_from_root;
-      r.step_totals.push_back(st.total_ms);
+      r.steps.push_back(st);
     }
     r.refit = med(&lwsccd::StepStats::refit_ms);
     r.traverse = med(&lwsccd::StepStats::traverse_ms);
@@ -158,13 +163,14 @@ std::vector<std::size_t> parse_sizes(const std::string& text) {
 int main(int argc, char** argv) {
   const auto args = lwsccd_bench::parse_bench_args(
       argc, argv, 5, {"--sweep=", "--device=", "--sizes="},
-      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
+      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default|front] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
       "                             [--data DIR] [--reps N] [--json FILE]");
   try {
     const std::string sweep = args.value("--sweep", "all");
-    if (sweep != "all" && sweep != "schedulers" && sweep != "methods" && sweep != "modes" && sweep != "scaling" && sweep != "default")
+    if (sweep != "all" && sweep != "schedulers" && sweep != "methods" && sweep != "modes" && sweep != "scaling" &&
+        sweep != "default" && sweep != "front")
       throw lwsccd::InputError("command line", "--sweep",
-                               "expected all, schedulers, methods, modes, scaling or default, got '" + sweep + "'");
+                               "expected all, schedulers, methods, modes, scaling, default or front, got '" + sweep + "'");
     const std::string gpu = ccd_app::gpu_name();
     const std::string device = args.value("--device", gpu.empty() ? "cpu" : "gpu");
     if (device == "gpu" && gpu.empty()) {
@@ -260,6 +266,18 @@ int main(int argc, char** argv) {
       std::shared_ptr<lwsccd::ClothBallSimulation> sim;
       measure(builtin_scenario(100000, sim), "default", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true);
     }
+    if (sweep == "front") {
+      for (const double limit : {1.25, 1.5, 2.0, 3.0, 1e9}) {
+        lwsccd::PipelineParams params;
+        params.front_growth_limit = limit;
+        if (have_data)
+          measure(horse_scenario(), "front", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true,
+                  params);
+        std::shared_ptr<lwsccd::ClothBallSimulation> sim;
+        measure(builtin_scenario(100000, sim), "front", ccd_app::PolicyChoice{}, device, std::max(args.reps, 40), rows,
+                lwsccd::CcdMode::contacts, true, params);
+      }
+    }
     if (sweep == "all" || sweep == "scaling") {
       for (const std::size_t n : sizes) {
         std::shared_ptr<lwsccd::ClothBallSimulation> sim;
@@ -289,9 +307,28 @@ int main(int argc, char** argv) {
       std::fprintf(f, ", \"certified_hits\": %zu, \"certified_misses\": %zu, \"fallbacks\": %zu, \"screened\": %zu",
                    v.certified_hits + e.certified_hits, v.certified_misses + e.certified_misses, v.fallbacks + e.fallbacks,
                    v.screened + e.screened);
-      std::fprintf(f, ", \"rebuilds\": %zu, \"restarts_from_root\": %zu, \"step_total_ms\": [", r.rebuilds, r.restarts);
-      for (std::size_t k = 0; k < r.step_totals.size(); ++k) std::fprintf(f, "%s%.4f", k ? ", " : "", r.step_totals[k]);
-      std::fprintf(f, "]}");
+      std::fprintf(f, ", \"rebuilds\": %zu, \"restarts_from_root\": %zu, \"front_growth_limit\": %g", r.rebuilds, r.restarts,
+                   r.front_growth_limit);
+      // Every measured step, in order: its total and stages (ms), whether it traversed from the
+      // root, its front and BVTT nodes (what a mean over steps hides).
+      auto list = [&](const char* name, auto value) {
+        std::fprintf(f, ", \"%s\": [", name);
+        for (std::size_t k = 0; k < r.steps.size(); ++k) std::fprintf(f, "%s%.10g", k ? ", " : "", double(value(r.steps[k])));
+        std::fprintf(f, "]");
+      };
+      using S = lwsccd::StepStats;
+      list("step_total_ms", [](const S& st) { return st.total_ms; });
+      list("step_refit_ms", [](const S& st) { return st.refit_ms; });
+      list("step_traverse_ms", [](const S& st) { return st.traverse_ms; });
+      list("step_features_ms", [](const S& st) { return st.features_ms; });
+      list("step_narrow_ms", [](const S& st) { return st.narrow_ms; });
+      list("step_restarted", [](const S& st) { return st.restarted_from_root ? 1 : 0; });
+      list("step_rebuilt", [](const S& st) { return st.rebuilt ? 1 : 0; });
+      list("step_reruns", [](const S& st) { return st.reruns; });
+      list("step_front_outgrown", [](const S& st) { return st.front_outgrown ? 1 : 0; });
+      list("step_front", [](const S& st) { return st.front_size; });
+      list("step_bvtt_nodes", [](const S& st) { return st.bvtt_nodes; });
+      std::fprintf(f, "}");
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-pipeline: error: %s\n", e.what());

@@ -78,6 +78,42 @@ TEST_CASE("CPU pipeline on cloth-ball: no ground-truth contact lost, earliest TO
   CHECK(r.contacts.earliest_toi >= 7.49155879e-06 - 1e-6);
 }
 
+TEST_CASE("CPU pipeline over horse-gallop: the front growth limit decides the restarts, 0 the CPU's default",
+          "[data][pipeline]") {
+  const Sequence seq = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
+  const std::size_t steps = 12;  // the first restart by growth comes at step 4 with the CPU's limit
+  struct Run {
+    double limit;
+    std::vector<bool> restarted, rebuilt;
+    std::vector<std::size_t> front;
+    std::vector<StepResult<double>> results;
+  };
+  std::vector<Run> runs = {{0, {}, {}, {}, {}}, {kCpuFrontGrowthLimit, {}, {}, {}, {}}, {3 * kCpuFrontGrowthLimit, {}, {}, {}, {}}};
+  for (Run& run : runs) {
+    PipelineParams params;
+    params.front_growth_limit = run.limit;
+    cpu::CcdPipeline<> pipeline(seq.mesh(), params);
+    for (std::size_t s = 0; s < steps; ++s) {
+      const Step step = seq.step(s);
+      run.results.push_back(pipeline.step(step.x0, step.x1));
+      run.restarted.push_back(run.results.back().stats.restarted_from_root);
+      run.rebuilt.push_back(run.results.back().stats.rebuilt);
+      run.front.push_back(run.results.back().stats.front_size);
+    }
+  }
+  for (const Run& run : runs) {
+    INFO("limit " << run.limit);
+    CHECK(lwsccd_test::restarts_follow_growth_limit(run.restarted, run.rebuilt, run.front,
+                                                    run.limit > 0 ? run.limit : kCpuFrontGrowthLimit));
+    for (std::size_t s = 0; s < steps; ++s) lwsccd_test::require_same_contacts(run.results[s].contacts, runs[0].results[s].contacts);
+  }
+  auto restarts = [](const Run& run) { return std::count(run.restarted.begin(), run.restarted.end(), true); };
+  CHECK(runs[0].restarted == runs[1].restarted);
+  CHECK(restarts(runs[1]) > restarts(runs[2]));  // the limit made a difference here
+  std::printf("horse-gallop (CPU pipeline), %zu steps: %td restarts at the default limit, %td at %g\n", steps, restarts(runs[0]),
+              restarts(runs[2]), runs[2].limit);
+}
+
 TEST_CASE("CPU pipeline over horse-gallop: front tracking equals fresh traversals at every step", "[data][pipeline]") {
   const Sequence seq = load_sequence(lwsccd_test::data_dir() + "/sequences/horse-gallop");
   REQUIRE(seq.num_steps() == 47);

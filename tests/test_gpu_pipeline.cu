@@ -223,6 +223,50 @@ TEST_CASE("GPU pipeline from a front without a host round trip equals the CPU pi
   pipeline_from_fronts_equals_cpu<TinyFlatFrontLazy>();
 }
 
+TEST_CASE("GPU pipeline: a front that outgrows its buffer is not kept, the step's contacts are, and the next step starts "
+          "from that step's start",
+          "[gpu][pipeline][front]") {
+  const auto m = lwsccd_test::folded_cloth(20, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  // The cloth shrunk to 6.5% of its size with the same motion: its swept boxes overlap many more,
+  // and the front deepens sevenfold in one step (no rebuild, no restart: both backends go on
+  // from fronts).
+  std::vector<Vec3d> small0(m.x0.size()), small1(m.x1.size());
+  for (std::size_t v = 0; v < m.x0.size(); ++v) {
+    small0[v] = m.x0[v] * 0.065;
+    small1[v] = small0[v] + (m.x1[v] - m.x0[v]);
+  }
+  PipelineParams params;
+  params.rebuild_factor = 1e9;
+  params.front_growth_limit = 1e9;
+  gpu::CcdPipeline<Aabbf, FlatFrontLazy> gpu_pipeline(mesh, params);
+  cpu::CcdPipeline<> cpu_pipeline(mesh, params);
+  const auto g0 = gpu_pipeline.step(m.x0, m.x1);
+  const auto c0 = cpu_pipeline.step(m.x0, m.x1);
+  require_same_contacts(g0, c0);
+  const auto g1 = gpu_pipeline.step(small0, small1);
+  const auto c1 = cpu_pipeline.step(small0, small1);
+  require_same_contacts(g1, c1);
+  REQUIRE_FALSE(c1.stats.restarted_from_root);
+  // The traversal's outputs start with room for 2^16 entries each, which the first step's fit:
+  // the second step's front outgrows its room, its results do not (no rerun of the traversal).
+  REQUIRE(c0.stats.front_size < (1 << 16) / 2);
+  REQUIRE(c1.stats.front_size > (1 << 16));
+  REQUIRE(c1.stats.triangle_pairs < (1 << 16));
+  CHECK_FALSE(g1.stats.restarted_from_root);
+  CHECK(g1.stats.front_outgrown);
+  CHECK(g1.stats.front_size == g0.stats.front_size);  // the step's seeds are kept for the next
+  for (int s = 2; s < 4; ++s) {
+    INFO("step " << s);
+    const auto g = gpu_pipeline.step(small0, small1);
+    const auto c = cpu_pipeline.step(small0, small1);
+    require_same_contacts(g, c);
+    CHECK_FALSE(g.stats.restarted_from_root);
+    CHECK_FALSE(g.stats.front_outgrown);  // its output was grown
+    CHECK(g.stats.front_size == c.stats.front_size);
+  }
+}
+
 TEST_CASE("GPU pipeline: non-finite positions are an InputError at the step's end, and the next step starts afresh",
           "[gpu][pipeline][front]") {
   const auto m = lwsccd_test::folded_cloth(40, 1);
@@ -300,6 +344,8 @@ TEST_CASE("GPU pipeline over horse-gallop: front tracking equals fresh traversal
   gpu::CcdPipeline<> tracked(seq.mesh()), fresh(seq.mesh(), fresh_params);
   cpu::CcdPipeline<> cpu_tracked(seq.mesh());
   std::size_t restarts = 0, contacts = 0;
+  std::vector<bool> restarted, rebuilt;
+  std::vector<std::size_t> front;
   for (std::size_t s = 0; s < seq.num_steps(); ++s) {
     INFO("step " << s);
     const Step step = seq.step(s);
@@ -308,7 +354,12 @@ TEST_CASE("GPU pipeline over horse-gallop: front tracking equals fresh traversal
     require_same_contacts(a, cpu_tracked.step(step.x0, step.x1));
     restarts += a.stats.restarted_from_root;
     contacts += a.stats.hits_vf + a.stats.hits_ee;
+    restarted.push_back(a.stats.restarted_from_root);
+    rebuilt.push_back(a.stats.rebuilt);
+    front.push_back(a.stats.front_size);
   }
+  // The default growth limit is the GPU's (a front of the GPU may grow further than the CPU's).
+  CHECK(lwsccd_test::restarts_follow_growth_limit(restarted, rebuilt, front, kGpuFrontGrowthLimit));
   std::printf("horse-gallop (GPU pipeline): 47 steps, %zu contacts, %zu restarts from the root; equal to fresh "
               "traversals and to the CPU pipeline at every step\n",
               contacts, restarts);
@@ -463,6 +514,7 @@ void require_parts_agree(std::size_t triangles, int steps) {
   simulation.advance(30);
   PipelineParams params;
   params.part_pairs = 500;
+  params.front_growth_limit = kCpuFrontGrowthLimit;  // the fronts are compared: one limit for both backends
   gpu::CcdPipeline<> gpu_parts(simulation.mesh(), simulation.layout(), params);
   cpu::CcdPipeline<> cpu_parts(simulation.mesh(), simulation.layout(), params);
   cpu::CcdPipeline<> cpu_whole(simulation.mesh(), simulation.layout());

@@ -307,6 +307,22 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   CHECK_FALSE(complete);
   CHECK(on_device == 3);
   CHECK(out.stats().relaunches == 0);
+  CHECK(out.front_complete());
+  CHECK(as_pairs(out.download_front()) == next_front);
+  // Only the front too small: the results are complete (no traverse() asked for), the front is
+  // not (none kept), and its output is grown so that the next traversal's fits.
+  REQUIRE(next_front.size() > 5);
+  out.front_.resize_discard(5);
+  gpu::traverse_async<FlatLazy>(task, seeds.data(), front.size(), out, true);
+  CHECK(device_result_count(out) == fresh.size());
+  CHECK(out.collect());
+  CHECK_FALSE(out.front_complete());
+  CHECK(out.num_front() == 0);
+  CHECK(sorted(out.download_results()) == fresh);
+  CHECK(out.front_.size() >= next_front.size());
+  REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
+  CHECK(complete);
+  CHECK(out.front_complete());
   CHECK(as_pairs(out.download_front()) == next_front);
   // Lists too short for the flat start's children: the device counts what had no room, collect()
   // asks for traverse(), which grows them until a pass fits; the same with tiny deques, whose

@@ -1,10 +1,12 @@
 // Shared helpers for the tests.
 #pragma once
 
+#include <cstddef>
 #include <cstdlib>
 #include <filesystem>
 #include <random>
 #include <string>
+#include <vector>
 
 namespace lwsccd_test {
 
@@ -36,5 +38,19 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+/// Whether a sequence of steps restarted from the root exactly where a front growth limit says
+/// (FrontPolicy): the first step, a step that rebuilt the BVH, and every step after one whose
+/// front exceeded `limit` times the front recorded by the last restart.
+inline bool restarts_follow_growth_limit(const std::vector<bool>& restarted, const std::vector<bool>& rebuilt,
+                                         const std::vector<std::size_t>& front, double limit) {
+  std::size_t at_restart = 0;
+  for (std::size_t i = 0; i < restarted.size(); ++i) {
+    const bool expected = i == 0 || rebuilt[i] || static_cast<double>(front[i - 1]) > limit * static_cast<double>(at_restart);
+    if (restarted[i] != expected) return false;
+    if (restarted[i]) at_restart = front[i];
+  }
+  return true;
+}
 
 }  // namespace lwsccd_test

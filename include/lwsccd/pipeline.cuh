@@ -321,15 +321,29 @@ class CcdPipeline {
     return restart;
   }
 
+  // Whether the front has grown past the growth limit since the last restart (the next step
+  // then starts from the root).
+  bool front_past_growth_limit() const {
+    const double limit = lwsccd::detail::front_growth_limit_of(params_, kGpuFrontGrowthLimit);
+    return static_cast<double>(front_size_) > limit * static_cast<double>(size_at_restart_);
+  }
+
   // After the traversal's counts are read: its front becomes the next step's seeds (the buffers
-  // trade places; the one the seeds held takes the next front, with as much room).
+  // trade places; the one the seeds held takes the next front). A front that outgrew its buffer
+  // is not kept: the seeds stay, a cut the next step starts from as well (a rerun of the
+  // traversal for the front alone cost ~1 ms on horse-gallop, whose steps take ~0.45).
   void keep_front(bool restart, StepStats& stats) {
-    if (params_.front_tracking) {
+    stats.front_outgrown = !traversal_.front_complete();
+    if (params_.front_tracking && !stats.front_outgrown) {
       front_size_ = traversal_.num_front();
       std::swap(seeds_, traversal_.front_);
-      if (traversal_.front_.size() < seeds_.size()) traversal_.front_.resize_discard(seeds_.size());
+      // Room for the next front to grow by a quarter (horse-gallop's grows by up to a fifth a
+      // step): the spare buffer's whole capacity where that suffices, else half as much again.
+      const std::size_t need = front_size_ + front_size_ / 4;
+      const std::size_t capacity = traversal_.front_.capacity_bytes() / sizeof(NodePair);
+      traversal_.front_.resize_discard(capacity >= need ? capacity : front_size_ + front_size_ / 2);
       if (restart) size_at_restart_ = front_size_;
-      reset_next_ = static_cast<double>(front_size_) > params_.front_growth_limit * static_cast<double>(size_at_restart_);
+      reset_next_ = front_past_growth_limit();
     }
     stats.restarted_from_root = restart;
     stats.bvtt_nodes = traversal_.stats().items_processed;
@@ -464,7 +478,7 @@ class CcdPipeline {
       std::swap(seeds_, next_front_);
       front_size_ = next_front;
       if (restart) size_at_restart_ = front_size_;
-      reset_next_ = static_cast<double>(front_size_) > params_.front_growth_limit * static_cast<double>(size_at_restart_);
+      reset_next_ = front_past_growth_limit();
     } else {
       front_size_ = 0;
       seeds_ = DeviceBuffer<NodePair>();

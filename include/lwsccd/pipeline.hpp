@@ -33,7 +33,9 @@ struct PipelineParams {
   int max_iterations = 16384;    ///< narrow-phase work bound per pair (InclusionCcd)
   bool front_tracking = true;    ///< restart each traversal from the last front
   double rebuild_factor = 1.5;   ///< rebuild the BVH when its cost exceeds this times the cost at build
-  double front_growth_limit = 1.5;  ///< restart from the root once the front grew this much
+  /// Restart from the root once the front has grown this much since the last restart (>= 1, or
+  /// 0: the backend's default, kCpuFrontGrowthLimit / kGpuFrontGrowthLimit).
+  double front_growth_limit = 0;
   /// GPU backend: device bytes the pipeline may hold (0: no limit). Under a budget a step streams:
   /// its traversal, feature pairs and narrow phase run in parts that fit, with the same answer.
   std::size_t device_memory_budget = 0;
@@ -55,8 +57,26 @@ inline void PipelineParams::validate() const {
   require(tolerance > 0 && tolerance < 1, "tolerance", "must be in (0, 1)");
   require(max_iterations >= 1, "max_iterations", "must be at least 1");
   require(rebuild_factor >= 1, "rebuild_factor", "must be >= 1 (1: rebuild every step)");
-  require(front_growth_limit >= 1, "front_growth_limit", "must be >= 1");
+  require(front_growth_limit == 0 || front_growth_limit >= 1, "front_growth_limit",
+          "must be >= 1, or 0 for the backend's default");
 }
+
+/// The CPU backend's front growth limit: a CPU pays as much for an item of a front as for one of a
+/// traversal from the root, so a grown front soon costs more than a restart (horse-gallop on 2
+/// cores, mean step: limit 1.5 -> 84 ms, 3 -> 104; docs/BENCHMARKS.md, fourteenth session).
+inline constexpr double kCpuFrontGrowthLimit = 1.5;
+/// The GPU backend's: a front goes through one flat launch, a thread per item, several times
+/// cheaper per item than the lazy traversal from the root (H100, horse-gallop: 1.4 M front items
+/// in 0.05-0.06 ms, 1.25 M node pairs from the root in 0.25-0.30), so a front may grow further
+/// (mean step device-resident: limit 1.5 -> 0.56 ms with 11 restarts in 46 steps, 3 -> 0.50 with none).
+inline constexpr double kGpuFrontGrowthLimit = 3;
+
+namespace detail {
+/// The growth limit a backend applies: the caller's, or the backend's default for 0.
+inline double front_growth_limit_of(const PipelineParams& params, double backend_default) {
+  return params.front_growth_limit > 0 ? params.front_growth_limit : backend_default;
+}
+}  // namespace detail
 
 namespace detail {
 inline PipelineParams validated(PipelineParams params) {
@@ -139,6 +159,9 @@ struct StepStats {
   /// phase together); 0: the step ran whole.
   std::size_t traversal_parts = 0, narrow_parts = 0;
   bool rebuilt = false, restarted_from_root = false;
+  /// GPU: the front this step found outgrew its buffer (grown now). Its results are complete; the
+  /// next step starts from this step's start instead (as valid a cut), with no rerun of this one.
+  bool front_outgrown = false;
 };
 
 template <class T>
@@ -179,7 +202,7 @@ class CcdPipeline {
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(detail::checked_mesh(std::move(mesh), "cpu::CcdPipeline")), layout_(std::move(layout)), self_collides_(detail::self_collision_flags(layout_)),
         params_(detail::validated(params)), representatives_(*mesh_, layout_),
-        tracker_(FrontPolicy{params.front_growth_limit}) {
+        tracker_(FrontPolicy{detail::front_growth_limit_of(params, kCpuFrontGrowthLimit)}) {
     // Features that come within min_separation: their boxes, each grown by half of it, overlap.
     bvh_.set_leaf_margin(params_.min_separation / 2);
   }

@@ -224,10 +224,15 @@ class TraversalOutput {
   /// stage on the same stream reads where traverse_async() left the count on the device.
   DeviceCount result_count() const;
   /// After traverse_async() and a synchronisation of its stream: reads the counts (num_results(),
-  /// num_front(), stats()). False when the traversal did not complete in that pass - an output
-  /// overflowed (it is grown now) or a block's deque did (its items were handed back): run
-  /// traverse() from the same seeds. True, with nothing to do, after traverse().
+  /// num_front(), stats()). Returns whether the results are complete: false when the results'
+  /// output overflowed (it is grown now) or blocks handed items back (a full deque, a full list):
+  /// run traverse() from the same seeds. A front that outgrew its output leaves the results
+  /// complete and the front unusable (front_complete() false, num_front() 0; the output is grown
+  /// for the next traversal): start the next traversal from elsewhere, e.g. this one's seeds,
+  /// which are as valid a cut. True, with nothing to do, after traverse().
   bool collect();
+  /// False after a collect() whose front did not fit its output; true after traverse().
+  bool front_complete() const { return front_complete_; }
 
   // Storage used by the schedulers.
   DeviceBuffer<result_type> results_;
@@ -246,6 +251,7 @@ class TraversalOutput {
   std::size_t num_results_ = 0, num_front_ = 0;
   std::size_t output_limit_ = 0;
   bool complete_ = true;
+  bool front_complete_ = true;
   bool awaiting_collect_ = false;  ///< traverse_async() left the counts on the device
   bool awaiting_front_ = false;    ///< and recorded a front
   TraversalStats stats_;

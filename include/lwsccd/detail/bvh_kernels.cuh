@@ -157,13 +157,20 @@ void DeviceStep<P>::set_positions(const std::vector<Vec3d>& h0, const std::vecto
       throw InputError("gpu::DeviceStep", name, "has " + std::to_string(h->size()) + " positions, the mesh has " +
                                                     std::to_string(num_vertices) + " vertices");
   }
-  // Staged through a host array of P; the copy must finish before the staging is reused.
-  for (int which = 0; which < 2; ++which) {
-    const std::vector<Vec3d>& h = which == 0 ? h0 : h1;
-    staging_.resize(h.size());
-    for (std::size_t v = 0; v < h.size(); ++v) staging_[v] = h[v].template cast<P>();
-    (which == 0 ? x0 : x1).upload(staging_, stream);
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  if constexpr (std::is_same<P, double>::value) {
+    // Copied as they are (a copy from pageable memory returns once the driver has taken the data):
+    // staging them first cost a host copy of 24 bytes a vertex, twice (~25 ms at 5 M vertices).
+    x0.upload(h0, stream);
+    x1.upload(h1, stream);
+  } else {
+    // Staged through a host array of P; the copy must finish before the staging is reused.
+    for (int which = 0; which < 2; ++which) {
+      const std::vector<Vec3d>& h = which == 0 ? h0 : h1;
+      staging_.resize(h.size());
+      for (std::size_t v = 0; v < h.size(); ++v) staging_[v] = h[v].template cast<P>();
+      (which == 0 ? x0 : x1).upload(staging_, stream);
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    }
   }
 }
 

@@ -788,12 +788,17 @@ bool NarrowPhase<Method, T, Policy>::collect() {
   for (auto& l : lists_) {
     const unsigned long long* c = l.host_counters.data();
     const unsigned long long kept = std::max(c[detail::kSurvivors], c[detail::kSurvivorsPeak]);
+    unsigned long long hits = c[detail::kHits];
     if (kTwoPass && kept > l.work_room) {
+      // The run tested only the survivors that fitted: as many hits again per survivor for the
+      // rest, so that their room does not cost a second rerun (cloth-ball's first step did).
+      hits = std::max(hits, static_cast<unsigned long long>(static_cast<double>(hits) * static_cast<double>(kept) /
+                                                            static_cast<double>(l.work_room)));
       l.work_room = detail::grown_room(kept);
       complete = false;
     }
-    if (c[detail::kHits] > l.hit_room) {
-      l.hit_room = detail::grown_room(c[detail::kHits]);
+    if (hits > l.hit_room) {
+      l.hit_room = detail::grown_room(hits);
       complete = false;
     }
     // The filter's intervals that did not fit went to the whole search (same answers): more room

@@ -1025,6 +1025,7 @@ void prepare_outputs(TraversalOutput<Task>& out, bool record_front) {
   if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
   out.stats_ = {};
   out.complete_ = true;
+  out.front_complete_ = true;
   out.awaiting_collect_ = false;  // what an earlier traverse_async() left uncollected is superseded
 }
 
@@ -1130,14 +1131,16 @@ bool TraversalOutput<Task>::collect() {
   const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
   const std::size_t front = awaiting_front_ ? static_cast<std::size_t>(c[detail::kFront]) : 0;
   stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
+  const bool results_fit = results <= results_.size();
+  front_complete_ = front <= front_.size();
   num_results_ = std::min(results, results_.size());
-  num_front_ = std::min(front, front_.size());
+  num_front_ = front_complete_ ? front : 0;  // (growing the output discards what it held)
   stats_.results = num_results_;
   stats_.front = num_front_;
-  const bool fits = results <= results_.size() && front <= front_.size();
-  if (!fits) detail::grow_outputs(*this, results, front);  // so that traverse() from the same seeds fits
+  // Grown so that traverse() from the same seeds, or the next traversal, fits.
+  if (!results_fit || !front_complete_) detail::grow_outputs(*this, results, front);
   if (c[detail::kLost] > 0) detail::grow_lazy_lists(*this, c[detail::kLost]);
-  return fits && c[detail::kHalted] == 0 && c[detail::kLost] == 0;
+  return results_fit && c[detail::kHalted] == 0 && c[detail::kLost] == 0;
 }
 
 template <class Task>
