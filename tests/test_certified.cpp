@@ -2,6 +2,7 @@
 // and mutation checks: each of its error bounds, removed, lets a wrong answer through.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <map>
 #include <random>
@@ -112,7 +113,10 @@ void check_case(const Case& c, Outcome& o) {
   ++o.cases;
   o.misses += a.certainty == Certainty::miss;
   o.undecided += a.certainty == Certainty::undecided;
-  if (a.certainty == Certainty::hit && (a.lo > c.toi || (exact && a.hi < c.toi))) ++o.outside_interval;
+  // A float contact within the tolerance is one within float's rounding (as the fallback's): only
+  // its lower bound is exact.
+  const bool interval_exact = exact && !(a.tolerance && sizeof(T) == 4);
+  if (a.certainty == Certainty::hit && (a.lo > c.toi || (interval_exact && a.hi < c.toi))) ++o.outside_interval;
   if (!full.hit || full.toi > c.toi) ++o.fallback_misses;
 }
 
@@ -159,6 +163,85 @@ TEST_CASE("certified path: hard generated cases never missed, intervals contain 
     CHECK(o.outside_interval == 0);
     CHECK(o.fallback_misses == 0);  // the whole method (fallback included): a hit no later than the TOI
   }
+}
+
+// The certified path without its tolerance contacts: what it leaves undecided on a boundary.
+struct NoToleranceContactsPolicy : CertifiedPolicy {
+  static constexpr bool kToleranceContacts = false;
+};
+
+TEST_CASE("certified path: contacts on a boundary settled within the tolerance, as the fallback settles them", "[narrow][certified]") {
+  // Contacts exactly on a feature's boundary (a vertex through a triangle's edge or corner,
+  // sliding in along the plane, collinear edges end to end) and the same moved beside the boundary
+  // by a few multiples of the contact distance (tolerance x motion): a query the search leaves
+  // undecided may become a tolerance hit at the same lower bound, and only where the fallback
+  // searching from that bound finds a contact too, no later than the hit's interval.
+  std::mt19937 rng(15);
+  std::vector<Case> cases;
+  using V = Vec3<long double>;
+  const V a{0, 0, 0}, b{8, 0, 0}, c{0, 8, 0};
+  for (int n = 0; n < 48; ++n) {
+    const long double h0 = eighth(rng, 1, 64), h1 = eighth(rng, 1, 64), tc = h0 / (h0 + h1), x = eighth(rng, 1, 63);
+    for (long double beside : {0.0L, 1e-6L, 4e-6L, 3e-5L}) {
+      // Down through the edge y = 0, or beside it (outside the triangle by `beside` x the motion).
+      const long double off = -beside * (h0 + h1);
+      cases.push_back({"vf through an edge", true, {V{x, off, -h0}, a, b, c, V{x, off, h1}, a, b, c}, beside == 0 ? tc : -1});
+      cases.push_back({"vf through a corner", true, {V{off, off, -h0}, a, b, c, V{off, off, h1}, a, b, c}, beside == 0 ? tc : -1});
+      // Edge down onto the triangle's edge line end to end (collinear at tc).
+      cases.push_back({"ee end on an edge", false,
+                       {V{8 - off, 0, -h0}, V{12, 0, -h0}, b, c, V{8 - off, 0, h1}, V{12, 0, h1}, b, c}, beside == 0 ? tc : -1});
+    }
+  }
+  std::size_t undecided_before = 0, settled = 0, changed_otherwise = 0, fallback_disagrees = 0, toi_outside = 0, exact_settled = 0;
+  double float_early = 0;
+  auto check = [&](const Case& k, auto tag) {
+    using T = decltype(tag);
+    const CcdParams<T> params;
+    auto classify_both = [&](const auto& q) {
+      const CertifiedAnswer<T> with = detail::certified_classify<CertifiedPolicy>(q, params);
+      const CertifiedAnswer<T> without = detail::certified_classify<NoToleranceContactsPolicy>(q, params);
+      if (without.certainty != Certainty::undecided) {
+        changed_otherwise += with.certainty != without.certainty || with.lo != without.lo || with.hi != without.hi || with.tolerance;
+        return;
+      }
+      ++undecided_before;
+      if (with.certainty == Certainty::undecided) {
+        changed_otherwise += with.lo != without.lo;
+        return;
+      }
+      ++settled;
+      // The window's end rounded in T: in float lo + tolerance may round up by an ulp of lo.
+      const T width = sizeof(T) == 8 ? params.tolerance : 2 * params.tolerance;
+      changed_otherwise += with.certainty != Certainty::hit || !with.tolerance || with.lo != without.lo || with.hi - with.lo > width;
+      CcdParams<T> rest = params;
+      rest.time_from = without.lo;
+      CcdResult<T> fallback;
+      if constexpr (std::is_same_v<std::decay_t<decltype(q)>, VertexFaceQuery<T>>) fallback = Filtered<InclusionCcd>::vertex_face(q, rest);
+      else fallback = Filtered<InclusionCcd>::edge_edge(q, rest);
+      fallback_disagrees += !fallback.hit || fallback.toi > with.hi;
+      if (k.toi >= 0) {
+        ++exact_settled;
+        // The exact contact just after lo; in float only lo is exact (a contact within float's
+        // rounding, as the fallback's answer), and how early it is gets reported.
+        toi_outside += with.lo > k.toi || (sizeof(T) == 8 && k.toi - with.lo > 2 * params.tolerance);
+        if (sizeof(T) == 4) float_early = std::max(float_early, double(k.toi - with.lo));
+      }
+    };
+    for (int scale : {0, 40, -40}) {
+      const Case t = transformed(k, int(rng() % 6), int(rng() % 8), scale, false);
+      if (t.vertex_face) classify_both(as_query<T, VertexFaceQuery<T>>(t));
+      else classify_both(as_query<T, EdgeEdgeQuery<T>>(t));
+    }
+  };
+  for (const Case& k : cases) check(k, 0.0), check(k, 0.0f);
+  std::printf("  tolerance contacts: %zu of %zu undecided queries settled (%zu exact contacts), %zu other changes, fallback "
+              "disagreeing %zu, exact TOI outside %zu (float: lo up to %.3g before it)\n", settled, undecided_before, exact_settled,
+              changed_otherwise, fallback_disagrees, toi_outside, float_early);
+  CHECK(settled > 100);
+  CHECK(exact_settled > 50);
+  CHECK(changed_otherwise == 0);
+  CHECK(fallback_disagrees == 0);
+  CHECK(toi_outside == 0);
 }
 
 TEST_CASE("certified path: easy cases are decided without the fallback", "[narrow][certified]") {
@@ -350,7 +433,13 @@ TEST_CASE("certified filter: a query it decides gets the whole search's answer, 
     second_round += !first;
     ++excluded;
     noted_lower += noted.any;
-    if (noted.any) wrong += a.certainty != Certainty::undecided || a.lo != noted.lower || a.hi != T(1);
+    if (noted.any) {
+      // What the GPU's filter kernel settles such a query with: undecided from the noted time, or
+      // a contact within the tolerance right after it.
+      const CertifiedAnswer<T> settled = CertifiedCcd::undecided_from(q, params, noted.lower);
+      wrong += a.certainty != settled.certainty || a.lo != settled.lo || a.hi != settled.hi;
+      wrong += settled.lo != noted.lower;
+    }
     else wrong += a.certainty != Certainty::miss || a.lo != T(0) || a.hi != T(1);
   };
   for (const CcdParams<double>& params : settings)

@@ -163,6 +163,7 @@ namespace {
 // The certified fast path against the truth and against the inclusion search, query by query.
 struct CertifiedTally {
   std::size_t queries = 0, hits = 0, misses = 0, undecided = 0;
+  std::size_t tolerance_hits = 0;       ///< hits by a contact within the tolerance (kToleranceContacts)
   std::size_t missed_truth = 0;         ///< certified "no contact" on a pair that touches: must stay 0
   std::size_t hit_after_inclusion = 0;  ///< inclusion's TOI later than the certified interval: must stay 0
   std::size_t hit_without_truth = 0;    ///< certified hits on pairs that do not touch (false positives)
@@ -178,8 +179,10 @@ void certify_one(const Q& q, int truth, CertifiedTally& c) {
   lwsccd::detail::Noted<T> noted;
   const bool decided = Filter::decides(q, params, noted);
   if (decided && !CertifiedCcd::screen(q, params)) {
-    CHECK(a.certainty == (noted.any ? Certainty::undecided : Certainty::miss));
-    if (noted.any) CHECK(a.lo == noted.lower);
+    const CertifiedAnswer<T> settled = noted.any ? CertifiedCcd::undecided_from(q, params, noted.lower) : CertifiedAnswer<T>{Certainty::miss};
+    CHECK(a.certainty == settled.certainty);
+    CHECK(a.lo == settled.lo);
+    CHECK(a.tolerance == settled.tolerance);
   }
   CcdResult<T> inc;
   if constexpr (std::is_same_v<Q, VertexFaceQuery<T>>) inc = Filtered<InclusionCcd>::vertex_face(q, params);
@@ -190,6 +193,7 @@ void certify_one(const Q& q, int truth, CertifiedTally& c) {
     c.missed_truth += truth == 1;
   } else if (a.certainty == Certainty::hit) {
     ++c.hits;
+    c.tolerance_hits += a.tolerance;
     c.hit_without_truth += truth == 0;
     // Both are right: inclusion's TOI is a lower bound of the earliest contact, which lies in [lo, hi].
     c.hit_after_inclusion += !inc.hit || inc.toi > a.hi;
@@ -228,10 +232,10 @@ CertifiedTally certify_scene(const Scene& scene) {
 }
 
 void report(const std::string& what, const CertifiedTally& c) {
-  std::printf("%-52s %6zu queries: certified %zu hits, %zu misses, %zu undecided (%.2f%%); %zu hits on untouching "
-              "pairs; lo - inclusion TOI <= %.3g\n",
-              what.c_str(), c.queries, c.hits, c.misses, c.undecided, 100.0 * double(c.undecided) / double(c.queries),
-              c.hit_without_truth, c.worst_gap);
+  std::printf("%-52s %6zu queries: certified %zu hits (%zu within the tolerance), %zu misses, %zu undecided (%.2f%%); %zu "
+              "hits on untouching pairs; lo - inclusion TOI <= %.3g\n",
+              what.c_str(), c.queries, c.hits, c.tolerance_hits, c.misses, c.undecided,
+              100.0 * double(c.undecided) / double(c.queries), c.hit_without_truth, c.worst_gap);
   CHECK(c.missed_truth == 0);
   CHECK(c.hit_after_inclusion == 0);
 }
@@ -258,7 +262,10 @@ TEST_CASE("certified fast path: never 'no' on a contact, intervals consistent wi
     const CertifiedTally d = certify_scene<double>(scene), f = certify_scene<float>(scene);
     report(std::string(name) + ", double", d);
     report(std::string(name) + ", float", f);
-    if (std::string(name) != "cloth-funnel") {  // real scenes: the fallback is the rare case
+    // Real scenes: the fallback is the rare case. cloth-funnel's ground-truth pairs are few (355)
+    // and hold its contacts on boundaries: its share of all screened pairs is checked with the
+    // CPU pipeline (test_data_pipeline.cpp).
+    if (std::string(name) != "cloth-funnel") {
       CHECK(d.undecided * 100 <= d.queries);
       CHECK(f.undecided * 100 <= f.queries);
     }

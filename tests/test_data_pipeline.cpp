@@ -46,6 +46,13 @@ StepResult<double> run_scene(const std::string& name, Scene& scene) {
               r.stats.triangle_pairs, r.stats.feature_pairs_vf, r.stats.feature_pairs_ee, r.stats.hits_vf, r.stats.hits_ee,
               r.contacts.earliest_toi, r.stats.gave_up, s.false_negatives, s.false_positives);
   CHECK(s.false_negatives == 0);
+  // Issue 11: the fallback takes at most 1% of the pairs the screen passes to the refinement.
+  const std::size_t screened = r.stats.narrow_vf.screened + r.stats.narrow_ee.screened;
+  const std::size_t fallbacks = r.stats.narrow_vf.fallbacks + r.stats.narrow_ee.fallbacks;
+  std::printf("%s: %zu of %zu screened pairs left to the fallback (%.2f%%)\n", name.c_str(), fallbacks, screened,
+              100.0 * double(fallbacks) / double(screened > 0 ? screened : 1));
+  CHECK(screened > 0);
+  CHECK(fallbacks * 100 <= screened);
   // The pipeline tested exactly the feature oracle's pairs (each once).
   const FeaturePairs oracle = require_emission_equals_oracle(RepresentativeTriangles(*scene.step.mesh), scene.step);
   CHECK(r.stats.feature_pairs_vf == oracle.vf.size());

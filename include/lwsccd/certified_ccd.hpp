@@ -68,6 +68,10 @@ struct CertifiedPolicy {
   /// Look-ahead: at the inside-test levels an interval whose halves both keep one sign beyond
   /// their perturbed bounds is dropped without the inside test (no perturbed root lies in it).
   static constexpr bool kLookAhead = false;
+  /// A query the search cannot decide, with every time before its lower bound excluded, is a hit
+  /// at that bound when the inclusion test accepts a small box within the tolerance after it
+  /// (detail::tolerance_contact): the contacts on a feature's boundary that no sign decides.
+  static constexpr bool kToleranceContacts = true;
 };
 
 /// What the certified fast path decided about one query.
@@ -77,6 +81,9 @@ template <class T>
 struct CertifiedAnswer {
   Certainty certainty = Certainty::undecided;
   T lo = T(0), hi = T(1);  ///< hit: the earliest contact time lies in [lo, hi]
+  /// hit: contact within the tolerance after lo (a box of [lo, hi] that the inclusion test
+  /// accepts; Policy::kToleranceContacts), not a certain one - the fallback's kind of answer.
+  bool tolerance = false;
 };
 
 namespace detail {
@@ -477,6 +484,105 @@ LWSCCD_HD LWSCCD_HOST_INLINE bool cubic_on_step(const Q& q, W mag, W perturbatio
   return finite;
 }
 
+/// Points (u, v) of the domain near which a query's F(t, u, v) is smallest at time t: the plane's
+/// least-squares point brought into the domain and the closest points on the domain's edges.
+/// Only where to look: any point of the domain is sound (tolerance_contact tests a box around it).
+template <class W>
+LWSCCD_HD int contact_candidates(const VertexFaceQuery<W>& q, W t, W u[4], W v[4]) {
+  const Vec3<W> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t);
+  const Vec3<W> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t), a), ac = vsub(vadd_scaled(q.c0, vsub(q.c1, q.c0), t), a);
+  const Vec3<W> ap = vsub(vadd_scaled(q.p0, vsub(q.p1, q.p0), t), a), bc = vsub(ac, ab);
+  const W aa = vdot(ab, ab), ab_ac = vdot(ab, ac), cc = vdot(ac, ac), pa = vdot(ap, ab), pc = vdot(ap, ac), bb = vdot(bc, bc);
+  const W det = fsub(fmul(aa, cc), fmul(ab_ac, ab_ac));
+  int n = 0;
+  if (det > W(0)) {
+    W x = fsub(fmul(cc, pa), fmul(ab_ac, pc)) / det, y = fsub(fmul(aa, pc), fmul(ab_ac, pa)) / det;
+    x = x > W(0) ? x : W(0);
+    y = y > W(0) ? y : W(0);
+    const W sum = fadd(x, y);
+    if (sum > W(1)) x = x / sum, y = y / sum;
+    u[n] = x, v[n++] = y;
+  }
+  if (aa > W(0)) u[n] = unit_clamp(pa / aa), v[n++] = W(0);
+  if (cc > W(0)) u[n] = W(0), v[n++] = unit_clamp(pc / cc);
+  if (bb > W(0)) {
+    const W s = unit_clamp(vdot(vsub(ap, ab), bc) / bb);
+    u[n] = fsub(W(1), s), v[n++] = s;
+  }
+  return n;
+}
+template <class W>
+LWSCCD_HD int contact_candidates(const EdgeEdgeQuery<W>& q, W t, W u[5], W v[5]) {
+  const Vec3<W> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t), c = vadd_scaled(q.c0, vsub(q.c1, q.c0), t);
+  const Vec3<W> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t), a), cd = vsub(vadd_scaled(q.d0, vsub(q.d1, q.d0), t), c);
+  const Vec3<W> ca = vsub(a, c);
+  const W aa = vdot(ab, ab), ab_cd = vdot(ab, cd), cc = vdot(cd, cd), ra = -vdot(ab, ca), rc = vdot(cd, ca);
+  const W det = fsub(fmul(aa, cc), fmul(ab_cd, ab_cd));
+  int n = 0;
+  if (det > W(0)) u[n] = unit_clamp(fadd(fmul(cc, ra), fmul(ab_cd, rc)) / det), v[n++] = unit_clamp(fadd(fmul(ab_cd, ra), fmul(aa, rc)) / det);
+  if (cc > W(0)) {
+    u[n] = W(0), v[n++] = unit_clamp(rc / cc);
+    u[n] = W(1), v[n++] = unit_clamp(vdot(cd, vadd(ca, ab)) / cc);
+  }
+  if (aa > W(0)) {
+    u[n] = unit_clamp(ra / aa), v[n++] = W(0);
+    u[n] = unit_clamp(vdot(ab, vsub(cd, ca)) / aa), v[n++] = W(1);
+  }
+  return n;
+}
+
+/// Contact within the tolerance over [from, to]: a small box of (t, u, v) there
+/// that the inclusion test accepts (not excluded by the time filter, an axis or a separating
+/// direction, and F within the distance the features move in `tolerance` of time) - the answer
+/// the fallback would give when it finds such a box with everything before it excluded. The boxes
+/// tried: each half of the window in time, around the candidates of its middle (u and v +- an
+/// eighth of that distance over the query's extent). Used where the certified search has
+/// excluded every time before `from` but cannot prove a contact: features that touch on a
+/// boundary (a vertex sliding along an edge), where no sign is certain.
+template <class Q, class W>
+LWSCCD_HD bool tolerance_contact(const Q& q, const CcdParams<W>& params, W from, W to) {
+  const InclusionSetup<W> s = inclusion_setup(q, params);
+  if (s.separated) return false;
+  const Vec3<W>* pts = q.points();
+  W extent = W(0);
+  for (int i = 1; i < 8; ++i) extent = fmax_of(extent, max_component(abs(vsub(pts[i], pts[0]))));
+  const W radius = extent > W(0) ? fmul(s.delta, W(0.125)) / extent : W(0);
+  const W half = fmul(fsub(to, from), W(0.5));
+  constexpr int kCandidates = 5;
+  for (int h = 0; h < 2; ++h) {
+    const W t[2] = {h == 0 ? from : fadd(from, half), h == 0 ? fadd(from, half) : to};
+    W cu[kCandidates], cv[kCandidates];
+    const int n = contact_candidates(q, fmul(fadd(t[0], t[1]), W(0.5)), cu, cv);
+    for (int k = 0; k < n; ++k) {
+      const W u[2] = {fmax_of(W(0), fsub(cu[k], radius)), fmin_of(W(1), fadd(cu[k], radius))};
+      const W v[2] = {fmax_of(W(0), fsub(cv[k], radius)), fmin_of(W(1), fadd(cv[k], radius))};
+      RangeTest<W> r;
+      test_ranges(q, s, t, u, v, true, false, r);
+      if (r.verdict == BoxVerdict::accepted) return true;
+    }
+  }
+  return false;
+}
+
+/// The certified answer for a query whose search excluded every time before `lower` and proved no
+/// contact after it: undecided from `lower` (the fallback's), or, with Policy::kToleranceContacts,
+/// a hit at `lower` when tolerance_contact finds contact within the tolerance right after it.
+/// The test runs in T with the inclusion test's rounding bound for T, as the fallback would (a float
+/// query's contact within float's rounding is one for the fallback too).
+template <class Policy, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<T>& params, T lower) {
+  const CertifiedAnswer<T> undecided{Certainty::undecided, lower, T(1)};
+  if (!Policy::kToleranceContacts || params.min_separation > T(0) || !(lower < T(1)) || !(lower < params.time_limit))
+    return undecided;
+  // Two of the search's leaves (dyadic: lower is a multiple of them, so the end is exact), or one
+  // where the level's cap makes two wider than the tolerance.
+  const int level = certified_max_level(params.tolerance);
+  const T width = exact_pow2_neg<T>(level - 1) <= params.tolerance ? exact_pow2_neg<T>(level - 1) : exact_pow2_neg<T>(level);
+  const T to = fadd(lower, width) < T(1) ? fadd(lower, width) : T(1);
+  if (!tolerance_contact(q_in.template cast<T>(), params, lower, to)) return undecided;
+  return {Certainty::hit, lower, to, true};
+}
+
 /// The certified classification of a query that certified_screen did not reject (see the file
 /// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
 /// query the screen would reject (it then finds the miss itself, at more cost).
@@ -525,6 +631,9 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   auto note_lower = [&](T t) {
     if (!has_lower) lower = t, has_lower = true;  // intervals come in time order
   };
+  // Undecided from `from` (every earlier time excluded), unless contact within the tolerance
+  // right after it settles the query.
+  auto settle = [&](T from) { return certified_undecided<Policy>(q, params, from); };
   stack[top++] = {root, 0u, 0};
   while (top > 0) {
     const Entry e = stack[--top];
@@ -556,7 +665,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
       inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
       if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
         if (inside == InsideVerdict::outside_as_given) note_lower(lo);
-        if (leaf && ++leaves > Policy::kMaxLeaves) return {Certainty::undecided, has_lower ? lower : lo, T(1)};
+        if (leaf && ++leaves > Policy::kMaxLeaves) return settle(has_lower ? lower : lo);
         continue;
       }
     }
@@ -585,7 +694,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
           note_lower(from);
           return {Certainty::hit, lower, to};
         }
-        if (++splits > Policy::kMaxSplits) return {Certainty::undecided, has_lower ? lower : from, T(1)};
+        if (++splits > Policy::kMaxSplits) return settle(has_lower ? lower : from);
         BernsteinPiece<W> left, right;
         bernstein_halves<Policy>(piece, left, right);
         const W middle = left.c[3];
@@ -598,7 +707,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
           index = 2u * index + 1u;
           // The query's root is past the caller's time limit; so is everything still stacked.
           if (static_cast<T>(index) * exact_pow2_neg<T>(level) >= params.time_limit)
-            return has_lower ? CertifiedAnswer<T>{Certainty::undecided, lower, T(1)} : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
+            return has_lower ? settle(lower) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
         } else {
           piece = left;
           index = 2u * index;
@@ -626,7 +735,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
         if (!has_open) open_from = lo, has_open = true, open_sign = sign_lo, open_inside = true;
         open_inside = open_inside && is_inside;
         if (++leaves > Policy::kMaxLeaves || (!set_mode && hi + (hi - lo) - open_from > params.tolerance))
-          return {Certainty::undecided, lower, T(1)};
+          return settle(lower);
         continue;  // touching, tangent or on a boundary: look further
       }
     }
@@ -635,8 +744,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     // still exclude time, when the features are apart within the plane; it was not certain over
     // this interval, so halves (with less motion each) are tried, unless they are certainly in
     // contact in the plane (no sign of f left to resolve).
-    if (coplanar && inside == InsideVerdict::inside) return {Certainty::undecided, open, T(1)};
-    if (++splits > Policy::kMaxSplits || top + 2 > kStack) return {Certainty::undecided, open, T(1)};
+    if (coplanar && inside == InsideVerdict::inside) return settle(open);
+    if (++splits > Policy::kMaxSplits || top + 2 > kStack) return settle(open);
     if (e.level >= defer_level) {
       if (deferred) *deferred = true;
       return undecided;
@@ -647,7 +756,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     stack[top++] = {left, 2u * e.index, e.level + 1};
   }
   // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
-  if (has_lower) return {Certainty::undecided, lower, T(1)};
+  if (has_lower) return settle(lower);
   return {Certainty::miss, T(0), T(1)};
 }
 
@@ -871,6 +980,13 @@ struct CertifiedCcdT {
   template <class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
     return detail::certified_refine<Policy>(q, params);
+  }
+  /// What refine answers for a query whose search excluded every time before `lower` and found
+  /// nothing certain after it (CertifiedFilter's queries with only a noted time): undecided from
+  /// `lower`, or a hit there when contact within the tolerance follows (kToleranceContacts).
+  template <class Q, class T>
+  LWSCCD_HD static CertifiedAnswer<T> undecided_from(const Q& q, const CcdParams<T>& params, T lower) {
+    return detail::certified_undecided<Policy>(q, params, lower);
   }
   /// Mode earliest: the time limit of window `round` (0, 1, ...) for a caller's `time_limit`; the
   /// last window is the one that returns `time_limit` itself.

@@ -276,6 +276,70 @@ LWSCCD_HD AlongDirection<T> along_direction(Vec3<T> n, const Vec3<T> f[2][2][2],
 
 enum class BoxVerdict : std::uint8_t { excluded, accepted, split_t, split_u, split_v };
 
+/// What the test of a box's ranges (t, u, v) found: excluded, accepted, or neither (then
+/// `split_t` stands for "to be split", and the corner values and directions tell where).
+template <class T>
+struct RangeTest {
+  BoxVerdict verdict = BoxVerdict::split_t;
+  Vec3<T> f[2][2][2];
+  AlongDirection<T> flattest;  ///< the flattest steering direction
+  T axis_width = T(0);         ///< the widest range of F's components over the box
+};
+
+/// The inclusion test over the ranges t x u x v (any box inside the domain, dyadic or not):
+/// excluded (no contact in it: past the time limits, the cubic of one sign over t when
+/// `filter_time`, F apart from 0 along an axis or a separating direction), accepted (contact
+/// within tolerance, or `finest`), or neither.
+template <class Q, class T>
+LWSCCD_HD void test_ranges(const Q& q, const InclusionSetup<T>& s, const T t[2], const T u[2], const T v[2], bool filter_time,
+                           bool finest, RangeTest<T>& r) {
+  r.verdict = BoxVerdict::excluded;
+  // Later than the caller wants: every box after it in the search's order starts as late, so the
+  // answer (the first accepted box with only excluded boxes before it) is unchanged before then.
+  if (t[0] >= s.time_limit) return;
+  if (t[1] <= s.time_from) return;  // before a time the caller proved free
+  if (s.time_filter && filter_time) {
+    T sub[4];
+    const T t_lo = t[0] > s.eta ? fsub(t[0], s.eta) : T(0);
+    const T t_hi = t[1] < fsub(T(1), s.eta) ? fadd(t[1], s.eta) : T(1);
+    bernstein_restrict(s.bern, t_lo, t_hi, sub);
+    if (same_sign_beyond(sub, s.bern_bound)) return;
+  }
+  corner_values(q, t, u, v, r.f);
+  bool within_tolerance = true;
+  for (int k = 0; k < 3; ++k) {
+    T fmin = r.f[0][0][0][k], fmax = fmin;
+    for (int c = 1; c < 8; ++c) {
+      const T x = r.f[c >> 2][(c >> 1) & 1][c & 1][k];
+      fmin = x < fmin ? x : fmin;
+      fmax = x > fmax ? x : fmax;
+    }
+    r.axis_width = fsub(fmax, fmin) > r.axis_width ? fsub(fmax, fmin) : r.axis_width;
+    const T low = fsub(fmin, s.eps[k]), high = fadd(fmax, s.eps[k]);
+    if (low > s.d || high < -s.d) return;
+    // Contact up to `delta`, and up to the rounding bound, which no subdivision can resolve.
+    const T reach = fadd(fadd(s.d, s.delta), fmul(T(2), s.eps[k]));
+    within_tolerance = within_tolerance && high <= reach && low >= -reach;
+  }
+  // Along directions other than the axes: parallel edges a few tolerances apart, or a vertex
+  // hovering over a tilted face, are excluded by a few boxes instead of thousands.
+  {
+    Vec3<T> n[2];
+    const T half = T(0.5);
+    const int count = separating_directions(q, fmul(fadd(t[0], t[1]), half), fmul(fadd(u[0], u[1]), half),
+                                            fmul(fadd(v[0], v[1]), half), n);
+    for (int i = 0; i < count; ++i) {
+      // Only the second edge-edge direction steers the split (parallel edges); the face normal
+      // and the cross product steering it gave up on thousands of armadillo-rollers' pairs.
+      const bool steers = i == 1;
+      const AlongDirection<T> a = along_direction(n[i], r.f, s, steers);
+      if (a.excluded) return;
+      if (steers && a.above_rounding && a.width < r.flattest.width) r.flattest = a;
+    }
+  }
+  r.verdict = within_tolerance || finest ? BoxVerdict::accepted : BoxVerdict::split_t;
+}
+
 /// One box's test: excluded (no contact in it), accepted (contact within tolerance, or finest),
 /// or which dimension to split. Times before `t_floor` are already excluded (the box is cut).
 template <class Q, class T>
@@ -289,54 +353,10 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
     dims[k][1] = dyadic<T>(box.idx[k] + 1, box.level[k]);
   }
   if (box_time_key(box) < floor_key) t[0] = t_floor;
-  // Later than the caller wants: every box after it in the search's order starts as late, so the
-  // answer (the first accepted box with only excluded boxes before it) is unchanged before then.
-  if (t[0] >= s.time_limit) return BoxVerdict::excluded;
-  if (t[1] <= s.time_from) return BoxVerdict::excluded;  // before a time the caller proved free
-  if (s.time_filter && (box.level[0] > 0 || floor_key > 0)) {
-    T sub[4];
-    const T t_lo = t[0] > s.eta ? fsub(t[0], s.eta) : T(0);
-    const T t_hi = t[1] < fsub(T(1), s.eta) ? fadd(t[1], s.eta) : T(1);
-    bernstein_restrict(s.bern, t_lo, t_hi, sub);
-    if (same_sign_beyond(sub, s.bern_bound)) return BoxVerdict::excluded;
-  }
-  Vec3<T> f[2][2][2];
-  corner_values(q, t, u, v, f);
-  bool within_tolerance = true;
-  T axis_width = T(0);  // the widest range of F's components over the box
-  for (int k = 0; k < 3; ++k) {
-    T fmin = f[0][0][0][k], fmax = fmin;
-    for (int c = 1; c < 8; ++c) {
-      const T x = f[c >> 2][(c >> 1) & 1][c & 1][k];
-      fmin = x < fmin ? x : fmin;
-      fmax = x > fmax ? x : fmax;
-    }
-    axis_width = fsub(fmax, fmin) > axis_width ? fsub(fmax, fmin) : axis_width;
-    const T low = fsub(fmin, s.eps[k]), high = fadd(fmax, s.eps[k]);
-    if (low > s.d || high < -s.d) return BoxVerdict::excluded;
-    // Contact up to `delta`, and up to the rounding bound, which no subdivision can resolve.
-    const T reach = fadd(fadd(s.d, s.delta), fmul(T(2), s.eps[k]));
-    within_tolerance = within_tolerance && high <= reach && low >= -reach;
-  }
-  // Along directions other than the axes: parallel edges a few tolerances apart, or a vertex
-  // hovering over a tilted face, are excluded by a few boxes instead of thousands.
-  AlongDirection<T> flattest;
-  {
-    Vec3<T> n[2];
-    const T half = T(0.5);
-    const int count = separating_directions(q, fmul(fadd(t[0], t[1]), half), fmul(fadd(u[0], u[1]), half),
-                                            fmul(fadd(v[0], v[1]), half), n);
-    for (int i = 0; i < count; ++i) {
-      // Only the second edge-edge direction steers the split (parallel edges); the face normal
-      // and the cross product steering it gave up on thousands of armadillo-rollers' pairs.
-      const bool steers = i == 1;
-      const AlongDirection<T> a = along_direction(n[i], f, s, steers);
-      if (a.excluded) return BoxVerdict::excluded;
-      if (steers && a.above_rounding && a.width < flattest.width) flattest = a;
-    }
-  }
   const bool finest = box.level[0] >= s.max_level && box.level[1] >= s.max_level && box.level[2] >= s.max_level;
-  if (within_tolerance || finest) return BoxVerdict::accepted;
+  RangeTest<T> r;
+  test_ranges(q, s, t, u, v, box.level[0] > 0 || floor_key > 0, finest, r);
+  if (r.verdict != BoxVerdict::split_t) return r.verdict;
   // A box across time_limit is split in time first: its later half is then dropped at once,
   // instead of after splits of u and v over time the caller does not want (mode earliest: most
   // fallback searches end in a few rounds). Not across time_from: there the box would be split
@@ -346,8 +366,8 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
   // distance between the features, as for parallel edges), split where that range varies most:
   // the splits that lead to its test excluding boxes (time, for parallel edges, while u and v
   // would be split thousands of times along them).
-  if (flattest.width < fmul(axis_width, T(1) / T(16)) && box.level[flattest.widest] < s.max_level)
-    return static_cast<BoxVerdict>(static_cast<int>(BoxVerdict::split_t) + flattest.widest);
+  if (r.flattest.width < fmul(r.axis_width, T(1) / T(16)) && box.level[r.flattest.widest] < s.max_level)
+    return static_cast<BoxVerdict>(static_cast<int>(BoxVerdict::split_t) + r.flattest.widest);
   // Otherwise split the dimension along which F varies most (time first on ties).
   int split = -1;
   T best = T(-1);
@@ -357,7 +377,7 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
     for (int c = 0; c < 8; ++c) {
       if ((c >> (2 - k)) & 1) continue;  // corners on the low side of dimension k
       const int c_hi = c | (1 << (2 - k));
-      const Vec3<T> diff = vsub(f[c_hi >> 2][(c_hi >> 1) & 1][c_hi & 1], f[c >> 2][(c >> 1) & 1][c & 1]);
+      const Vec3<T> diff = vsub(r.f[c_hi >> 2][(c_hi >> 1) & 1][c_hi & 1], r.f[c >> 2][(c >> 1) & 1][c & 1]);
       const T w = max_component(abs(diff));
       spread = w > spread ? w : spread;
     }

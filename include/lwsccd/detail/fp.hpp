@@ -78,5 +78,10 @@ template <class T> LWSCCD_HD Vec3<T> vcross(const Vec3<T>& a, const Vec3<T>& b) 
   return {fsub(fmul(a.y, b.z), fmul(a.z, b.y)), fsub(fmul(a.z, b.x), fmul(a.x, b.z)), fsub(fmul(a.x, b.y), fmul(a.y, b.x))};
 }
 template <class T> LWSCCD_HD T vnorm(const Vec3<T>& a) { return std::sqrt(vdot(a, a)); }
+/// Comparisons spelled out (no fmax/fmin: what they return for NaN differs between libraries).
+template <class T> LWSCCD_HD T fmax_of(T a, T b) { return a > b ? a : b; }
+template <class T> LWSCCD_HD T fmin_of(T a, T b) { return a < b ? a : b; }
+/// x clamped to [0, 1] (NaN to 0).
+template <class T> LWSCCD_HD T unit_clamp(T x) { return x > T(0) ? (x < T(1) ? x : T(1)) : T(0); }
 
 }  // namespace lwsccd::detail

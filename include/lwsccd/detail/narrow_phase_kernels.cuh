@@ -272,19 +272,23 @@ __device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long lo
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
                               std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* undecided,
-                              unsigned* deferred) {
+                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* hits,
+                              std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     std::uint32_t found = 0;
     lwsccd::detail::Noted<T> noted;
-    const int count = Filter::intervals(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, found, noted);
-    // A lower bound noted: with no interval left the search's answer is undecided from it (the
-    // fallback's); with some, the whole search decides (rare).
+    const auto query = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
+    const int count = Filter::intervals(query, params, found, noted);
+    // A lower bound noted: with no interval left the search's answer is undecided from it (or a
+    // contact within the tolerance there: Method::undecided_from); with some, the whole search
+    // decides (rare).
     bool whole = count < 0 || (count > 0 && noted.any);
-    if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
+    if (count == 0 && noted.any)
+      settle_refined(Method::undecided_from(query, params, noted.lower), kept[i].first, kept[i].second, counters, hits,
+                     hit_room, undecided);
     if (count > 0 && !whole) {
       bool fits = true;
       const unsigned long long base = append_run(counters + kIntervals, static_cast<unsigned>(count), interval_room, fits);
@@ -714,7 +718,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
-          l.interval_room, l.undecided.data(), l.deferred.data());
+          l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
