@@ -592,7 +592,10 @@ LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<
 /// resolved at the tolerance) out of the warps that decide misses in a few levels.
 /// `kStack`: pending intervals held at most (one per level; defer_level + 2 suffice): a GPU
 /// thread keeps them in local memory, so a short search holds a short stack.
-template <class Policy, int kStack = 34, class Q, class T>
+/// `kSettle` false: an undecided answer is returned as it is, for a batch that settles its
+/// undecided queries apart (certified_undecided): the GPU keeps that test's code out of its
+/// refinement kernels, whose registers it would cost on every pair.
+template <class Policy, int kStack = 34, bool kSettle = true, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
                                               bool* deferred = nullptr) {
   using W = typename certified_compute<T>::type;
@@ -633,7 +636,10 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   };
   // Undecided from `from` (every earlier time excluded), unless contact within the tolerance
   // right after it settles the query.
-  auto settle = [&](T from) { return certified_undecided<Policy>(q, params, from); };
+  auto settle = [&](T from) {
+    if constexpr (kSettle) return certified_undecided<Policy>(q, params, from);
+    else return CertifiedAnswer<T>{Certainty::undecided, from, T(1)};
+  };
   stack[top++] = {root, 0u, 0};
   while (top > 0) {
     const Entry e = stack[--top];
@@ -977,9 +983,10 @@ struct CertifiedCcdT {
   LWSCCD_HD static bool screen(const Q& q, const CcdParams<T>& params) {
     return detail::certified_screen<Policy>(q, params);
   }
-  template <class Q, class T>
+  /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
+  template <bool kSettle = true, class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
-    return detail::certified_refine<Policy>(q, params);
+    return detail::certified_refine<Policy, 34, kSettle>(q, params);
   }
   /// What refine answers for a query whose search excluded every time before `lower` and found
   /// nothing certain after it (CertifiedFilter's queries with only a noted time): undecided from
@@ -999,10 +1006,10 @@ struct CertifiedCcdT {
   }
   /// refine, stopped (*deferred set) where it would halve an interval at `kDeferLevel` or deeper
   /// (with a stack only that deep).
-  template <int kDeferLevel, class Q, class T>
+  template <int kDeferLevel, bool kSettle = true, class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine_until(const Q& q, const CcdParams<T>& params, bool* deferred) {
     static_assert(kDeferLevel >= 1 && kDeferLevel <= 30, "lwsccd: the defer level must be in [1, 30]");
-    return detail::certified_refine<Policy, kDeferLevel + 2>(q, params, kDeferLevel, deferred);
+    return detail::certified_refine<Policy, kDeferLevel + 2, kSettle>(q, params, kDeferLevel, deferred);
   }
   template <class T>
   LWSCCD_HD static CcdResult<T> vertex_face(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {

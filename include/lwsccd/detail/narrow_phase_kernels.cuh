@@ -65,6 +65,7 @@ enum NarrowCounter : int {
   kIntervals,       // CertifiedCcd's filter: intervals listed for the inside test (more than the room: deferred)
   kExpanded,        // the filter's second round: intervals whose test was unknown, to split further
   kDeepIntervals,   // the second round's intervals listed for the inside test (more than the room: deferred)
+  kSettled,         // CertifiedCcd: undecided queries settled as contacts within the tolerance (not the fallback's)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.
@@ -229,7 +230,7 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
     const std::pair<index_t, index_t> p = kept[i];
     bool later = false;
     const CertifiedAnswer<T> a =
-        Method::template refine_until<kDeferLevel>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
+        Method::template refine_until<kDeferLevel, false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
     if (later) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
     else settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
   }
@@ -272,23 +273,19 @@ __device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long lo
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
                               std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* hits,
-                              std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
+                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* undecided,
+                              unsigned* deferred) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     std::uint32_t found = 0;
     lwsccd::detail::Noted<T> noted;
-    const auto query = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
-    const int count = Filter::intervals(query, params, found, noted);
-    // A lower bound noted: with no interval left the search's answer is undecided from it (or a
-    // contact within the tolerance there: Method::undecided_from); with some, the whole search
-    // decides (rare).
+    const int count = Filter::intervals(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, found, noted);
+    // A lower bound noted: with no interval left the search's answer is undecided from it (the
+    // fallback's, once settle_undecided_kernel has looked); with some, the whole search decides (rare).
     bool whole = count < 0 || (count > 0 && noted.any);
-    if (count == 0 && noted.any)
-      settle_refined(Method::undecided_from(query, params, noted.lower), kept[i].first, kept[i].second, counters, hits,
-                     hit_room, undecided);
+    if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
     if (count > 0 && !whole) {
       bool fits = true;
       const unsigned long long base = append_run(counters + kIntervals, static_cast<unsigned>(count), interval_room, fits);
@@ -371,8 +368,31 @@ __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, con
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
   LWSCCD_GRID_STRIDE(w, n) {
     const std::pair<index_t, index_t> p = kept[deferred[w]];
-    const CertifiedAnswer<T> a = Method::refine(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
+    const CertifiedAnswer<T> a = Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
     settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// Third part: the undecided queries, a thread each, settled as the whole search settles them
+// (CertifiedCcd::undecided_from: a contact within the tolerance after the lower bound is a hit,
+// counted with the certified hits). A settled query stays in the list with nothing left to search
+// (from time 1), so the fallback's launches keep their count. Apart from the refinement kernels so
+// that their registers do not pay for a test most pairs never reach.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void settle_undecided_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, CcdParams<T> params,
+                                        const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
+                                        std::size_t hit_room, FeatureHit<T>* undecided, std::size_t room) {
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kUndecided] < room ? static_cast<std::size_t>(counters[kUndecided]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    FeatureHit<T>& item = undecided[i];
+    const CertifiedAnswer<T> a =
+        Method::undecided_from(gather_query<kVertexFace, T>(mesh, x0, x1, item_pair(item)), params, item.toi);
+    if (a.certainty != Certainty::hit) continue;
+    push_hit(FeatureHit<T>{item.first, item.second, a.lo}, hits, hit_room, counters);
+    atomicAdd(counters + kCertifiedHits, 1ull);
+    atomicAdd(counters + kSettled, 1ull);
+    item.toi = T(1);
   }
 }
 
@@ -718,7 +738,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
-          l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
+          l.interval_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
@@ -748,6 +768,10 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
         l.hit_room, l.undecided.data());
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
+    detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
+        mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.work_room);
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
 }
@@ -820,7 +844,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     const unsigned long long* c = l.host_counters.data();
     const auto pairs = static_cast<std::size_t>(c[detail::kPairs]);
     l.count = static_cast<std::size_t>(c[detail::kHits]);
-    l.num_full = static_cast<std::size_t>(kCertified ? c[detail::kUndecided] : kTwoPass ? c[detail::kSurvivors] : pairs);
+    l.num_full = static_cast<std::size_t>(kCertified ? c[detail::kUndecided] - c[detail::kSettled] : kTwoPass ? c[detail::kSurvivors] : pairs);
     l.warp_searches = static_cast<std::size_t>(c[detail::kOpen]);
     l.whole_searches = static_cast<std::size_t>(c[detail::kDeferred]);
     l.counts = {};
