@@ -198,6 +198,53 @@ TEMPLATE_TEST_CASE("a full box heap costs time, not a wrong answer", "[narrow]",
   CHECK_FALSE(InclusionCcdT<SmallHeap>::edge_edge(crossing_edges<T>(T(1), T(-3), T(1.5)), params).hit);
 }
 
+namespace {
+// box_before as written before it became two words: the fields compared one by one.
+bool box_before_by_fields(const detail::DyadicBox& a, const detail::DyadicBox& b) {
+  const std::uint64_t ka = detail::box_time_key(a), kb = detail::box_time_key(b);
+  if (ka != kb) return ka < kb;
+  const int la = a.level[0] + a.level[1] + a.level[2], lb = b.level[0] + b.level[1] + b.level[2];
+  if (la != lb) return la > lb;
+  for (int k = 0; k < 3; ++k)
+    if (a.level[k] != b.level[k]) return a.level[k] < b.level[k];
+  for (int k = 0; k < 3; ++k)
+    if (a.idx[k] != b.idx[k]) return a.idx[k] < b.idx[k];
+  return false;
+}
+}  // namespace
+
+TEST_CASE("the search's box order as two words is the field-by-field order", "[narrow]") {
+  std::mt19937 rng(16);
+  // Shallow boxes collide in every field (equal times, level sums, levels); deep ones reach the
+  // 31 levels and 2^31 - 1 indices the words must hold.
+  auto random_box = [&](int max_level) {
+    detail::DyadicBox b{};
+    for (int k = 0; k < 3; ++k) {
+      b.level[k] = static_cast<std::uint8_t>(std::uniform_int_distribution<int>(0, max_level)(rng));
+      const std::uint32_t cells = std::uint32_t(1) << b.level[k];
+      b.idx[k] = std::uniform_int_distribution<std::uint32_t>(0, cells - 1)(rng);
+      if (std::uniform_int_distribution<int>(0, 7)(rng) == 0) b.idx[k] = cells - 1;  // the last cell
+    }
+    return b;
+  };
+  int ties = 0, checked = 0;
+  for (int max_level : {2, 3, 31}) {
+    for (int i = 0; i < 200000; ++i) {
+      const detail::DyadicBox a = random_box(max_level), b = random_box(max_level);
+      ties += detail::box_time_key(a) == detail::box_time_key(b);
+      ++checked;
+      if (detail::box_before(a, b) != box_before_by_fields(a, b) || detail::box_before(b, a) != box_before_by_fields(b, a)) {
+        FAIL_CHECK("boxes (" << a.idx[0] << "," << a.idx[1] << "," << a.idx[2] << " @ " << int(a.level[0]) << "," << int(a.level[1])
+                             << "," << int(a.level[2]) << ") and (" << b.idx[0] << "," << b.idx[1] << "," << b.idx[2] << " @ "
+                             << int(b.level[0]) << "," << int(b.level[1]) << "," << int(b.level[2]) << ") ordered differently");
+        return;
+      }
+    }
+  }
+  CHECK(checked == 600000);
+  CHECK(ties > 10000);  // the tie-breaks were exercised, not only the time keys
+}
+
 TEST_CASE("a vertex near a sliver triangle that moves away: no contact (it overflowed the heap)", "[narrow]") {
   // cloth-ball 92->93, vertex 11423 and face 246191, in the query's local frame: the vertex is
   // 0.0029 from a nearly collinear triangle at t = 0 and 0.019 at t = 1. The search needs ~2,000

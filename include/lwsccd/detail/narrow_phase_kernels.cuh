@@ -427,12 +427,22 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
   }
 }
 
-// The rank of `x` among the n sorted boxes at `sorted` (how many come before it).
-LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, const lwsccd::detail::DyadicBox& x) {
+// The rank of `x` among the n sorted keys at `sorted`, or among the n sorted boxes (how many come
+// before it).
+LWSCCD_HD inline int rank_in(const lwsccd::detail::BoxOrderKey* sorted, int n, const lwsccd::detail::BoxOrderKey& x) {
   int lo = 0, hi = n;
   while (lo < hi) {
     const int mid = (lo + hi) / 2;
-    if (lwsccd::detail::box_before(sorted[mid], x)) lo = mid + 1;
+    if (lwsccd::detail::key_before(sorted[mid], x)) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, const lwsccd::detail::BoxOrderKey& x) {
+  int lo = 0, hi = n;
+  while (lo < hi) {
+    const int mid = (lo + hi) / 2;
+    if (lwsccd::detail::key_before(lwsccd::detail::box_order_key(sorted[mid]), x)) lo = mid + 1;
     else hi = mid;
   }
   return lo;
@@ -442,7 +452,9 @@ LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, con
 // detail::InclusionSearch with the work spread over the lanes: each lane examines one box of the
 // round and makes its new boxes; the new boxes are ranked among themselves and merged into the
 // sorted live boxes by rank, every lane placing its own. Same sets and answers as the one-thread
-// search (the order is total), with a long search's latency cut to that of its rounds.
+// search (the order is total), with a long search's latency cut to that of its rounds. Ranks
+// compare box_order_key's two words (H100: comparing the fields one by one took ~22 K of a
+// round's ~35 K cycles on cloth-funnel's edge-edge searches; ~6 K this way).
 template <class Method, bool kVertexFace, class T, class P, int kWarps, class Item>
 __global__ void __launch_bounds__(32 * kWarps)
     inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, const unsigned* which,
@@ -451,13 +463,15 @@ __global__ void __launch_bounds__(32 * kWarps)
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
   using Round = typename Search::Round;
+  using lwsccd::detail::BoxOrderKey;
   using lwsccd::detail::BoxVerdict;
   using lwsccd::detail::DyadicBox;
   constexpr int kFresh = Search::kFresh;
   static_assert(Search::kBatch <= 32, "lwsccd: a round must fit in a warp");
   // Raw storage: shared variables cannot have constructors; start() initializes a search.
   __shared__ alignas(Search) unsigned char storage[kWarps * sizeof(Search)];
-  __shared__ DyadicBox fresh_raw[kWarps][kFresh], fresh_sorted[kWarps][kFresh];
+  __shared__ DyadicBox fresh_sorted[kWarps][kFresh];
+  __shared__ BoxOrderKey fresh_keys[kWarps][kFresh], sorted_keys[kWarps][kFresh];
   __shared__ CcdResult<T> results[kWarps];
   __shared__ unsigned long long dropped[kWarps];
   __shared__ int state[kWarps];
@@ -500,22 +514,26 @@ __global__ void __launch_bounds__(32 * kWarps)
           __syncwarp();
           return;
         }
-        // This lane's new boxes, then their ranks among all the round's new boxes.
+        // This lane's new boxes, listed after the lower lanes' ones, then ranked among all the
+        // round's new boxes by their keys (every lane reads the same key at once).
         DyadicBox mine[2];
         const int count = lane < k ? search.fresh_boxes(batch[lane], verdict, setup.vf, mine) : 0;
-        fresh_raw[warp][2 * lane] = mine[0];
-        fresh_raw[warp][2 * lane + 1] = mine[1];
         const unsigned has_one = __ballot_sync(0xffffffffu, count >= 1), has_two = __ballot_sync(0xffffffffu, count == 2);
+        const unsigned lower_lanes = (1u << lane) - 1u;
+        const int listed_at = __popc(has_one & lower_lanes) + __popc(has_two & lower_lanes);
         const int nf = __popc(has_one) + __popc(has_two);
+        BoxOrderKey my_keys[2];
+        for (int c = 0; c < count; ++c) {
+          my_keys[c] = lwsccd::detail::box_order_key(mine[c]);
+          fresh_keys[warp][listed_at + c] = my_keys[c];
+        }
         __syncwarp();
         for (int c = 0; c < count; ++c) {
           int rank = 0;
-          for (int other = 0; other < 32; ++other) {
-            const int other_count = ((has_one >> other) & 1u) + ((has_two >> other) & 1u);
-            for (int oc = 0; oc < other_count; ++oc)
-              rank += lwsccd::detail::box_before(fresh_raw[warp][2 * other + oc], mine[c]) ? 1 : 0;
-          }
+#pragma unroll 4
+          for (int other = 0; other < nf; ++other) rank += lwsccd::detail::key_before(fresh_keys[warp][other], my_keys[c]) ? 1 : 0;
           fresh_sorted[warp][rank] = mine[c];
+          sorted_keys[warp][rank] = my_keys[c];
         }
         __syncwarp();
         // Merge by rank into the other buffer, keeping the earliest kKeep when over capacity.
@@ -524,12 +542,12 @@ __global__ void __launch_bounds__(32 * kWarps)
         const int limit = total > Search::kCapacity ? Search::kKeep : total;
         DyadicBox* out = search.items[1 - search.current];
         for (int a = lane; a < size; a += 32) {
-          const int pos = a + rank_in(fresh_sorted[warp], nf, live[a]);
+          const int pos = a + rank_in(sorted_keys[warp], nf, lwsccd::detail::box_order_key(live[a]));
           if (pos < limit) out[pos] = live[a];
           else if (pos == limit) dropped[warp] = lwsccd::detail::box_time_key(live[a]);
         }
         for (int b = lane; b < nf; b += 32) {
-          const int pos = b + rank_in(live, size, fresh_sorted[warp][b]);
+          const int pos = b + rank_in(live, size, sorted_keys[warp][b]);
           if (pos < limit) out[pos] = fresh_sorted[warp][b];
           else if (pos == limit) dropped[warp] = lwsccd::detail::box_time_key(fresh_sorted[warp][b]);
         }
