@@ -504,6 +504,72 @@ TEST_CASE("certified path: a refinement stopped at a level, then run whole, give
   CHECK(finished_at_3 > 0);
 }
 
+// The GPU warp's way of running the inside tests (WarpInsideSubtree), on the CPU: a test not at
+// hand is evaluated with its subtree (the interval and 4 levels below it, 31 intervals, deeper than
+// the search goes skipped) and the search reads the verdicts from there. `wrong_place` reads a
+// neighbour's verdict instead (a mutation that the comparison must catch).
+struct SubtreeInside {
+  int max_level = 0, wrong_place = 0;
+  int root_level = -1;
+  std::uint32_t root_index = 0;
+  detail::InsideVerdict verdicts[31] = {};
+  int asked = 0, evaluated = 0;
+  template <class Compute>
+  detail::InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) {
+    ++asked;
+    const int depth = level - root_level;
+    if (!(root_level >= 0 && depth >= 0 && depth < 5 && (index >> depth) == root_index)) {
+      root_level = level, root_index = index;
+      ++evaluated;
+      for (int place = 0; place < 31; ++place) {
+        int d = 0;
+        while ((2 << d) <= place + 1) ++d;
+        const std::uint32_t offset = static_cast<std::uint32_t>(place + 1 - (1 << d));
+        verdicts[place] = level + d <= max_level ? compute(level + d, (index << d) | offset) : detail::InsideVerdict::unknown;
+      }
+    }
+    const int d = level - root_level;
+    const int place = (1 << d) - 1 + static_cast<int>(index - (root_index << d));
+    return verdicts[(place + wrong_place) % 31];
+  }
+};
+
+TEST_CASE("certified path: inside tests evaluated ahead by subtrees give the one-by-one answer", "[narrow][certified]") {
+  std::mt19937 rng(17);
+  const std::vector<Case> cases = hard_cases(rng, 6);
+  int asked = 0, evaluated = 0, differ_when_wrong = 0, queries = 0;
+  auto check = [&](const auto& q) {
+    using T = std::decay_t<decltype(q.points()[0].x)>;
+    for (CcdMode mode : {CcdMode::contacts, CcdMode::set}) {
+      CcdParams<T> params;
+      params.mode = mode;
+      const CertifiedAnswer<T> whole = CertifiedCcd::refine<false>(q, params);
+      SubtreeInside inside;
+      inside.max_level = detail::certified_max_level(params.tolerance);
+      const CertifiedAnswer<T> ahead = CertifiedCcd::refine_with<false>(q, params, inside);
+      CHECK(ahead.certainty == whole.certainty);
+      CHECK(ahead.lo == whole.lo);
+      CHECK(ahead.hi == whole.hi);
+      asked += inside.asked, evaluated += inside.evaluated, ++queries;
+      SubtreeInside wrong;
+      wrong.max_level = inside.max_level;
+      wrong.wrong_place = 1;
+      const CertifiedAnswer<T> misread = CertifiedCcd::refine_with<false>(q, params, wrong);
+      differ_when_wrong += misread.certainty != whole.certainty || misread.lo != whole.lo || misread.hi != whole.hi;
+    }
+  };
+  for (const Case& c : cases)
+    for (int scale : {0, 60}) {
+      const Case t = transformed(c, 0, 0, scale, false);
+      if (t.vertex_face) check(as_query<double, VertexFaceQuery<double>>(t)), check(as_query<float, VertexFaceQuery<float>>(t));
+      else check(as_query<double, EdgeEdgeQuery<double>>(t)), check(as_query<float, EdgeEdgeQuery<float>>(t));
+    }
+  INFO(queries << " searches: " << asked << " inside tests asked, " << evaluated << " subtrees evaluated");
+  CHECK(queries > 100);
+  CHECK(evaluated * 2 < asked);     // most tests were read from a subtree evaluated ahead
+  CHECK(differ_when_wrong > 0);     // the comparison sees a misread verdict
+}
+
 TEST_CASE("inclusion search: time_from drops the time a caller proved free of contact", "[narrow][certified]") {
   // A vertex through a triangle's middle at t = 0.25.
   const VertexFaceQuery<double> through{{1, 1, -1}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}, {1, 1, 3}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}};

@@ -245,6 +245,46 @@ TEST_CASE("the search's box order as two words is the field-by-field order", "[n
   CHECK(ties > 10000);  // the tie-breaks were exercised, not only the time keys
 }
 
+TEST_CASE("a box's order key holds the whole box, its mark ordering it only against itself", "[narrow]") {
+  std::mt19937 rng(17);
+  int checked = 0;
+  for (int i = 0; i < 100000; ++i) {
+    detail::DyadicBox b{};
+    for (int k = 0; k < 3; ++k) {
+      b.level[k] = static_cast<std::uint8_t>(std::uniform_int_distribution<int>(0, detail::kMaxBoxLevel)(rng));
+      const std::uint32_t cells = std::uint32_t(1) << b.level[k];
+      b.idx[k] = std::uniform_int_distribution<std::uint32_t>(0, cells - 1)(rng);
+      if (i % 5 == 0) b.idx[k] = cells - 1;  // every index bit set
+    }
+    b.accepted = static_cast<std::uint8_t>(i % 2);
+    const detail::DyadicBox back = detail::box_of_key(detail::box_order_key(b));
+    REQUIRE(back.idx[0] == b.idx[0]);
+    REQUIRE(back.idx[1] == b.idx[1]);
+    REQUIRE(back.idx[2] == b.idx[2]);
+    REQUIRE(back.level[0] == b.level[0]);
+    REQUIRE(back.level[1] == b.level[1]);
+    REQUIRE(back.level[2] == b.level[2]);
+    REQUIRE(back.accepted == b.accepted);
+    REQUIRE(detail::box_time_key(detail::box_order_key(b)) == detail::box_time_key(b));
+    REQUIRE(detail::is_accepted(detail::box_order_key(b)) == (b.accepted != 0));
+    // Marked or not, the box keeps its place against every other box.
+    detail::DyadicBox marked = b, other = b;
+    marked.accepted = 1;
+    other.idx[2] ^= 1u;
+    other.level[2] = other.level[2] == 0 ? 1 : other.level[2];
+    CHECK(detail::box_before(marked, other) == detail::box_before(b, other));
+    CHECK(detail::box_before(other, marked) == detail::box_before(other, b));
+    ++checked;
+  }
+  CHECK(checked == 100000);
+  detail::DyadicBox root{};
+  detail::whole_domain(root);
+  detail::BoxOrderKey root_key{};
+  detail::whole_domain(root_key);
+  CHECK(detail::box_of_key(root_key).level[2] == root.level[2]);
+  CHECK(detail::box_time_key(root_key) == 0);
+}
+
 TEST_CASE("a vertex near a sliver triangle that moves away: no contact (it overflowed the heap)", "[narrow]") {
   // cloth-ball 92->93, vertex 11423 and face 246191, in the query's local frame: the vertex is
   // 0.0029 from a nearly collinear triangle at t = 0 and 0.019 at t = 1. The search needs ~2,000

@@ -595,9 +595,19 @@ LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<
 /// `kSettle` false: an undecided answer is returned as it is, for a batch that settles its
 /// undecided queries apart (certified_undecided): the GPU keeps that test's code out of its
 /// refinement kernels, whose registers it would cost on every pair.
-template <class Policy, int kStack = 34, bool kSettle = true, class Q, class T>
+/// The refinement's inside tests as they are asked for, one at a time (certified_refine's
+/// `inside_at`: called with an interval's level and index, and a function that computes the
+/// verdict there). The GPU's warp per search evaluates a whole subtree of them at once instead.
+struct InsideOneByOne {
+  template <class Compute>
+  LWSCCD_HD InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) const {
+    return compute(level, index);
+  }
+};
+
+template <class Policy, int kStack = 34, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
 LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
-                                              bool* deferred = nullptr) {
+                                              bool* deferred = nullptr, InsideAt&& inside_at = InsideOneByOne{}) {
   using W = typename certified_compute<T>::type;
   const auto q = q_in.template cast<W>();
   const W perturbation = unit_roundoff<T>();
@@ -662,13 +672,18 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     const bool coarse = Policy::kInsideEvery > 0 && e.level >= Policy::kInsideFrom &&
                         (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
     const bool coplanar = all_within(c, exact);
-    const W half = exact_pow2_neg<W>(e.level + 1);
     // Both halves of one sign (a root of the control polygon, not of the cubic): no root here even
     // perturbed, so the costly inside test is skipped (before it, the interval was only split).
     if (Policy::kLookAhead && coarse && !leaf && !coplanar && halves_keep_sign<Policy>(e.piece)) continue;
     InsideVerdict inside = InsideVerdict::unknown;
     if (try_hit || coarse || coplanar) {
-      inside = inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
+      // The test over interval `index` of `level` (this one, or another that inside_at evaluates
+      // ahead): the same operations on the same values, so the same verdict.
+      inside = inside_at(e.level, e.index, [&](int level, std::uint32_t index) {
+        const W half_width = exact_pow2_neg<W>(level + 1);
+        const T from = static_cast<T>(index) * exact_pow2_neg<T>(level);
+        return inside_over<Policy>(q, fadd(W(from), half_width), half_width, m, perturbation, inside_slack);
+      });
       if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
         if (inside == InsideVerdict::outside_as_given) note_lower(lo);
         if (leaf && ++leaves > Policy::kMaxLeaves) return settle(has_lower ? lower : lo);
@@ -987,6 +1002,12 @@ struct CertifiedCcdT {
   template <bool kSettle = true, class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
     return detail::certified_refine<Policy, 34, kSettle>(q, params);
+  }
+  /// refine with its inside tests asked of `inside_at` (detail::InsideOneByOne's contract): the
+  /// same answer, whatever order the tests are evaluated in.
+  template <bool kSettle, class Q, class T, class InsideAt>
+  LWSCCD_HD static CertifiedAnswer<T> refine_with(const Q& q, const CcdParams<T>& params, InsideAt&& inside_at) {
+    return detail::certified_refine<Policy, 34, kSettle>(q, params, 1 << 30, nullptr, inside_at);
   }
   /// What refine answers for a query whose search excluded every time before `lower` and found
   /// nothing certain after it (CertifiedFilter's queries with only a noted time): undecided from

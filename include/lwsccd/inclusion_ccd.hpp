@@ -27,6 +27,7 @@
 // the time the excluded part reaches, so a full store costs time, not a wrong answer.
 #pragma once
 
+#include <cassert>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -61,21 +62,44 @@ LWSCCD_HD inline std::uint64_t box_time_key(const DyadicBox& b) {
 // The search's order: earlier first; at equal times the smaller (deeper) box first, so that
 // ties dive; then any fixed order, so that the order is total (two distinct boxes are never
 // tied) and "the k earliest boxes" is the same set however they are stored. As two words compared
-// in turn: [time key (40 bits) | 127 - level sum | level t | level u] and [u index | v index]
-// (levels are at most 31, InclusionSetup::max_level; equal time keys and t levels mean equal t
-// indices, and the level sum then fixes the v level). The GPU's warp search ranks a round's new
-// boxes by these words: comparing the fields one by one cost it ~22 K cycles a round.
+// in turn: [time key (40 bits) | 127 - level sum | level t | level u] and [u index | v index |
+// accepted mark] (levels are at most 31, InclusionSetup::max_level; equal time keys and t levels
+// mean equal t indices, and the level sum then fixes the v level). The mark orders a box only
+// against itself marked, which no store holds at once. The key is the whole box (box_of_key): the
+// GPU's warp search keeps its live boxes as keys, ranked and merged by two word compares (by fields
+// the ranking alone cost it ~22 K of a round's ~35 K cycles).
 struct BoxOrderKey {
   std::uint64_t high, low;
 };
+constexpr int kMaxBoxLevel = 31;  ///< a box index has 31 bits (InclusionSetup::max_level's cap)
 LWSCCD_HD inline BoxOrderKey box_order_key(const DyadicBox& b) {
+  assert(b.level[0] <= kMaxBoxLevel && b.level[1] <= kMaxBoxLevel && b.level[2] <= kMaxBoxLevel);
   const std::uint64_t level_sum = static_cast<std::uint64_t>(b.level[0]) + b.level[1] + b.level[2];
   return {box_time_key(b) << 17 | (127u - level_sum) << 10 | static_cast<std::uint64_t>(b.level[0]) << 5 | b.level[1],
-          static_cast<std::uint64_t>(b.idx[1]) << 32 | b.idx[2]};
+          static_cast<std::uint64_t>(b.idx[1]) << 33 | static_cast<std::uint64_t>(b.idx[2]) << 1 | (b.accepted ? 1u : 0u)};
+}
+LWSCCD_HD inline DyadicBox box_of_key(const BoxOrderKey& k) {
+  const unsigned level_t = static_cast<unsigned>(k.high >> 5) & 31u, level_u = static_cast<unsigned>(k.high) & 31u;
+  const unsigned level_sum = 127u - (static_cast<unsigned>(k.high >> 10) & 127u);
+  DyadicBox b;
+  b.idx[0] = static_cast<std::uint32_t>((k.high >> 17) >> (40u - level_t));
+  b.idx[1] = static_cast<std::uint32_t>(k.low >> 33);
+  b.idx[2] = static_cast<std::uint32_t>(k.low >> 1) & 0x7fffffffu;
+  b.level[0] = static_cast<std::uint8_t>(level_t);
+  b.level[1] = static_cast<std::uint8_t>(level_u);
+  b.level[2] = static_cast<std::uint8_t>(level_sum - level_t - level_u);
+  b.accepted = static_cast<std::uint8_t>(k.low & 1u);
+  return b;
 }
 LWSCCD_HD inline bool key_before(const BoxOrderKey& a, const BoxOrderKey& b) {
   return a.high < b.high || (a.high == b.high && a.low < b.low);
 }
+// A stored box's time key and mark, as a box or as its key (InclusionSearch holds either).
+LWSCCD_HD inline std::uint64_t box_time_key(const BoxOrderKey& k) { return k.high >> 17; }
+LWSCCD_HD inline bool is_accepted(const DyadicBox& b) { return b.accepted != 0; }
+LWSCCD_HD inline bool is_accepted(const BoxOrderKey& k) { return (k.low & 1u) != 0; }
+LWSCCD_HD inline void whole_domain(DyadicBox& b) { b = DyadicBox{{0, 0, 0}, {0, 0, 0}, 0}; }
+LWSCCD_HD inline void whole_domain(BoxOrderKey& k) { k = box_order_key(DyadicBox{{0, 0, 0}, {0, 0, 0}, 0}); }
 LWSCCD_HD inline bool box_before(const DyadicBox& a, const DyadicBox& b) { return key_before(box_order_key(a), box_order_key(b)); }
 
 template <class T>
@@ -413,7 +437,9 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
 /// kStore (at most kMaxBoxes) is the room this instance has: a search that would keep more live
 /// boxes than that stops with `overflow` set, so that a small first attempt (a GPU thread with
 /// little memory) can hand the query over to a full one, which then gives the same answer.
-template <class Policy, class T, int kStore = Policy::kMaxBoxes>
+/// Item: how a live box is stored, as a DyadicBox or as its BoxOrderKey (the GPU's warp search,
+/// which ranks and merges them itself; apply() is for DyadicBox).
+template <class Policy, class T, int kStore = Policy::kMaxBoxes, class Item = DyadicBox>
 struct InclusionSearch {
   static_assert(Policy::kMaxBoxes >= 2, "lwsccd: InclusionCcd policy: kMaxBoxes must be at least 2");
   static_assert(Policy::kBatch >= 1 && Policy::kBatch <= 32, "lwsccd: InclusionCcd policy: kBatch must be in [1, 32]");
@@ -427,18 +453,18 @@ struct InclusionSearch {
   static constexpr std::uint64_t kNone = ~std::uint64_t(0);
   enum class Round : std::uint8_t { examine, no_contact, gave_up };
 
-  DyadicBox items[2][kRoom];  ///< live boxes, sorted: items[current][head, head + size)
+  Item items[2][kRoom];  ///< live boxes, sorted: items[current][head, head + size)
   int current = 0, head = 0, size = 0, batch_size = 0, examined = 0;
   std::uint64_t floor_key = 0, evicted_key = kNone;
   T t_floor = T(0);
 
-  LWSCCD_HD const DyadicBox* batch() const { return items[current] + head - batch_size; }
-  LWSCCD_HD const DyadicBox* live() const { return items[current] + head; }
+  LWSCCD_HD const Item* batch() const { return items[current] + head - batch_size; }
+  LWSCCD_HD const Item* live() const { return items[current] + head; }
 
   LWSCCD_HD void restart_whole() {
     current = head = 0;
     size = 1;
-    items[0][0] = DyadicBox{{0, 0, 0}, {0, 0, 0}, 0};
+    whole_domain(items[0][0]);
   }
   LWSCCD_HD void start() {
     restart_whole();
@@ -447,8 +473,12 @@ struct InclusionSearch {
     evicted_key = kNone;
     t_floor = T(0);
   }
-  LWSCCD_HD T time_of(const DyadicBox& b) const {
-    return box_time_key(b) < floor_key ? t_floor : dyadic<T>(b.idx[0], b.level[0]);
+  /// A box's earliest time not cut off (a time key is exact in T: T's rounding of idx0 is scaled
+  /// by a power of two either way).
+  template <class Box>
+  LWSCCD_HD T time_of(const Box& b) const {
+    const std::uint64_t key = box_time_key(b);
+    return key < floor_key ? t_floor : std::ldexp(static_cast<T>(key), -40);
   }
   /// Takes the next round's boxes (restarting past dropped boxes when needed). On gave_up,
   /// `result` holds the conservative answer.
@@ -465,7 +495,7 @@ struct InclusionSearch {
       evicted_key = kNone;
       restart_whole();
     }
-    const DyadicBox* first = items[current] + head;
+    const Item* first = items[current] + head;
     int k = 0;
     while (k < kBatch && k < size && (evicted_key == kNone || box_time_key(first[k]) < evicted_key)) ++k;
     batch_size = k;
@@ -475,7 +505,7 @@ struct InclusionSearch {
       result = {true, time_of(first[0]), true};  // the earliest time not excluded
       return Round::gave_up;
     }
-    for (int i = 0; i < k; ++i) examined += first[i].accepted ? 0 : 1;
+    for (int i = 0; i < k; ++i) examined += is_accepted(first[i]) ? 0 : 1;
     return Round::examine;
   }
   /// Whether the verdicts answer the query: the first accepted box of the round, if no box

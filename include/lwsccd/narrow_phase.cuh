@@ -37,12 +37,18 @@ struct NarrowPhasePolicy {
   static constexpr int kBlock = 128;               ///< threads per block, a thread per query
   static constexpr int kThreadRounds = 6;   ///< InclusionCcd: rounds of the one-thread attempt per query
   static constexpr int kThreadBoxes = 64;   ///< InclusionCcd: live boxes the one-thread attempt may keep
-  static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~12 KiB of shared memory each)
+  static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~11 KiB of shared memory each)
+  /// InclusionCcd: a list of at most this many queries skips the one-thread attempt (its warp
+  /// searches run at once; CertifiedCcd's few fallbacks); 0 always makes the attempt.
+  static constexpr int kWarpSearchDirect = 1024;
   /// CertifiedCcd: refinements that would halve intervals this deep (width 2^-level) go to a
   /// second kernel, so that the long searches of contacts do not hold up warps of quick misses.
   /// On an H100 levels 3 and 4 were fastest (cloth-ball narrow 3.3 ms against 3.5 at level 8,
   /// built-in 100K 1.05 against 1.5; docs/BENCHMARKS.md).
   static constexpr int kRefineDeferLevel = 4;
+  /// CertifiedCcd: at most this many deferred refinements run a warp each (inside tests by
+  /// subtrees: the long coplanar searches' latency ~5x shorter), more a thread each; 0: always a thread.
+  static constexpr int kRefineWarpBelow = 1024;
   /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
   /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.

@@ -363,13 +363,76 @@ template <class Method, bool kVertexFace, class T, class P>
 __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                        const std::pair<index_t, index_t>* kept, const unsigned* deferred, CcdParams<T> params,
                                        const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
-                                       std::size_t hit_room, FeatureHit<T>* undecided) {
+                                       std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  if (n <= warp_below) return;  // refine_deferred_warp_kernel's
   LWSCCD_GRID_STRIDE(w, n) {
     const std::pair<index_t, index_t> p = kept[deferred[w]];
     const CertifiedAnswer<T> a = Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
     settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// The inside tests of a refinement run by a whole warp (every lane runs the same search on the
+// same values, so all ask for the same test at once): a test not at hand is evaluated with its
+// subtree, the interval and its descendants down to 4 levels below, a lane each (31 lanes); every
+// lane keeps the 31 verdicts (2 bits each, by two ballots). The search asks next for a child or a
+// later sibling most of the time: cloth-funnel's longest coplanar edge-edge search (186 tests)
+// evaluates 37 subtrees (CPU count).
+struct WarpInsideSubtree {
+  static constexpr int kDepth = 5;  // levels of a subtree; 2^5 - 1 = 31 intervals
+  int lane = 0, max_level = 0;
+  int root_level = -1;
+  std::uint32_t root_index = 0;
+  unsigned low_bits = 0, high_bits = 0;  // verdict bit 0 and bit 1 of each subtree interval (heap order)
+
+  template <class Compute>
+  __device__ lwsccd::detail::InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) {
+    using lwsccd::detail::InsideVerdict;
+    const int depth = level - root_level;
+    const bool held = root_level >= 0 && depth >= 0 && depth < kDepth && (index >> depth) == root_index;
+    if (!held) {
+      root_level = level, root_index = index;
+      // This lane's interval: heap place lane + 1 = 2^d + offset, d levels below the root.
+      const int d = 31 - __clz(lane + 1);
+      const std::uint32_t offset = static_cast<std::uint32_t>(lane + 1 - (1 << d));
+      const int lane_level = level + d;
+      InsideVerdict v = InsideVerdict::unknown;
+      if (lane < 31 && lane_level <= max_level) v = compute(lane_level, (index << d) | offset);
+      const unsigned bits = static_cast<unsigned>(v);
+      low_bits = __ballot_sync(0xffffffffu, bits & 1u);
+      high_bits = __ballot_sync(0xffffffffu, bits & 2u);
+    }
+    const int d = level - root_level;
+    const int place = (1 << d) - 1 + static_cast<int>(index - (root_index << d));
+    return static_cast<InsideVerdict>(((low_bits >> place) & 1u) | (((high_bits >> place) & 1u) << 1));
+  }
+};
+
+// Second part for a short list (at most `warp_below` deferred pairs): a warp per pair, the inside
+// tests by subtrees (WarpInsideSubtree); the same answers as refine_deferred_kernel. Its pairs are
+// the long searches (cloth-funnel's coplanar edge-edge ones: 96 halvings and ~190 inside tests one
+// after the other took ~255 us in one thread on an H100).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                            const std::pair<index_t, index_t>* kept, const unsigned* deferred,
+                                            CcdParams<T> params, const unsigned long long* control,
+                                            unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room,
+                                            FeatureHit<T>* undecided, std::size_t warp_below) {
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  if (n > warp_below) return;
+  const int lane = static_cast<int>(threadIdx.x) % 32;
+  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
+  for (std::size_t w = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; w < n; w += warps) {
+    const std::pair<index_t, index_t> p = kept[deferred[w]];
+    WarpInsideSubtree inside;
+    inside.lane = lane;
+    inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
+    const CertifiedAnswer<T> a = Method::template refine_with<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, inside);
+    if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+    __syncwarp();
   }
 }
 
@@ -398,16 +461,25 @@ __global__ void settle_undecided_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
 
 // Second pass, first attempt: the same search in one thread per query, for a few rounds and
 // little memory. Most queries end there; the others are listed in `open` for the warp search
-// (which starts over and gives the answer the whole search gives).
+// (which starts over and gives the answer the whole search gives). A list of at most
+// `direct_below` queries goes to the warp search whole: its warps all run at once, and the
+// attempt's rounds would only lengthen the longest search (cloth-funnel's fallbacks: 34-54 us).
 template <class Method, bool kVertexFace, class T, class P, int kRounds, int kStore, class Item>
 __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items,
                                         DeviceCount count, CcdParams<T> params, const unsigned long long* control,
                                         const unsigned long long* limit_bits, unsigned long long* counters, FeatureHit<T>* hits,
-                                        std::size_t hit_room, unsigned* open) {
+                                        std::size_t hit_room, unsigned* open, std::size_t direct_below) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   if (control[kSkip]) return;
   const CcdParams<T> base = limited_params(params, limit_bits);
   const std::size_t n = count.get();
+  if (n <= direct_below) {
+    LWSCCD_GRID_STRIDE(i, n) {
+      if (i == 0) counters[kOpen] = n;
+      open[i] = static_cast<unsigned>(i);
+    }
+    return;
+  }
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = item_pair(items[i]);
     const CcdParams<T> qp = item_params(items[i], base);
@@ -427,51 +499,59 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
   }
 }
 
-// The rank of `x` among the n sorted keys at `sorted`, or among the n sorted boxes (how many come
-// before it).
-LWSCCD_HD inline int rank_in(const lwsccd::detail::BoxOrderKey* sorted, int n, const lwsccd::detail::BoxOrderKey& x) {
-  int lo = 0, hi = n;
-  while (lo < hi) {
-    const int mid = (lo + hi) / 2;
-    if (lwsccd::detail::key_before(sorted[mid], x)) lo = mid + 1;
-    else hi = mid;
+// The warp's `n` keys (n <= 64, two a lane: lane l holds places 2l and 2l + 1, the places from n
+// on padded with a key after every box's) sorted by a bitonic network: in place, ascending. Half
+// the stages exchange with another lane (four 64-bit shuffles), the others swap the lane's pair;
+// up to 32 keys need only the first lanes' network.
+__device__ inline void warp_sort_keys(lwsccd::detail::BoxOrderKey& first, lwsccd::detail::BoxOrderKey& second, int n, int lane) {
+  using lwsccd::detail::BoxOrderKey;
+  using lwsccd::detail::key_before;
+  const int size = n <= 2 ? 2 : (n <= 4 ? 4 : (n <= 8 ? 8 : (n <= 16 ? 16 : (n <= 32 ? 32 : 64))));
+  for (int k = 2; k <= size; k <<= 1) {
+    const bool up = ((2 * lane) & k) == 0;  // this lane's places sort up in this stage's runs
+    for (int j = k >> 1; j >= 2; j >>= 1) {
+      const int mask = j >> 1;  // the partner's lane distance; both places share it
+      const bool lower = (lane & mask) == 0;
+      const BoxOrderKey other_first{__shfl_xor_sync(0xffffffffu, first.high, mask), __shfl_xor_sync(0xffffffffu, first.low, mask)};
+      const BoxOrderKey other_second{__shfl_xor_sync(0xffffffffu, second.high, mask), __shfl_xor_sync(0xffffffffu, second.low, mask)};
+      const bool keep_min = lower == up;
+      if (key_before(other_first, first) == keep_min) first = other_first;
+      if (key_before(other_second, second) == keep_min) second = other_second;
+    }
+    if (key_before(second, first) == up) {
+      const BoxOrderKey x = first;
+      first = second;
+      second = x;
+    }
   }
-  return lo;
-}
-LWSCCD_HD inline int rank_in(const lwsccd::detail::DyadicBox* sorted, int n, const lwsccd::detail::BoxOrderKey& x) {
-  int lo = 0, hi = n;
-  while (lo < hi) {
-    const int mid = (lo + hi) / 2;
-    if (lwsccd::detail::key_before(lwsccd::detail::box_order_key(sorted[mid]), x)) lo = mid + 1;
-    else hi = mid;
-  }
-  return lo;
 }
 
 // Second pass for InclusionCcd (filtered or not): a warp per query. The rounds of
 // detail::InclusionSearch with the work spread over the lanes: each lane examines one box of the
-// round and makes its new boxes; the new boxes are ranked among themselves and merged into the
-// sorted live boxes by rank, every lane placing its own. Same sets and answers as the one-thread
-// search (the order is total), with a long search's latency cut to that of its rounds. Ranks
-// compare box_order_key's two words (H100: comparing the fields one by one took ~22 K of a
-// round's ~35 K cycles on cloth-funnel's edge-edge searches; ~6 K this way).
+// round and makes its new boxes; the new boxes are sorted by a warp network and merged with the
+// sorted live boxes along the merge path, each lane writing a run of the output. Same sets and
+// answers as the one-thread search (the order is total), with a long search's latency cut to that
+// of its rounds. The live boxes are kept as their order keys (BoxOrderKey: the whole box in two
+// words), so that ranking and merging compare words (H100, cloth-funnel's edge-edge searches:
+// comparing boxes field by field took ~22 K of a round's ~35 K cycles).
 template <class Method, bool kVertexFace, class T, class P, int kWarps, class Item>
 __global__ void __launch_bounds__(32 * kWarps)
     inclusion_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, const unsigned* which,
                           CcdParams<T> params, const unsigned long long* control, const unsigned long long* limit_bits,
                           unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
-  using Search = lwsccd::detail::InclusionSearch<typename Traits::policy, T>;
-  using Round = typename Search::Round;
+  using Policy = typename Traits::policy;
   using lwsccd::detail::BoxOrderKey;
   using lwsccd::detail::BoxVerdict;
   using lwsccd::detail::DyadicBox;
+  using lwsccd::detail::key_before;
+  using Search = lwsccd::detail::InclusionSearch<Policy, T, Policy::kMaxBoxes, BoxOrderKey>;
+  using Round = typename Search::Round;
   constexpr int kFresh = Search::kFresh;
-  static_assert(Search::kBatch <= 32, "lwsccd: a round must fit in a warp");
+  static_assert(Search::kBatch <= 32 && kFresh <= 64, "lwsccd: a round must fit in a warp");
   // Raw storage: shared variables cannot have constructors; start() initializes a search.
   __shared__ alignas(Search) unsigned char storage[kWarps * sizeof(Search)];
-  __shared__ DyadicBox fresh_sorted[kWarps][kFresh];
-  __shared__ BoxOrderKey fresh_keys[kWarps][kFresh], sorted_keys[kWarps][kFresh];
+  __shared__ BoxOrderKey fresh[kWarps][kFresh];
   __shared__ CcdResult<T> results[kWarps];
   __shared__ unsigned long long dropped[kWarps];
   __shared__ int state[kWarps];
@@ -480,6 +560,7 @@ __global__ void __launch_bounds__(32 * kWarps)
   const std::size_t n = static_cast<std::size_t>(counters[kOpen]);
   const int warp = static_cast<int>(threadIdx.x) / 32, lane = static_cast<int>(threadIdx.x) % 32;
   Search& search = reinterpret_cast<Search*>(storage)[warp];
+  const BoxOrderKey after_all{~0ull, ~0ull};
   for (std::size_t w = static_cast<std::size_t>(blockIdx.x) * kWarps + warp; w < n;
        w += static_cast<std::size_t>(gridDim.x) * kWarps) {
     const std::size_t i = which[w];
@@ -501,9 +582,13 @@ __global__ void __launch_bounds__(32 * kWarps)
           return;
         }
         const int k = search.batch_size;
-        const DyadicBox* batch = search.batch();
+        const BoxOrderKey* batch = search.batch();
         BoxVerdict verdict = BoxVerdict::excluded;
-        if (lane < k) verdict = lwsccd::detail::examine_box(q, setup, batch[lane], search.floor_key, search.t_floor);
+        DyadicBox box{};
+        if (lane < k) {
+          box = lwsccd::detail::box_of_key(batch[lane]);
+          verdict = lwsccd::detail::examine_box(q, setup, box, search.floor_key, search.t_floor);
+        }
         // The answer: the first accepted box with no split box before it in the round.
         const unsigned accepted = __ballot_sync(0xffffffffu, lane < k && verdict == BoxVerdict::accepted);
         const unsigned split = __ballot_sync(0xffffffffu, lane < k && verdict != BoxVerdict::accepted &&
@@ -514,42 +599,51 @@ __global__ void __launch_bounds__(32 * kWarps)
           __syncwarp();
           return;
         }
-        // This lane's new boxes, listed after the lower lanes' ones, then ranked among all the
-        // round's new boxes by their keys (every lane reads the same key at once).
+        // This lane's new boxes, listed after the lower lanes' ones, then sorted by the warp.
         DyadicBox mine[2];
-        const int count = lane < k ? search.fresh_boxes(batch[lane], verdict, setup.vf, mine) : 0;
+        const int count = lane < k ? search.fresh_boxes(box, verdict, setup.vf, mine) : 0;
         const unsigned has_one = __ballot_sync(0xffffffffu, count >= 1), has_two = __ballot_sync(0xffffffffu, count == 2);
         const unsigned lower_lanes = (1u << lane) - 1u;
         const int listed_at = __popc(has_one & lower_lanes) + __popc(has_two & lower_lanes);
         const int nf = __popc(has_one) + __popc(has_two);
-        BoxOrderKey my_keys[2];
-        for (int c = 0; c < count; ++c) {
-          my_keys[c] = lwsccd::detail::box_order_key(mine[c]);
-          fresh_keys[warp][listed_at + c] = my_keys[c];
-        }
+        for (int c = 0; c < count; ++c) fresh[warp][listed_at + c] = lwsccd::detail::box_order_key(mine[c]);
         __syncwarp();
-        for (int c = 0; c < count; ++c) {
-          int rank = 0;
-#pragma unroll 4
-          for (int other = 0; other < nf; ++other) rank += lwsccd::detail::key_before(fresh_keys[warp][other], my_keys[c]) ? 1 : 0;
-          fresh_sorted[warp][rank] = mine[c];
-          sorted_keys[warp][rank] = my_keys[c];
-        }
+        BoxOrderKey first = 2 * lane < nf ? fresh[warp][2 * lane] : after_all;
+        BoxOrderKey second = 2 * lane + 1 < nf ? fresh[warp][2 * lane + 1] : after_all;
         __syncwarp();
-        // Merge by rank into the other buffer, keeping the earliest kKeep when over capacity.
-        const DyadicBox* live = search.live();
+        warp_sort_keys(first, second, nf, lane);
+        if (2 * lane < nf) fresh[warp][2 * lane] = first;
+        if (2 * lane + 1 < nf) fresh[warp][2 * lane + 1] = second;
+        __syncwarp();
+        // Merge into the other buffer, keeping the earliest kKeep when over capacity (the first
+        // box past them gives the dropped time): output places [from, to) are this lane's; where
+        // its run starts in each list is found on the merge path (how many of the first `from`
+        // outputs are live boxes).
+        const BoxOrderKey* live = search.live();
+        const BoxOrderKey* sorted = fresh[warp];
         const int size = search.size, total = size + nf;
         const int limit = total > Search::kCapacity ? Search::kKeep : total;
-        DyadicBox* out = search.items[1 - search.current];
-        for (int a = lane; a < size; a += 32) {
-          const int pos = a + rank_in(sorted_keys[warp], nf, lwsccd::detail::box_order_key(live[a]));
-          if (pos < limit) out[pos] = live[a];
-          else if (pos == limit) dropped[warp] = lwsccd::detail::box_time_key(live[a]);
-        }
-        for (int b = lane; b < nf; b += 32) {
-          const int pos = b + rank_in(live, size, sorted_keys[warp][b]);
-          if (pos < limit) out[pos] = fresh_sorted[warp][b];
-          else if (pos == limit) dropped[warp] = lwsccd::detail::box_time_key(fresh_sorted[warp][b]);
+        const int outputs = total > limit ? limit + 1 : total;
+        const int run = (outputs + 31) / 32;
+        const int from = lane * run < outputs ? lane * run : outputs, to = from + run < outputs ? from + run : outputs;
+        BoxOrderKey* out = search.items[1 - search.current];
+        if (from < to) {
+          int lo = from > nf ? from - nf : 0, hi = from < size ? from : size;
+          while (lo < hi) {
+            const int mid = (lo + hi) / 2;
+            if (key_before(live[mid], sorted[from - 1 - mid])) lo = mid + 1;
+            else hi = mid;
+          }
+          int a = lo, b = from - lo;
+          BoxOrderKey next_live = a < size ? live[a] : after_all, next_fresh = b < nf ? sorted[b] : after_all;
+          for (int o = from; o < to; ++o) {
+            const bool take_live = key_before(next_live, next_fresh);
+            const BoxOrderKey next = take_live ? next_live : next_fresh;
+            if (take_live) next_live = ++a < size ? live[a] : after_all;
+            else next_fresh = ++b < nf ? sorted[b] : after_all;
+            if (o < limit) out[o] = next;
+            else dropped[warp] = lwsccd::detail::box_time_key(next);  // o == limit: the earliest dropped box
+          }
         }
         __syncwarp();
         if (lane == 0) {
@@ -783,10 +877,21 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
               l.hit_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
+    // The deferred pairs: a warp each when they are few (the long searches' latency is the
+    // list's), else a thread each; each kernel returns at once where the other one's case holds.
+    const auto warp_below = static_cast<std::size_t>(Policy::kRefineWarpBelow);
     detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
-        l.hit_room, l.undecided.data());
+        l.hit_room, l.undecided.data(), warp_below);
     LWSCCD_CUDA_CHECK_LAUNCH();
+    if (warp_below > 0) {
+      const std::size_t warp_room = std::min(room, warp_below);
+      detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
+          <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+              l.hit_room, l.undecided.data(), warp_below);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
     // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
     detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.work_room);
@@ -809,7 +914,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh,
       detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
           <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
               mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room,
-              l.open.data());
+              l.open.data(), static_cast<std::size_t>(Policy::kWarpSearchDirect));
       LWSCCD_CUDA_CHECK_LAUNCH();
       constexpr int kWarps = Policy::kSearchWarpsPerBlock;
       detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps>
