@@ -483,21 +483,36 @@ struct InclusionSearch {
   /// Takes the next round's boxes (restarting past dropped boxes when needed). On gave_up,
   /// `result` holds the conservative answer.
   LWSCCD_HD Round next_round(int max_iterations, CcdResult<T>& result) {
+    if (!settle_front(result)) return result.hit ? Round::gave_up : Round::no_contact;
+    int k = 0, unexamined = 0;
+    while (in_batch(k)) unexamined += is_accepted(items[current][head + k]) ? 0 : 1, ++k;
+    return take_batch(k, unexamined, max_iterations, result);
+  }
+  /// next_round in three steps, for a warp that finds the batch with one ballot: settle_front
+  /// restarts past dropped boxes where needed (false: no round; `result` holds a hit when the
+  /// search gave up, else none); in_batch(i): whether live box i joins the batch (the batch is a
+  /// prefix of the live boxes); take_batch: takes the first k, `unexamined` of them not yet accepted.
+  LWSCCD_HD bool settle_front(CcdResult<T>& result) {
+    result = {};
     while (size == 0 || (evicted_key != kNone && box_time_key(items[current][head]) >= evicted_key)) {
-      if (evicted_key == kNone) return Round::no_contact;  // everything excluded
+      if (evicted_key == kNone) return false;  // everything excluded
       // No time excluded since the last restart: the store is too small for this query.
       if (evicted_key == floor_key) {
         result = {true, t_floor, true};
-        return Round::gave_up;
+        return false;
       }
       floor_key = evicted_key;
       t_floor = std::ldexp(static_cast<T>(floor_key), -40);  // a box's time: exact in T
       evicted_key = kNone;
       restart_whole();
     }
+    return true;
+  }
+  LWSCCD_HD bool in_batch(int i) const {
+    return i < kBatch && i < size && (evicted_key == kNone || box_time_key(items[current][head + i]) < evicted_key);
+  }
+  LWSCCD_HD Round take_batch(int k, int unexamined, int max_iterations, CcdResult<T>& result) {
     const Item* first = items[current] + head;
-    int k = 0;
-    while (k < kBatch && k < size && (evicted_key == kNone || box_time_key(first[k]) < evicted_key)) ++k;
     batch_size = k;
     head += k;
     size -= k;
@@ -505,7 +520,7 @@ struct InclusionSearch {
       result = {true, time_of(first[0]), true};  // the earliest time not excluded
       return Round::gave_up;
     }
-    for (int i = 0; i < k; ++i) examined += is_accepted(first[i]) ? 0 : 1;
+    examined += unexamined;
     return Round::examine;
   }
   /// Whether the verdicts answer the query: the first accepted box of the round, if no box

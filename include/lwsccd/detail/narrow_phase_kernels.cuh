@@ -574,11 +574,21 @@ __global__ void __launch_bounds__(32 * kWarps)
       if (lane == 0) search.start();
       __syncwarp();
       while (true) {
-        if (lane == 0) state[warp] = static_cast<int>(search.next_round(qp.max_iterations, results[warp]));
+        // Search::next_round with the batch found by ballots (lane 0 alone went through it box by box).
+        if (lane == 0) state[warp] = search.settle_front(results[warp]) ? 1 : 0;
         __syncwarp();
-        const Round round = static_cast<Round>(state[warp]);
-        if (round != Round::examine) {
-          if (round == Round::gave_up) r = results[warp];
+        if (state[warp] == 0) {
+          if (results[warp].hit) r = results[warp];  // gave up
+          return;
+        }
+        const bool joins = search.in_batch(lane);  // a prefix of the live boxes (they are sorted by time)
+        const int joining = __popc(__ballot_sync(0xffffffffu, joins));
+        const int unexamined = __popc(__ballot_sync(0xffffffffu, joins && !lwsccd::detail::is_accepted(search.live()[lane])));
+        __syncwarp();  // every lane's reads of the search before lane 0 takes the batch
+        if (lane == 0) state[warp] = static_cast<int>(search.take_batch(joining, unexamined, qp.max_iterations, results[warp]));
+        __syncwarp();
+        if (static_cast<Round>(state[warp]) != Round::examine) {
+          r = results[warp];  // gave up
           return;
         }
         const int k = search.batch_size;
