@@ -165,6 +165,15 @@ int main(int argc, char** argv) {
       // instead of compiled to fit the default's two (64).
       using NoFit = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>;
       rows.push_back(scheduler_row<NoFit>("lazy stealing (no fit)", kind, task, rays, best, seeds, reference, args.reps));
+      // Each ray's inverse direction stored once (RayCastTask::inverse), not divided for per item.
+      gpu::DeviceBuffer<Vec3f> inverse;
+      inverse.upload(inverse_directions(host_rays));
+      RayCastTask with_inverse = task;
+      with_inverse.inverse = inverse.data();
+      rows.push_back(scheduler_row<gpu::LazyStealScheduler<>>("lazy, inverses stored", kind, with_inverse, rays, best, seeds,
+                                                              reference, args.reps));
+      rows.push_back(scheduler_row<gpu::StaticTaskList<>>("static, inverses stored", kind, with_inverse, rays, best, seeds,
+                                                          reference, args.reps));
     }
     std::printf("GPU: %s; cloth-ball (92,230 triangles), closest hit, CUDA events, median of %d runs\n", prop.name, args.reps);
     std::printf("%-30s %-22s %10s %10s %14s %s\n", "rays", "method", "count", "ms", "Mrays/s", "hits = per-thread");

@@ -40,6 +40,9 @@ std::vector<std::uint64_t> cast(bool gpu, const BvhView<Aabbf>& gpu_bvh, const B
   gpu::DeviceBuffer<RayNode> d_seeds;
   d_seeds.upload(seeds);
   RayCastTask task{gpu_bvh, d_faces->data(), d_x->data(), d_rays.data(), best.data(), any_hit};
+  gpu::DeviceBuffer<Vec3f> inverse;  // each ray's 1 / direction once, not per visited node
+  inverse.upload(inverse_directions(rays));
+  task.inverse = inverse.data();
   gpu::TraversalOutput<RayCastTask> out;
   gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
   return best.download();

@@ -15,7 +15,8 @@ namespace {
 
 template <class Scheduler>
 std::vector<std::uint64_t> traced(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceBuffer<Face>& faces,
-                                  const gpu::DeviceBuffer<Vec3f>& x, const std::vector<Ray>& rays, bool any_hit) {
+                                  const gpu::DeviceBuffer<Vec3f>& x, const std::vector<Ray>& rays, bool any_hit,
+                                  bool stored_inverses = false) {
   gpu::DeviceBuffer<Ray> d_rays;
   d_rays.upload(rays);
   gpu::DeviceBuffer<std::uint64_t> best;
@@ -25,6 +26,11 @@ std::vector<std::uint64_t> traced(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceB
   gpu::DeviceBuffer<RayNode> d_seeds;
   d_seeds.upload(seeds);
   RayCastTask task{bvh.view(), faces.data(), x.data(), d_rays.data(), best.data(), any_hit};
+  gpu::DeviceBuffer<Vec3f> inverse;
+  if (stored_inverses) {
+    inverse.upload(inverse_directions(rays));
+    task.inverse = inverse.data();
+  }
   gpu::TraversalOutput<RayCastTask> out;
   gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
   return best.download();
@@ -45,6 +51,7 @@ void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, int grid
   REQUIRE(traced<gpu::StaticTaskList<>>(bvh, faces, dx, rays, false) == reference);
   REQUIRE(traced<gpu::GProximityBalancer<>>(bvh, faces, dx, rays, false) == reference);
   REQUIRE(traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, false) == reference);
+  REQUIRE(traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, false, true) == reference);  // stored inverses
   const auto any = traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, true);
   for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any[r] == kNoHit) == (reference[r] == kNoHit));
 }

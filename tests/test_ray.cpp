@@ -15,9 +15,11 @@ namespace {
 
 template <class Scheduler>
 std::vector<std::uint64_t> traced(const cpu::Bvh<Aabbf>& bvh, const TriangleMesh& mesh, const std::vector<Vec3f>& x,
-                                  const std::vector<Ray>& rays, bool any_hit, Scheduler s) {
+                                  const std::vector<Ray>& rays, bool any_hit, Scheduler s, bool stored_inverses = false) {
   std::vector<std::uint64_t> best(rays.size(), kNoHit);
   RayCastTask task{bvh.view(), mesh.faces().data(), x.data(), rays.data(), best.data(), any_hit};
+  const std::vector<Vec3f> inverse = inverse_directions(rays);
+  if (stored_inverses) task.inverse = inverse.data();
   std::vector<RayNode> seeds;
   for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
   cpu::traverse(task, seeds, false, s);
@@ -30,6 +32,7 @@ void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3f>& x, int grid,
   const auto reference = lwsccd_test::brute_force_hits(rays, mesh.faces(), x);
   REQUIRE(traced(bvh, mesh, x, rays, false, cpu::SerialScheduler{}) == reference);
   REQUIRE(traced(bvh, mesh, x, rays, false, cpu::WorkStealingScheduler{3}) == reference);
+  REQUIRE(traced(bvh, mesh, x, rays, false, cpu::WorkStealingScheduler{2}, true) == reference);  // stored inverses
   // Any hit: a ray is blocked exactly when it has a closest hit.
   const auto any = traced(bvh, mesh, x, rays, true, cpu::WorkStealingScheduler{2});
   std::size_t hits = 0;

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <vector>
 
 #include "lwsccd/bvh.hpp"
 #include "lwsccd/detail/fp.hpp"
@@ -83,6 +84,9 @@ LWSCCD_HD inline float ray_box_entry(const Ray& r, const Vec3f& inv, const Aabbf
   return t0 * (1.0f - kWiden) <= t1 * (1.0f + kWiden) ? t0 * (1.0f - kWiden) : std::numeric_limits<float>::infinity();
 }
 
+/// 1 / direction, componentwise (IEEE division: the same bits on host and device).
+LWSCCD_HD inline Vec3f inverse_direction(const Vec3f& d) { return {1.0f / d.x, 1.0f / d.y, 1.0f / d.z}; }
+
 /// Moller-Trumbore: distance along the ray to triangle (a, b, c), or +inf. Rounded the same way
 /// on host and device (detail/fp.hpp), so every scheduler reports the same bits.
 LWSCCD_HD inline float ray_triangle(const Ray& r, const Vec3f& a, const Vec3f& b, const Vec3f& c) {
@@ -116,6 +120,9 @@ struct RayCastTask {
   const Ray* rays;
   std::uint64_t* best;  ///< per ray, kNoHit before the traversal
   bool any_hit = false;
+  /// Optional, per ray: detail::inverse_direction of its direction (inverse_directions() makes
+  /// them), so that each of its items does not divide three times again; the same hits.
+  const Vec3f* inverse = nullptr;
 
   LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
@@ -124,7 +131,7 @@ struct RayCastTask {
     const std::uint64_t current = detail::atomic_load_u64(&best[item.ray]);
     if (any_hit && current != kNoHit) return;
     const float limit = current == kNoHit ? r.t_max : hit_t(current);
-    const Vec3f inv{1.0f / r.direction.x, 1.0f / r.direction.y, 1.0f / r.direction.z};
+    const Vec3f inv = inverse ? inverse[item.ray] : detail::inverse_direction(r.direction);
     if (!(detail::ray_box_entry(r, inv, bvh.bvs[item.node], limit) <= limit)) return;
     if (bvh.is_leaf(item.node)) {
       const index_t tri = bvh.primitive(item.node);
@@ -137,5 +144,12 @@ struct RayCastTask {
     out.push_item(RayNode{item.ray, bvh.right[item.node]});
   }
 };
+
+/// The inverse directions of `rays`, for RayCastTask::inverse.
+inline std::vector<Vec3f> inverse_directions(const std::vector<Ray>& rays) {
+  std::vector<Vec3f> out(rays.size());
+  for (std::size_t i = 0; i < rays.size(); ++i) out[i] = detail::inverse_direction(rays[i].direction);
+  return out;
+}
 
 }  // namespace lwsccd
