@@ -583,6 +583,16 @@ LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<
   return {Certainty::hit, lower, to, true};
 }
 
+/// The refinement's inside tests as they are asked for, one at a time (certified_refine's
+/// `inside_at`: called with an interval's level and index, and a function that computes the
+/// verdict there). The GPU's warp per search evaluates a whole subtree of them at once instead.
+struct InsideOneByOne {
+  template <class Compute>
+  LWSCCD_HD InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) const {
+    return compute(level, index);
+  }
+};
+
 /// The certified classification of a query that certified_screen did not reject (see the file
 /// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
 /// query the screen would reject (it then finds the miss itself, at more cost).
@@ -595,16 +605,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<
 /// `kSettle` false: an undecided answer is returned as it is, for a batch that settles its
 /// undecided queries apart (certified_undecided): the GPU keeps that test's code out of its
 /// refinement kernels, whose registers it would cost on every pair.
-/// The refinement's inside tests as they are asked for, one at a time (certified_refine's
-/// `inside_at`: called with an interval's level and index, and a function that computes the
-/// verdict there). The GPU's warp per search evaluates a whole subtree of them at once instead.
-struct InsideOneByOne {
-  template <class Compute>
-  LWSCCD_HD InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) const {
-    return compute(level, index);
-  }
-};
-
+/// `inside_at`: where the inside tests are asked for (InsideOneByOne's contract); any evaluator
+/// that returns each test's own verdict gives the same answer.
 template <class Policy, int kStack = 34, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
 LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
                                               bool* deferred = nullptr, InsideAt&& inside_at = InsideOneByOne{}) {
