@@ -57,6 +57,25 @@ __global__ void ray_per_thread_kernel(BvhView<Aabbf> bvh, const Face* faces, con
   best[i] = hit;
 }
 
+// One thread per ray with the walk RayWalkTask's items use (detail::walk_ray: children tested
+// before they are pushed, pending nodes kept with their entry distances), unbounded: the standard
+// approach with the same inner loop, so that the walk rows compare schedulers, not loops.
+struct CountOverflow {
+  unsigned* overflows;
+  __device__ void operator()(index_t) { atomicAdd(overflows, 1u); }
+};
+__global__ void ray_walk_per_thread_kernel(BvhView<Aabbf> bvh, const Face* faces, const Vec3f* x, const Ray* rays,
+                                           const Vec3f* inverse, int n, std::uint64_t* best, unsigned* overflows) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const Ray r = rays[i];
+  std::uint64_t hit = kNoHit;
+  CountOverflow spill{overflows};
+  if (detail::ray_box_entry(r, inverse[i], bvh.bvs[0], r.t_max) <= r.t_max)
+    detail::walk_ray<64>(bvh, faces, x, r, inverse[i], 0, hit, false, -1, spill);
+  best[i] = hit;
+}
+
 std::vector<Ray> camera_rays(const std::vector<Vec3f>& x, int w, int h) {
   Aabbf box = Aabbf::empty();
   for (const auto& p : x) box.expand(p);
@@ -99,30 +118,53 @@ struct Row {
   std::size_t count;
   double median_ms;
   bool same;
+  std::size_t items = 0, flat_items = 0;  ///< scheduler rows: items processed (all, by the flat start)
+  double busy_share = -1;                 ///< lazy stealing: busy / (busy + idle) over its blocks
 };
 
-template <class Scheduler>
-Row scheduler_row(const char* name, const std::string& kind, const RayCastTask& task_template, const gpu::DeviceBuffer<Ray>& rays,
+template <class Scheduler, class Task = RayCastTask>
+Row scheduler_row(const std::string& name, const std::string& kind, const Task& task_template, const gpu::DeviceBuffer<Ray>& rays,
                   gpu::DeviceBuffer<std::uint64_t>& best, const gpu::DeviceBuffer<RayNode>& seeds,
                   const std::vector<std::uint64_t>& reference, int reps) {
-  RayCastTask task = task_template;
+  Task task = task_template;
   task.rays = rays.data();
   task.best = best.data();
-  gpu::TraversalOutput<RayCastTask> out;
+  gpu::TraversalOutput<Task> out;
   auto run = [&] {
     LWSCCD_CUDA_CHECK(cudaMemset(best.data(), 0xff, rays.size() * sizeof(std::uint64_t)));
     gpu::traverse<Scheduler>(task, seeds.data(), seeds.size(), out, false);
   };
   run();
   const auto ms = lwsccd_bench::time_with_events(reps, run);
-  return {kind, name, rays.size(), lwsccd_bench::median(ms), best.download() == reference};
+  Row row{kind, name, rays.size(), lwsccd_bench::median(ms), best.download() == reference};
+  row.items = out.stats().items_processed;
+  row.flat_items = out.stats().flat_start_items;
+  unsigned long long busy = 0, idle = 0;
+  for (const gpu::BlockActivity& a : out.download_block_activity()) {
+    busy += a.busy_cycles;
+    idle += a.idle_cycles;
+  }
+  if (busy + idle) row.busy_share = double(busy) / double(busy + idle);
+  return row;
+}
+
+// RayWalkTask<StackSize> (visit budget `budget`) with Scheduler.
+template <class Scheduler, int StackSize>
+Row walk_row(const std::string& name, const std::string& kind, const RayCastTask& base, int budget,
+             const gpu::DeviceBuffer<Ray>& rays, gpu::DeviceBuffer<std::uint64_t>& best, const gpu::DeviceBuffer<RayNode>& seeds,
+             const std::vector<std::uint64_t>& reference, int reps) {
+  RayWalkTask<StackSize> walk;
+  static_cast<RayCastTask&>(walk) = base;
+  walk.visit_budget = budget;
+  return scheduler_row<Scheduler>(name, kind, walk, rays, best, seeds, reference, reps);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   const lwsccd_bench::BenchArgs args =
-      lwsccd_bench::parse_bench_args(argc, argv, 5, {}, "usage: lwsccd-bench-rays [--data DIR] [--reps N] [--json FILE]");
+      lwsccd_bench::parse_bench_args(argc, argv, 5, {"--walks"},
+                                     "usage: lwsccd-bench-rays [--data DIR] [--reps N] [--json FILE] [--walks]");
   cudaDeviceProp prop{};
   if (!lwsccd_bench::first_gpu(prop, "lwsccd-bench-rays")) return 77;
   try {
@@ -174,17 +216,73 @@ int main(int argc, char** argv) {
                                                               reference, args.reps));
       rows.push_back(scheduler_row<gpu::StaticTaskList<>>("static, inverses stored", kind, with_inverse, rays, best, seeds,
                                                           reference, args.reps));
+      // Walks (RayWalkTask): an item takes a ray `budget` nodes down before it hands the rest back.
+      gpu::DeviceBuffer<unsigned> overflows;
+      overflows.upload(std::vector<unsigned>{0});
+      auto walk_baseline = [&] {
+        ray_walk_per_thread_kernel<<<(n + 127) / 128, 128>>>(bvh.view(), faces.data(), dx.data(), rays.data(), inverse.data(), n,
+                                                             best.data(), overflows.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      };
+      walk_baseline();
+      const auto walk_ms = lwsccd_bench::time_with_events(args.reps, walk_baseline);
+      rows.push_back({kind, "one thread per ray, walk", host_rays.size(), lwsccd_bench::median(walk_ms),
+                      best.download() == reference && overflows.download()[0] == 0});
+      // Walks with the defaults: RayWalkTask<> (a stack of 14 nodes), gpu::RayWalkLazySteal.
+      for (const int budget : {32, 64, 128, 0})
+        rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>(budget ? "lazy, walks of " + std::to_string(budget) : "lazy, whole rays",
+                                                           kind, with_inverse, budget, rays, best, seeds, reference, args.reps));
+      rows.push_back(walk_row<gpu::StaticTaskList<128, 4096>, 14>("static, walks of 32", kind, with_inverse, 32, rays, best, seeds,
+                                                                 reference, args.reps));
+      if (args.has("--walks")) {  // the variants weighed for RayWalkTask's defaults (docs/RAYTRACING.md)
+        using Lazy256 = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4>;
+        using NoFlat = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4, 8, 256, 16, true, true, 0>;
+        using NoFit = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4, 8, 256, 16, true, false>;
+        using Lazy128 = gpu::LazyStealScheduler<128, 2048, 8192, 256, 1024, 8>;
+        using Lazy64 = gpu::LazyStealScheduler<64, 1024, 8192, 128, 512, 16>;
+        using Lazy128Deep = gpu::LazyStealScheduler<128, 4096, 8192, 512, 2048, 6>;
+        using Lazy64Deep = gpu::LazyStealScheduler<64, 2048, 8192, 256, 1024, 12>;
+        using Lazy64Deeper = gpu::LazyStealScheduler<64, 4096, 8192, 512, 2048, 6>;
+        rows.push_back(walk_row<NoFlat, 6>("lazy no flat start, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,
+                                           args.reps));
+        rows.push_back(walk_row<NoFit, 6>("lazy no fit, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,
+                                          args.reps));
+        for (const int budget : {8, 16, 32}) {
+          const std::string b = std::to_string(budget);
+          rows.push_back(walk_row<Lazy256, 6>("lazy 256x4, walks of " + b, kind, with_inverse, budget, rays, best, seeds,
+                                              reference, args.reps));
+          rows.push_back(walk_row<Lazy128, 6>("lazy 128x8, walks of " + b, kind, with_inverse, budget, rays, best, seeds,
+                                              reference, args.reps));
+          rows.push_back(walk_row<Lazy64, 6>("lazy 64x16, walks of " + b, kind, with_inverse, budget, rays, best, seeds,
+                                             reference, args.reps));
+          rows.push_back(walk_row<Lazy128Deep, 14>("lazy 128x6, stack 14, walks of " + b, kind, with_inverse, budget, rays, best,
+                                                   seeds, reference, args.reps));
+          rows.push_back(walk_row<Lazy64Deep, 14>("lazy 64x12, stack 14, walks of " + b, kind, with_inverse, budget, rays, best,
+                                                  seeds, reference, args.reps));
+          rows.push_back(walk_row<Lazy64Deeper, 30>("lazy 64x6, stack 30, walks of " + b, kind, with_inverse, budget, rays, best,
+                                                    seeds, reference, args.reps));
+        }
+        for (const int budget : {48, 96, 256})
+          rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>("lazy, walks of " + std::to_string(budget), kind, with_inverse, budget,
+                                                             rays, best, seeds, reference, args.reps));
+        rows.push_back(walk_row<Lazy128Deep, 14>("lazy 128x6, stack 14, whole rays", kind, with_inverse, 0, rays, best, seeds,
+                                                 reference, args.reps));
+        rows.push_back(walk_row<Lazy64Deeper, 30>("lazy 64x6, stack 30, whole rays", kind, with_inverse, 0, rays, best, seeds,
+                                                  reference, args.reps));
+      }
     }
     std::printf("GPU: %s; cloth-ball (92,230 triangles), closest hit, CUDA events, median of %d runs\n", prop.name, args.reps);
-    std::printf("%-30s %-22s %10s %10s %14s %s\n", "rays", "method", "count", "ms", "Mrays/s", "hits = per-thread");
+    std::printf("%-30s %-36s %10s %10s %12s %11s %11s %6s %s\n", "rays", "method", "count", "ms", "Mrays/s", "items", "flat items",
+                "busy", "hits = per-thread");
     for (const Row& r : rows)
-      std::printf("%-30s %-22s %10zu %10.3f %14.1f %s\n", r.rays.c_str(), r.method.c_str(), r.count, r.median_ms,
-                  r.count / r.median_ms / 1e3, r.same ? "yes" : "NO");
+      std::printf("%-30s %-36s %10zu %10.3f %12.1f %11zu %11zu %6.3f %s\n", r.rays.c_str(), r.method.c_str(), r.count, r.median_ms,
+                  r.count / r.median_ms / 1e3, r.items, r.flat_items, r.busy_share, r.same ? "yes" : "NO");
     lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
       std::fprintf(f, "{\"gpu\": \"%s\", \"rays\": \"%s\", \"method\": \"%s\", \"count\": %zu, \"median_ms\": %.6f, "
-                        "\"mrays_per_s\": %.3f, \"same_hits\": %s}",
+                        "\"mrays_per_s\": %.3f, \"same_hits\": %s, \"items\": %zu, \"flat_start_items\": %zu, \"busy_share\": %.4f}",
                      prop.name, rows[i].rays.c_str(), rows[i].method.c_str(), rows[i].count, rows[i].median_ms,
-                     rows[i].count / rows[i].median_ms / 1e3, rows[i].same ? "true" : "false");
+                     rows[i].count / rows[i].median_ms / 1e3, rows[i].same ? "true" : "false", rows[i].items, rows[i].flat_items,
+                     rows[i].busy_share);
     });
     for (const Row& r : rows)
       if (!r.same) return 2;

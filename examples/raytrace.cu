@@ -1,6 +1,8 @@
 // raytrace — the lazy-stealing scheduler reused for ray tracing: renders a mesh with primary rays
 // and one shadow ray per hit, through the same traversal engine as collision detection
-// (RayCastTask, no change to any scheduler), and writes a PNG.
+// (no change to any scheduler), and writes a PNG. The lazy scheduler takes walks (RayWalkTask: an
+// item walks its ray up to 64 nodes down before it hands the rest back), the static list and
+// gProximity one node per item (RayCastTask).
 //
 //   lwsccd-raytrace [SCENE_DIR | MESH.ply|.obj] [--out image.png] [--size WxH]
 //                   [--scheduler lazy|static|gproximity|all]
@@ -24,8 +26,9 @@ using namespace lwsccd;
 
 namespace {
 
-// Casts rays with Scheduler on the GPU, or on the CPU backend when `gpu` is false.
-template <class Scheduler>
+// Casts rays with Scheduler on the GPU (items of Task: RayCastTask or RayWalkTask), or on the CPU
+// backend when `gpu` is false.
+template <class Scheduler, class Task>
 std::vector<std::uint64_t> cast(bool gpu, const BvhView<Aabbf>& gpu_bvh, const BvhView<Aabbf>& cpu_bvh,
                                 const gpu::DeviceBuffer<Face>* d_faces, const gpu::DeviceBuffer<Vec3f>* d_x,
                                 const TriangleMesh& mesh, const std::vector<Vec3f>& x, const std::vector<Ray>& rays,
@@ -39,23 +42,24 @@ std::vector<std::uint64_t> cast(bool gpu, const BvhView<Aabbf>& gpu_bvh, const B
   best.upload(std::vector<std::uint64_t>(rays.size(), kNoHit));
   gpu::DeviceBuffer<RayNode> d_seeds;
   d_seeds.upload(seeds);
-  RayCastTask task{gpu_bvh, d_faces->data(), d_x->data(), d_rays.data(), best.data(), any_hit};
+  Task task;
+  static_cast<RayCastTask&>(task) = RayCastTask{gpu_bvh, d_faces->data(), d_x->data(), d_rays.data(), best.data(), any_hit};
   gpu::DeviceBuffer<Vec3f> inverse;  // each ray's 1 / direction once, not per visited node
   inverse.upload(inverse_directions(rays));
   task.inverse = inverse.data();
-  gpu::TraversalOutput<RayCastTask> out;
+  gpu::TraversalOutput<Task> out;
   gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
   return best.download();
 }
 
-template <class Scheduler>
+template <class Scheduler, class Task = RayCastTask>
 std::vector<unsigned char> render(bool gpu, const RenderView& view, const BvhView<Aabbf>& gpu_bvh, const BvhView<Aabbf>& cpu_bvh,
                                   const gpu::DeviceBuffer<Face>* d_faces, const gpu::DeviceBuffer<Vec3f>* d_x,
                                   const TriangleMesh& mesh, const std::vector<Vec3f>& x) {
   const std::vector<Ray> rays = primary_rays(view);
-  const auto hits = cast<Scheduler>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, rays, false);
+  const auto hits = cast<Scheduler, Task>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, rays, false);
   const ShadowRays shadows = shadow_rays(view, mesh, x, rays, hits);
-  return shade(view, shadows, cast<Scheduler>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, shadows.rays, true));
+  return shade(view, shadows, cast<Scheduler, Task>(gpu, gpu_bvh, cpu_bvh, d_faces, d_x, mesh, x, shadows.rays, true));
 }
 
 }  // namespace
@@ -121,7 +125,7 @@ int main(int argc, char** argv) {
       if (name == "static") return render<gpu::StaticTaskList<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
       if (name == "gproximity")
         return render<gpu::GProximityBalancer<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
-      return render<gpu::LazyStealScheduler<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
+      return render<gpu::RayWalkLazySteal, RayWalkTask<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
     };
     if (scheduler == "all") {
       image = run("lazy");

@@ -36,6 +36,29 @@ std::vector<std::uint64_t> traced(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceB
   return best.download();
 }
 
+// Walks of `budget` nodes (RayWalkTask, StackSize + 2 children per item: policies with room for them).
+template <class Scheduler, int StackSize = 14>
+std::vector<std::uint64_t> walked(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceBuffer<Face>& faces,
+                                  const gpu::DeviceBuffer<Vec3f>& x, const std::vector<Ray>& rays, bool any_hit, int budget) {
+  gpu::DeviceBuffer<Ray> d_rays;
+  d_rays.upload(rays);
+  gpu::DeviceBuffer<std::uint64_t> best;
+  best.upload(std::vector<std::uint64_t>(rays.size(), kNoHit));
+  std::vector<RayNode> seeds;
+  for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
+  gpu::DeviceBuffer<RayNode> d_seeds;
+  d_seeds.upload(seeds);
+  RayWalkTask<StackSize> task;
+  static_cast<RayCastTask&>(task) = RayCastTask{bvh.view(), faces.data(), x.data(), d_rays.data(), best.data(), any_hit};
+  task.visit_budget = budget;
+  gpu::TraversalOutput<RayWalkTask<StackSize>> out;
+  gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
+  return best.download();
+}
+
+// Small pops and deques, no flat start: walks handed back are stolen and spilled often.
+using WalkLazyTight = gpu::LazyStealScheduler<32, 1024, 512, 16, 512, 2, 8, 256, 16, true, true, 0>;
+
 void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, int grid, int random_rays) {
   std::vector<Vec3f> x(x0.size());
   for (std::size_t v = 0; v < x.size(); ++v) x[v] = x0[v].cast<float>();
@@ -54,6 +77,18 @@ void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, int grid
   REQUIRE(traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, false, true) == reference);  // stored inverses
   const auto any = traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, true);
   for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any[r] == kNoHit) == (reference[r] == kNoHit));
+  // Walks (RayWalkTask): whole rays, budgets that split them, a one-node stack, each scheduler.
+  for (const int budget : {0, 3, 32}) {
+    INFO("visit budget " << budget);
+    REQUIRE(walked<gpu::RayWalkLazySteal>(bvh, faces, dx, rays, false, budget) == reference);
+    REQUIRE(walked<WalkLazyTight>(bvh, faces, dx, rays, false, budget) == reference);
+    REQUIRE(walked<gpu::StaticTaskList<128, 4096>>(bvh, faces, dx, rays, false, budget) == reference);
+    REQUIRE(walked<gpu::GProximityBalancer<128, 4096>>(bvh, faces, dx, rays, false, budget) == reference);
+    REQUIRE(walked<gpu::LazyStealScheduler<>, 4>(bvh, faces, dx, rays, false, budget) == reference);  // 6 children: the default fits
+  }
+  REQUIRE(walked<gpu::LazyStealScheduler<>, 1>(bvh, faces, dx, rays, false, 0) == reference);
+  const auto any_walked = walked<gpu::RayWalkLazySteal>(bvh, faces, dx, rays, true, 5);
+  for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any_walked[r] == kNoHit) == (reference[r] == kNoHit));
 }
 
 }  // namespace

@@ -10,8 +10,25 @@
 using namespace lwsccd;
 
 static_assert(require_traversal_task<RayCastTask>::value, "");
+static_assert(require_traversal_task<RayWalkTask<>>::value, "");
+static_assert(RayWalkTask<>::kMaxChildren == 16 && RayWalkTask<1>::kMaxChildren == 3, "a walk hands back its stack and two nodes");
 
 namespace {
+
+// Walks of `budget` nodes with a stack of StackSize through the CPU work-stealing engine; the
+// items it processed go to `items`.
+template <int StackSize>
+std::vector<std::uint64_t> walked(const cpu::Bvh<Aabbf>& bvh, const TriangleMesh& mesh, const std::vector<Vec3f>& x,
+                                  const std::vector<Ray>& rays, bool any_hit, int budget, std::size_t& items) {
+  std::vector<std::uint64_t> best(rays.size(), kNoHit);
+  RayWalkTask<StackSize> task;
+  static_cast<RayCastTask&>(task) = RayCastTask{bvh.view(), mesh.faces().data(), x.data(), rays.data(), best.data(), any_hit};
+  task.visit_budget = budget;
+  std::vector<RayNode> seeds;
+  for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
+  items = cpu::traverse(task, seeds, false, cpu::WorkStealingScheduler{2}).stats.items_processed;
+  return best;
+}
 
 template <class Scheduler>
 std::vector<std::uint64_t> traced(const cpu::Bvh<Aabbf>& bvh, const TriangleMesh& mesh, const std::vector<Vec3f>& x,
@@ -41,6 +58,20 @@ void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3f>& x, int grid,
     hits += reference[r] != kNoHit;
   }
   CHECK(hits > rays.size() / 10);
+  // Walks: whole rays, budgets that split them, a stack of one node that fills at once. Each
+  // hands what it did not visit back, so all give the same hits; the items counted show that
+  // the short budgets and the small stack did split rays.
+  std::size_t whole = 0, budget_3 = 0, budget_16 = 0, tiny_stack = 0;
+  REQUIRE(walked<6>(bvh, mesh, x, rays, false, 0, whole) == reference);
+  REQUIRE(walked<6>(bvh, mesh, x, rays, false, 3, budget_3) == reference);
+  REQUIRE(walked<6>(bvh, mesh, x, rays, false, 16, budget_16) == reference);
+  REQUIRE(walked<1>(bvh, mesh, x, rays, false, 0, tiny_stack) == reference);
+  CHECK(budget_3 > budget_16);
+  CHECK(budget_16 > whole);
+  CHECK(tiny_stack > whole);
+  std::size_t unused = 0;
+  const auto any_walked = walked<6>(bvh, mesh, x, rays, true, 5, unused);
+  for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any_walked[r] == kNoHit) == (reference[r] == kNoHit));
 }
 
 }  // namespace

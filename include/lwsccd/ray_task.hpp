@@ -105,6 +105,70 @@ LWSCCD_HD inline float ray_triangle(const Ray& r, const Vec3f& a, const Vec3f& b
   return t > 0.0f && t <= r.t_max ? t : std::numeric_limits<float>::infinity();
 }
 
+/// One ray's walk down a BVH from `node`, whose box it enters within its best hit so far (`hit`,
+/// lowered as it finds closer ones): near child first, the far one on a local stack of kStack
+/// nodes with their entry distances, so a pending node beyond a closer hit found since is dropped
+/// without a box test. After `budget` visited nodes, or when a far child finds the stack full, it
+/// stops and hands every node it still had to visit to `spill` (at most kStack + 2), for other
+/// threads to take. Any hit: it stops at the first one. The same nodes are pruned as in
+/// RayCastTask (entry distance beyond the best hit), so the closest hit is the same.
+template <int kStack, class Spill>
+LWSCCD_HD void walk_ray(const BvhView<Aabbf>& bvh, const Face* faces, const Vec3f* positions, const Ray& r, const Vec3f& inv,
+                        index_t node, std::uint64_t& hit, bool any_hit, int budget, Spill& spill) {
+  static_assert(kStack >= 1, "lwsccd: walk_ray needs a stack of at least one node");
+  index_t pending[kStack];
+  float pending_entry[kStack];
+  int top = 0;
+  float limit = hit == kNoHit ? r.t_max : hit_t(hit);
+  for (int visits = 0;; ++visits) {
+    if (visits == budget) {  // out of budget: the node and the stack go to other threads
+      spill(node);
+      while (top > 0)
+        if (pending_entry[--top] <= limit) spill(pending[top]);
+      return;
+    }
+    if (bvh.is_leaf(node)) {
+      const index_t tri = bvh.primitive(node);
+      const Face f = faces[tri];
+      const float t = ray_triangle(r, positions[f.v[0]], positions[f.v[1]], positions[f.v[2]]);
+      if (t <= limit) {
+        const std::uint64_t key = hit_key(t, tri);
+        if (key < hit) hit = key;
+        limit = hit_t(hit);
+        if (any_hit) return;
+      }
+    } else {
+      const index_t a = bvh.left[node], b = bvh.right[node];
+      const float entry_a = ray_box_entry(r, inv, bvh.bvs[a], limit), entry_b = ray_box_entry(r, inv, bvh.bvs[b], limit);
+      const bool enters_a = entry_a <= limit, enters_b = entry_b <= limit;
+      if (enters_a && enters_b) {
+        const bool a_first = entry_a <= entry_b;
+        const index_t near = a_first ? a : b, far = a_first ? b : a;
+        if (top == kStack) {  // no room for the far child: hand everything over
+          spill(far);
+          spill(near);
+          while (top > 0)
+            if (pending_entry[--top] <= limit) spill(pending[top]);
+          return;
+        }
+        pending[top] = far;
+        pending_entry[top] = a_first ? entry_b : entry_a;
+        ++top;
+        node = near;
+        continue;
+      }
+      if (enters_a || enters_b) {
+        node = enters_a ? a : b;
+        continue;
+      }
+    }
+    // Back to the nearest pending node the ray still enters within its best hit.
+    while (top > 0 && !(pending_entry[top - 1] <= limit)) --top;
+    if (top == 0) return;
+    node = pending[--top];
+  }
+}
+
 }  // namespace detail
 
 /// Rays against a BVH of AABBs over the triangles at t0 (x0). Seeds: {ray, root} per ray.
@@ -143,6 +207,50 @@ struct RayCastTask {
     out.push_item(RayNode{item.ray, bvh.left[item.node]});
     out.push_item(RayNode{item.ray, bvh.right[item.node]});
   }
+};
+
+/// RayCastTask with items that each walk a ray `visit_budget` nodes down the BVH (detail::walk_ray:
+/// near child first, a local stack of StackSize nodes) before handing the nodes still to visit
+/// back as items, instead of one node per item. The scheduler's cost (a round, a scan, shared
+/// memory, steals) is then paid per walk, not per node; the budget bounds how long one thread
+/// holds a ray, so long rays are still split among threads. Budget 0: no bound (a whole ray per
+/// item, unless its stack fills). The same closest hits as RayCastTask, in every scheduler.
+///
+/// kMaxChildren is StackSize + 2 (16 by default): a scheduler's policy needs room for that many
+/// children per thread and round - gpu::RayWalkLazySteal (<lwsccd/traverse.cuh>) has it; a policy
+/// with too little says so in its static_asserts. The defaults (a stack of 14, walks of 64, that
+/// policy) were the fastest of the variants lwsccd-bench-rays --walks weighs on an H100
+/// (docs/RAYTRACING.md).
+template <int StackSize = 14>
+struct RayWalkTask : RayCastTask {
+  static constexpr int kStackSize = StackSize;
+  static constexpr int kMaxChildren = StackSize + 2;
+  int visit_budget = 64;  ///< nodes one item visits before it hands the rest back (0: no bound)
+
+  LWSCCD_EXEC_CHECK_DISABLE
+  template <class Out>
+  LWSCCD_HD void process(const RayNode& item, Out& out) const {
+    const Ray r = rays[item.ray];
+    const std::uint64_t current = detail::atomic_load_u64(&best[item.ray]);
+    if (any_hit && current != kNoHit) return;
+    const float limit = current == kNoHit ? r.t_max : hit_t(current);
+    const Vec3f inv = inverse ? inverse[item.ray] : detail::inverse_direction(r.direction);
+    if (!(detail::ray_box_entry(r, inv, bvh.bvs[item.node], limit) <= limit)) return;
+    Spill<Out> spill{out, item.ray};
+    std::uint64_t hit = current;
+    detail::walk_ray<StackSize>(bvh, faces, positions, r, inv, item.node, hit, any_hit,
+                                visit_budget > 0 ? visit_budget : -1, spill);
+    if (hit < current) detail::atomic_min_u64(&best[item.ray], hit);
+  }
+
+ private:
+  template <class Out>
+  struct Spill {
+    Out& out;
+    index_t ray;
+    LWSCCD_EXEC_CHECK_DISABLE
+    LWSCCD_HD void operator()(index_t node) { out.push_item(RayNode{ray, node}); }
+  };
 };
 
 /// The inverse directions of `rays`, for RayCastTask::inverse.

@@ -115,6 +115,11 @@ struct LazyStealScheduler {
   static constexpr bool kIsLazySteal = true;
 };
 
+/// LazyStealScheduler with room for 16 children per thread and round (RayWalkTask<>'s items):
+/// 128-thread blocks, six per SM, a shared stack of 4,096 items. The fastest shape for ray walks
+/// on an H100 among those lwsccd-bench-rays --walks weighs (docs/RAYTRACING.md).
+using RayWalkLazySteal = LazyStealScheduler<128, 4096, 8192, 512, 2048, 6>;
+
 /// LazyStealScheduler: what one persistent block did in a launch (clock64 cycles of its SM).
 struct BlockActivity {
   unsigned long long busy_cycles = 0;    ///< processing items (rounds, batches moved to its deque)
