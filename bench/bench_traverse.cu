@@ -133,6 +133,8 @@ void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& s
 // The default lazy scheduler with another kFlatStartPerBlock (0: no flat start, as before 2026-11-24).
 template <int kPerBlock>
 using FlatFrom = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, kPerBlock>;
+template <int kAbove>
+using Hungry = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, kAbove>;
 
 // Variants of the lazy scheduler's occupancy and batch knobs (AABB only: the knobs do not depend
 // on the BV), beside its defaults.
@@ -154,6 +156,11 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   // A flat first launch for starts of at least 128 or 2,048 items per block (default 512).
   scene_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, name, step, reps, rows);
   scene_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, name, step, reps, rows);
+  // Sharing the older half when the deque is empty and a block is searching, above 128, 256 or
+  // 512 items (default: only above kPushThreshold, 1,024).
+  scene_rows<Hungry<128>, BV>("lazy-hungry128", bv_name, name, step, reps, rows);
+  scene_rows<Hungry<256>, BV>("lazy-hungry256", bv_name, name, step, reps, rows);
+  scene_rows<Hungry<512>, BV>("lazy-hungry512", bv_name, name, step, reps, rows);
 }
 
 template <class BV>

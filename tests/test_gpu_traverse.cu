@@ -26,6 +26,9 @@ using TinyLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64>;
 // A flat first launch for any start of at least one item per block (the default asks 512).
 using FlatLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
 using TinyFlatLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
+// Sharing on demand (kShareWhenHungry): the default's shape, and tiny deques that overflow.
+using HungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 128>;
+using TinyHungryLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 512, 8>;
 
 template <class V>
 V sorted(V v) {
@@ -123,6 +126,8 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
     self_matches_cpu<BV, TinyBalanced>(m, true);
     self_matches_cpu<BV, gpu::LazyStealScheduler<>>(m, false);
     self_matches_cpu<BV, TinyLazy>(m, true);
+    self_matches_cpu<BV, HungryLazy>(m, false);
+    self_matches_cpu<BV, TinyHungryLazy>(m, true);
   }
 }
 

@@ -69,7 +69,8 @@ struct GProximityBalancer {
 /// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
 template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
           int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256,
-          int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true, int FlatStartPerBlock = 512>
+          int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true, int FlatStartPerBlock = 512,
+          int ShareWhenHungry = 0>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
@@ -111,6 +112,11 @@ struct LazyStealScheduler {
   /// fronts): cloth-ball 0.56 -> 0.21 ms, cloth-funnel 0.058 -> 0.030 (512 per block; 2,048
   /// left it out), horse-gallop 0.32 -> 0.23 (docs/TRAVERSAL.md).
   static constexpr int kFlatStartPerBlock = FlatStartPerBlock;
+  /// A block holding more than this many items (and at most kPushThreshold) moves the older half
+  /// to its deque when its deque is empty and some block is looking for work (a count of the
+  /// blocks in a search, read once a round), instead of only above kPushThreshold: the CPU
+  /// scheduler's rule (share when the deque is empty) asked for by demand. 0: never.
+  static constexpr int kShareWhenHungry = ShareWhenHungry;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };

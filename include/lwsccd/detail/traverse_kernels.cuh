@@ -30,7 +30,8 @@ enum Counter : int {
   kStartItems = 8,  ///< LazyStealScheduler: the length of the launch's start list
   kStartTaken = 9,  ///< LazyStealScheduler: how much of the start list blocks have taken
   kLost = 10,       ///< LazyStealScheduler: items a list had no room for (the pass is rerun with more)
-  kCounters = 11
+  kHungry = 11,     ///< LazyStealScheduler: blocks in a search for work (kShareWhenHungry)
+  kCounters = 12
 };
 
 template <class Task>
@@ -654,6 +655,7 @@ __global__ void __launch_bounds__(kThreads) lazy_start_kernel(unsigned long long
     counters[kPending] = items;
     counters[kStartTaken] = 0;
     counters[kAppended] = counters[kHalted] = 0;
+    counters[kHungry] = 0;
   }
 }
 
@@ -679,6 +681,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   __shared__ typename Scan::TempStorage scan_storage;
   __shared__ typename Reduce::TempStorage reduce_storage;
   __shared__ int s_size, take, action, count, source, moved;
+  __shared__ bool share_now;  // kShareWhenHungry: thread 0's reading at the end of the last round
   __shared__ unsigned long long from, out_base[2];
   const int t = threadIdx.x, me = blockIdx.x, blocks = static_cast<int>(gridDim.x);
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(out.counters[kPending]);
@@ -696,13 +699,20 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   unsigned backoff = 256;  // thread 0: the next sleep after a failed search (ns)
   std::uint32_t looks = 0;  // thread 0: looks for work in the current search
   static_assert(Policy::kMaxBackoffNs >= 256, "lwsccd: LazyStealScheduler: kMaxBackoffNs must be at least 256");
-  if (t == 0) s_size = 0;
+  if (t == 0) {
+    s_size = 0;
+    share_now = false;
+  }
   __syncthreads();
+  cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> hungry(out.counters[kHungry]);
   while (true) {
     if (s_size == 0) {  // find work: own deque first, then a lazy steal
       const long long start = clock64();
       if (t == 0) {
-        if (!seeking) timeline.record(me, BlockPhase::seek, 0), looks = 0;
+        if (!seeking) {
+          timeline.record(me, BlockPhase::seek, 0), looks = 0;
+          if (Policy::kShareWhenHungry > 0) hungry.fetch_add(1, cuda::memory_order_relaxed);
+        }
         seeking = true;
         ++looks;
         action = 0;
@@ -794,7 +804,10 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
       __syncthreads();
       if (action == 3) {
         idle += clock64() - start;
-        if (t == 0) timeline.record(me, BlockPhase::done, looks);
+        if (t == 0) {
+          timeline.record(me, BlockPhase::done, looks);
+          if (Policy::kShareWhenHungry > 0) hungry.fetch_sub(1, cuda::memory_order_relaxed);
+        }
         break;
       }
       if (action == 4) {
@@ -817,6 +830,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
         s_size = count;
         if (source >= 0) unlock_deque(&locks[source]);
         timeline.record(me, action == 1 ? BlockPhase::own : BlockPhase::steal, static_cast<std::uint32_t>(count));
+        if (Policy::kShareWhenHungry > 0) hungry.fetch_sub(1, cuda::memory_order_relaxed);
         seeking = false;
         backoff = 256;
       }
@@ -824,9 +838,9 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
       __syncthreads();
     }
     const long long start = clock64();
-    if (s_size > kPushAbove) {  // the oldest batch goes to this block's deque, for thieves
+    if (s_size > kPushAbove || share_now) {  // the oldest batch goes to this block's deque, for thieves
       if (t == 0) {
-        moved = s_size - kPushAbove / 2;
+        moved = s_size > kPushAbove ? s_size - kPushAbove / 2 : s_size / 2;
         lock_deque(&locks[me]);
         const unsigned long long top = ends[2 * me], bottom = ends[2 * me + 1];
         if (bottom - top + moved > static_cast<unsigned long long>(capacity)) {
@@ -864,6 +878,12 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
     if (t == 0 && total != take) {
       // Children counted and parents retired in one update (see the termination note above).
       live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_relaxed);
+    }
+    if (Policy::kShareWhenHungry > 0 && t == 0) {  // share next round? (own deque empty, a block searching)
+      using Word = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>;
+      share_now = s_size > Policy::kShareWhenHungry && s_size <= kPushAbove &&
+                  Word(ends[2 * me + 1]).load(cuda::memory_order_relaxed) <= Word(ends[2 * me]).load(cuda::memory_order_relaxed) &&
+                  hungry.load(cuda::memory_order_relaxed) > 0;
     }
     busy += clock64() - start;
     __syncthreads();
