@@ -13,47 +13,47 @@ using namespace lwsccd;
 
 namespace {
 
+// The rays on the device, every ray's best hit at kNoHit, one seed {ray, root} per ray.
+struct UploadedRays {
+  gpu::DeviceBuffer<Ray> rays;
+  gpu::DeviceBuffer<std::uint64_t> best;
+  gpu::DeviceBuffer<RayNode> seeds;
+  explicit UploadedRays(const std::vector<Ray>& host) {
+    rays.upload(host);
+    best.upload(std::vector<std::uint64_t>(host.size(), kNoHit));
+    std::vector<RayNode> s;
+    for (index_t r = 0; r < static_cast<index_t>(host.size()); ++r) s.push_back({r, 0});
+    seeds.upload(s);
+  }
+};
+
 template <class Scheduler>
 std::vector<std::uint64_t> traced(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceBuffer<Face>& faces,
                                   const gpu::DeviceBuffer<Vec3f>& x, const std::vector<Ray>& rays, bool any_hit,
                                   bool stored_inverses = false) {
-  gpu::DeviceBuffer<Ray> d_rays;
-  d_rays.upload(rays);
-  gpu::DeviceBuffer<std::uint64_t> best;
-  best.upload(std::vector<std::uint64_t>(rays.size(), kNoHit));
-  std::vector<RayNode> seeds;
-  for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
-  gpu::DeviceBuffer<RayNode> d_seeds;
-  d_seeds.upload(seeds);
-  RayCastTask task{bvh.view(), faces.data(), x.data(), d_rays.data(), best.data(), any_hit};
+  UploadedRays d(rays);
+  RayCastTask task{bvh.view(), faces.data(), x.data(), d.rays.data(), d.best.data(), any_hit};
   gpu::DeviceBuffer<Vec3f> inverse;
   if (stored_inverses) {
     inverse.upload(inverse_directions(rays));
     task.inverse = inverse.data();
   }
   gpu::TraversalOutput<RayCastTask> out;
-  gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
-  return best.download();
+  gpu::traverse<Scheduler>(task, d.seeds.data(), d.seeds.size(), out, false);
+  return d.best.download();
 }
 
 // Walks of `budget` nodes (RayWalkTask, StackSize + 2 children per item: policies with room for them).
 template <class Scheduler, int StackSize = 14>
 std::vector<std::uint64_t> walked(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceBuffer<Face>& faces,
                                   const gpu::DeviceBuffer<Vec3f>& x, const std::vector<Ray>& rays, bool any_hit, int budget) {
-  gpu::DeviceBuffer<Ray> d_rays;
-  d_rays.upload(rays);
-  gpu::DeviceBuffer<std::uint64_t> best;
-  best.upload(std::vector<std::uint64_t>(rays.size(), kNoHit));
-  std::vector<RayNode> seeds;
-  for (index_t r = 0; r < static_cast<index_t>(rays.size()); ++r) seeds.push_back({r, 0});
-  gpu::DeviceBuffer<RayNode> d_seeds;
-  d_seeds.upload(seeds);
+  UploadedRays d(rays);
   RayWalkTask<StackSize> task;
-  static_cast<RayCastTask&>(task) = RayCastTask{bvh.view(), faces.data(), x.data(), d_rays.data(), best.data(), any_hit};
+  static_cast<RayCastTask&>(task) = RayCastTask{bvh.view(), faces.data(), x.data(), d.rays.data(), d.best.data(), any_hit};
   task.visit_budget = budget;
   gpu::TraversalOutput<RayWalkTask<StackSize>> out;
-  gpu::traverse<Scheduler>(task, d_seeds.data(), seeds.size(), out, false);
-  return best.download();
+  gpu::traverse<Scheduler>(task, d.seeds.data(), d.seeds.size(), out, false);
+  return d.best.download();
 }
 
 // Small pops and deques, no flat start: walks handed back are stolen and spilled often.

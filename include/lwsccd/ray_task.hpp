@@ -188,15 +188,31 @@ struct RayCastTask {
   /// them), so that each of its items does not divide three times again; the same hits.
   const Vec3f* inverse = nullptr;
 
+  /// What an item starts from: its ray, the ray's best hit so far and the distance it limits,
+  /// the inverse direction; false when the item ends at once (any hit found, or its node's box
+  /// not entered within the limit).
+  struct ItemStart {
+    Ray r;
+    std::uint64_t current;
+    float limit;
+    Vec3f inv;
+  };
+  LWSCCD_HD bool start(const RayNode& item, ItemStart& s) const {
+    s.r = rays[item.ray];
+    s.current = detail::atomic_load_u64(&best[item.ray]);
+    if (any_hit && s.current != kNoHit) return false;
+    s.limit = s.current == kNoHit ? s.r.t_max : hit_t(s.current);
+    s.inv = inverse ? inverse[item.ray] : detail::inverse_direction(s.r.direction);
+    return detail::ray_box_entry(s.r, s.inv, bvh.bvs[item.node], s.limit) <= s.limit;
+  }
+
   LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void process(const RayNode& item, Out& out) const {
-    const Ray r = rays[item.ray];
-    const std::uint64_t current = detail::atomic_load_u64(&best[item.ray]);
-    if (any_hit && current != kNoHit) return;
-    const float limit = current == kNoHit ? r.t_max : hit_t(current);
-    const Vec3f inv = inverse ? inverse[item.ray] : detail::inverse_direction(r.direction);
-    if (!(detail::ray_box_entry(r, inv, bvh.bvs[item.node], limit) <= limit)) return;
+    ItemStart s;
+    if (!start(item, s)) return;
+    const Ray& r = s.r;
+    const float limit = s.limit;
     if (bvh.is_leaf(item.node)) {
       const index_t tri = bvh.primitive(item.node);
       const Face f = faces[tri];
@@ -230,17 +246,13 @@ struct RayWalkTask : RayCastTask {
   LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void process(const RayNode& item, Out& out) const {
-    const Ray r = rays[item.ray];
-    const std::uint64_t current = detail::atomic_load_u64(&best[item.ray]);
-    if (any_hit && current != kNoHit) return;
-    const float limit = current == kNoHit ? r.t_max : hit_t(current);
-    const Vec3f inv = inverse ? inverse[item.ray] : detail::inverse_direction(r.direction);
-    if (!(detail::ray_box_entry(r, inv, bvh.bvs[item.node], limit) <= limit)) return;
+    ItemStart s;
+    if (!start(item, s)) return;
     Spill<Out> spill{out, item.ray};
-    std::uint64_t hit = current;
-    detail::walk_ray<StackSize>(bvh, faces, positions, r, inv, item.node, hit, any_hit,
+    std::uint64_t hit = s.current;
+    detail::walk_ray<StackSize>(bvh, faces, positions, s.r, s.inv, item.node, hit, any_hit,
                                 visit_budget > 0 ? visit_budget : -1, spill);
-    if (hit < current) detail::atomic_min_u64(&best[item.ray], hit);
+    if (hit < s.current) detail::atomic_min_u64(&best[item.ray], hit);
   }
 
  private:
