@@ -240,7 +240,7 @@ int main(int argc, char** argv) {
         using NoFit = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4, 8, 256, 16, true, false>;
         using Lazy128 = gpu::LazyStealScheduler<128, 2048, 8192, 256, 1024, 8>;
         using Lazy64 = gpu::LazyStealScheduler<64, 1024, 8192, 128, 512, 16>;
-        using Lazy128Deep = gpu::LazyStealScheduler<128, 4096, 8192, 512, 2048, 6>;
+        using Lazy128Deep = gpu::RayWalkLazySteal;  // 128 x 6, room for stack 14's 16 children
         using Lazy64Deep = gpu::LazyStealScheduler<64, 2048, 8192, 256, 1024, 12>;
         using Lazy64Deeper = gpu::LazyStealScheduler<64, 4096, 8192, 512, 2048, 6>;
         rows.push_back(walk_row<NoFlat, 6>("lazy no flat start, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,

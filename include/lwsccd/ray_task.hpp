@@ -120,11 +120,14 @@ LWSCCD_HD void walk_ray(const BvhView<Aabbf>& bvh, const Face* faces, const Vec3
   float pending_entry[kStack];
   int top = 0;
   float limit = hit == kNoHit ? r.t_max : hit_t(hit);
+  auto spill_stack = [&] {  // the pending nodes the ray still enters, to other threads
+    while (top > 0)
+      if (pending_entry[--top] <= limit) spill(pending[top]);
+  };
   for (int visits = 0;; ++visits) {
     if (visits == budget) {  // out of budget: the node and the stack go to other threads
       spill(node);
-      while (top > 0)
-        if (pending_entry[--top] <= limit) spill(pending[top]);
+      spill_stack();
       return;
     }
     if (bvh.is_leaf(node)) {
@@ -147,8 +150,7 @@ LWSCCD_HD void walk_ray(const BvhView<Aabbf>& bvh, const Face* faces, const Vec3
         if (top == kStack) {  // no room for the far child: hand everything over
           spill(far);
           spill(near);
-          while (top > 0)
-            if (pending_entry[--top] <= limit) spill(pending[top]);
+          spill_stack();
           return;
         }
         pending[top] = far;
@@ -229,8 +231,8 @@ struct RayCastTask {
 /// near child first, a local stack of StackSize nodes) before handing the nodes still to visit
 /// back as items, instead of one node per item. The scheduler's cost (a round, a scan, shared
 /// memory, steals) is then paid per walk, not per node; the budget bounds how long one thread
-/// holds a ray, so long rays are still split among threads. Budget 0: no bound (a whole ray per
-/// item, unless its stack fills). The same closest hits as RayCastTask, in every scheduler.
+/// holds a ray, so long rays are still split among threads. Budget 0 (or less): no bound (a whole
+/// ray per item, unless its stack fills). The same closest hits as RayCastTask, in every scheduler.
 ///
 /// kMaxChildren is StackSize + 2 (16 by default): a scheduler's policy needs room for that many
 /// children per thread and round - gpu::RayWalkLazySteal (<lwsccd/traverse.cuh>) has it; a policy
@@ -239,9 +241,10 @@ struct RayCastTask {
 /// (docs/RAYTRACING.md).
 template <int StackSize = 14>
 struct RayWalkTask : RayCastTask {
+  static_assert(StackSize >= 1, "lwsccd: RayWalkTask needs a stack of at least one node (StackSize >= 1)");
   static constexpr int kStackSize = StackSize;
   static constexpr int kMaxChildren = StackSize + 2;
-  int visit_budget = 64;  ///< nodes one item visits before it hands the rest back (0: no bound)
+  int visit_budget = 64;  ///< nodes one item visits before it hands the rest back (0 or less: no bound)
 
   LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>

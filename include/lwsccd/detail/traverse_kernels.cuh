@@ -675,6 +675,8 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   constexpr int kPushAbove = Policy::kPushThreshold;
   static_assert(kPushAbove + kThreads * kK <= kShared, "lwsccd: kSharedStack must hold kPushThreshold plus one round of children");
   static_assert(kPop <= kPushAbove, "lwsccd: kPopSize must not exceed kPushThreshold");
+  static_assert(Policy::kShareWhenHungry >= 0 && Policy::kShareWhenHungry < kPushAbove,
+                "lwsccd: LazyStealScheduler: kShareWhenHungry must be 0 (off) or below kPushThreshold");
   using Scan = cub::BlockScan<unsigned long long, kThreads>;
   using Reduce = cub::BlockReduce<unsigned long long, kThreads>;
   __shared__ Item s_items[kShared];
