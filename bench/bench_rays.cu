@@ -232,6 +232,10 @@ int main(int argc, char** argv) {
       for (const int budget : {32, 64, 128, 0})
         rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>(budget ? "lazy, walks of " + std::to_string(budget) : "lazy, whole rays",
                                                            kind, with_inverse, budget, rays, best, seeds, reference, args.reps));
+      // RayWalkLazySteal without sharing on demand (its default until session nineteen).
+      using WalkNeverHungry = gpu::LazyStealScheduler<128, 4096, 8192, 512, 2048, 6, 8, 256, 16, true, true, 512, 0>;
+      rows.push_back(walk_row<WalkNeverHungry, 14>("lazy, walks of 64, share off", kind, with_inverse, 64, rays, best, seeds,
+                                                   reference, args.reps));
       rows.push_back(walk_row<gpu::StaticTaskList<128, 4096>, 14>("static, walks of 32", kind, with_inverse, 32, rays, best, seeds,
                                                                  reference, args.reps));
       if (args.has("--walks")) {  // the variants weighed for RayWalkTask's defaults (docs/RAYTRACING.md)

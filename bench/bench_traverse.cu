@@ -156,11 +156,10 @@ void lazy_variants(const char* bv_name, const std::string& name, const Step& ste
   // A flat first launch for starts of at least 128 or 2,048 items per block (default 512).
   scene_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, name, step, reps, rows);
   scene_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, name, step, reps, rows);
-  // Sharing the older half when the deque is empty and a block is searching, above 128, 256 or
-  // 512 items (default: only above kPushThreshold, 1,024).
-  scene_rows<Hungry<128>, BV>("lazy-hungry128", bv_name, name, step, reps, rows);
+  // Sharing the older half when the deque is empty and a block is searching, above 256 or 768
+  // items (default: above 512, half of kPushThreshold; lazy-share-off below: only above 1,024).
   scene_rows<Hungry<256>, BV>("lazy-hungry256", bv_name, name, step, reps, rows);
-  scene_rows<Hungry<512>, BV>("lazy-hungry512", bv_name, name, step, reps, rows);
+  scene_rows<Hungry<768>, BV>("lazy-hungry768", bv_name, name, step, reps, rows);
 }
 
 template <class BV>
@@ -172,13 +171,14 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
     scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
     scene_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, name, step, reps, rows);
     lazy_variants<BV>(bv_name, name, step, reps, rows);
+    scene_rows<Hungry<0>, BV>("lazy-share-off", bv_name, name, step, reps, rows);  // the default until session nineteen
     independent_rows<BV>(bv_name, name, step, reps, rows);
   }
-  // The steals before 2026-11-24 (the fullest victim, waiting for its lock, no flat start; the
+  // The steals before 2026-11-24 (the fullest victim, waiting for its lock, no flat start, no sharing on demand; the
   // variants of each change alone are in docs/TRAVERSAL.md), and the kernel left to the
   // compiler's register choice (OBB: 113, so one block per SM) instead of compiled to fit the
   // default's two.
-  using Before = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false, true, 0>;
+  using Before = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false, true, 0, 0>;
   using NoFit = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>;
   for (const auto& [name, step] : scenes) {
     scene_rows<Before, BV>("lazy-before", bv_name, name, step, reps, rows);
@@ -190,6 +190,7 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
   sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
   sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);
   sequence_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, horse, rows);
+  sequence_rows<Hungry<0>, BV>("lazy-share-off", bv_name, horse, rows);
   if (std::string(bv_name) == "AABB float") {
     sequence_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, horse, rows);
     sequence_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, horse, rows);

@@ -26,7 +26,10 @@ using TinyLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64>;
 // A flat first launch for any start of at least one item per block (the default asks 512).
 using FlatLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
 using TinyFlatLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
-// Sharing on demand (kShareWhenHungry): the default's shape, and tiny deques that overflow.
+// Sharing on demand (kShareWhenHungry; the defaults share above half of kPushThreshold): eagerly
+// in the default's shape and with tiny deques that overflow, and never (0, the default until session nineteen).
+using NeverHungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 0>;
+using TinyNeverHungryLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 512, 0>;
 using HungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 128>;
 using TinyHungryLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 512, 8>;
 
@@ -128,6 +131,8 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
     self_matches_cpu<BV, TinyLazy>(m, true);
     self_matches_cpu<BV, HungryLazy>(m, false);
     self_matches_cpu<BV, TinyHungryLazy>(m, true);
+    self_matches_cpu<BV, NeverHungryLazy>(m, false);
+    self_matches_cpu<BV, TinyNeverHungryLazy>(m, true);
   }
 }
 

@@ -70,7 +70,7 @@ struct GProximityBalancer {
 template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
           int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256,
           int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true, int FlatStartPerBlock = 512,
-          int ShareWhenHungry = 0>
+          int ShareWhenHungry = -1>
 struct LazyStealScheduler {
   static constexpr int kBlockThreads = BlockThreads;
   static constexpr int kSharedStack = SharedStack;
@@ -115,8 +115,15 @@ struct LazyStealScheduler {
   /// A block holding more than this many items (and at most kPushThreshold) moves the older half
   /// to its deque when its deque is empty and some block is looking for work (a count of the
   /// blocks in a search, read once a round), instead of only above kPushThreshold: the CPU
-  /// scheduler's rule (share when the deque is empty) asked for by demand. 0: never.
-  static constexpr int kShareWhenHungry = ShareWhenHungry;
+  /// scheduler's rule (share when the deque is empty) asked for by demand. 0: never; negative
+  /// (the default): half of kPushThreshold. On an H100 (docs/TRAVERSAL.md, "Sharing on demand",
+  /// five runs) half of the default's 1,024 took cloth-funnel from the root below Karras's
+  /// per-leaf traversal (AABB 0.32-0.35 -> 0.28-0.29 ms, Karras 0.29-0.31; OBB 0.57-0.62 ->
+  /// 0.53-0.54) and was as fast or faster on the other OBB traversals and every front; AABB from
+  /// the root paid 8% on armadillo-rollers and 0-11% on cloth-ball. A quarter or an eighth was
+  /// slower than half everywhere; three quarters (AABB only) cost nothing there but only tied
+  /// Karras on cloth-funnel.
+  static constexpr int kShareWhenHungry = ShareWhenHungry < 0 ? PushThreshold / 2 : ShareWhenHungry;
   static constexpr bool kIsStatic = false;
   static constexpr bool kIsLazySteal = true;
 };
