@@ -21,14 +21,14 @@
 #include <vector>
 
 #include "bench_common.hpp"
-#include "lwsccd/ccd_filters.hpp"
-#include "lwsccd/ccd_query.hpp"
-#include "lwsccd/certified_ccd.hpp"
-#include "lwsccd/cubic_ccd.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/error.hpp"
-#include "lwsccd/inclusion_ccd.hpp"
-#include "lwsccd/query_io.hpp"
+#include "lwsccd/core/error.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/io/query_io.hpp"
+#include "lwsccd/narrow_phase/ccd_filters.hpp"
+#include "lwsccd/narrow_phase/ccd_query.hpp"
+#include "lwsccd/narrow_phase/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/cubic_ccd.hpp"
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
 
 #ifndef LWSCCD_BENCH_DATA_DIR
 #define LWSCCD_BENCH_DATA_DIR "../shared/data"

@@ -9,9 +9,9 @@
 
 #include "bench_common.hpp"
 #include "bench_gpu.cuh"
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/scenes.hpp"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/simulation/scenes.hpp"
 
 using namespace lwsccd;
 

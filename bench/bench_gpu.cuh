@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "lwsccd/cuda_check.cuh"
+#include "lwsccd/core/cuda_check.cuh"
 
 namespace lwsccd_bench {
 

@@ -8,11 +8,11 @@
 
 #include "bench_common.hpp"
 #include "bench_gpu.cuh"
-#include "lwsccd/cubic_ccd.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/inclusion_ccd.hpp"
-#include "lwsccd/narrow_phase.cuh"
-#include "lwsccd/oracle.hpp"
+#include "lwsccd/features/oracle.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/narrow_phase/cubic_ccd.hpp"
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.cuh"
 
 using namespace lwsccd;
 

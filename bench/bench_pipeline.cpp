@@ -30,8 +30,8 @@
 
 #include "bench_common.hpp"
 #include "ccd_app.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/simulation.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/simulation/simulation.hpp"
 
 namespace {
 

@@ -9,10 +9,10 @@
 
 #include "bench_common.hpp"
 #include "bench_gpu.cuh"
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/ray_task.hpp"
-#include "lwsccd/scenes.hpp"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/simulation/scenes.hpp"
+#include "lwsccd/traversal/ray_task.hpp"
 #include "lwsccd/traverse.cuh"
 
 using namespace lwsccd;

@@ -11,10 +11,10 @@
 
 #include "bench_common.hpp"
 #include "bench_gpu.cuh"
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/bvtt.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/independent_traversal.cuh"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/traversal/bvtt.hpp"
+#include "lwsccd/traversal/independent_traversal.cuh"
 #include "lwsccd/traverse.cuh"
 
 using namespace lwsccd;

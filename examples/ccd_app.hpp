@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "lwsccd/any_pipeline.hpp"
 #include "lwsccd/lwsccd.hpp"
+#include "lwsccd/pipeline/any_pipeline.hpp"
 
 namespace ccd_app {
 

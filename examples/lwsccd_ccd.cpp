@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "ccd_app.hpp"
-#include "lwsccd/render.hpp"
-#include "lwsccd/simulation.hpp"
+#include "lwsccd/io/render.hpp"
+#include "lwsccd/simulation/simulation.hpp"
 
 namespace {
 

@@ -1,6 +1,6 @@
 // lwsccd-ccd — the GPU backend of the main program (compiled where nvcc is; see ccd_app.hpp).
 #include "ccd_app.hpp"
-#include "lwsccd/any_pipeline.cuh"
+#include "lwsccd/pipeline/any_pipeline.cuh"
 
 namespace ccd_app {
 

@@ -14,13 +14,13 @@
 #include <string>
 #include <vector>
 
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/ray_task.hpp"
-#include "lwsccd/render.hpp"
-#include "lwsccd/scenes.hpp"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/io/render.hpp"
+#include "lwsccd/simulation/scenes.hpp"
+#include "lwsccd/traversal/cpu_traverse.hpp"
+#include "lwsccd/traversal/ray_task.hpp"
 #include "lwsccd/traverse.cuh"
-#include "lwsccd/traverse.hpp"
 
 using namespace lwsccd;
 

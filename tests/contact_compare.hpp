@@ -5,7 +5,7 @@
 
 #include <cstring>
 
-#include "lwsccd/narrow_phase.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
 
 namespace lwsccd_test {
 

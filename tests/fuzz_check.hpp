@@ -14,10 +14,10 @@
 #include <cstring>
 #include <string>
 
-#include "lwsccd/bvh.hpp"
-#include "lwsccd/narrow_phase.hpp"
-#include "lwsccd/pipeline.hpp"
-#include "lwsccd/representative.hpp"
+#include "lwsccd/bvh/bvh.hpp"
+#include "lwsccd/features/representative.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
+#include "lwsccd/pipeline/cpu_pipeline.hpp"
 #include "contact_compare.hpp"
 #include "fuzz_scenes.hpp"
 

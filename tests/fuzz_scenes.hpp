@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "lwsccd/mesh.hpp"
-#include "lwsccd/oracle.hpp"
+#include "lwsccd/features/oracle.hpp"
+#include "lwsccd/geometry/mesh.hpp"
 #include "scene_fixtures.hpp"
 
 namespace lwsccd_test {

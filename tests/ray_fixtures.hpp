@@ -4,7 +4,7 @@
 #include <random>
 #include <vector>
 
-#include "lwsccd/ray_task.hpp"
+#include "lwsccd/traversal/ray_task.hpp"
 
 namespace lwsccd_test {
 

@@ -4,7 +4,8 @@
 #   2. configures and builds everything (every CUDA translation unit too when nvcc is found;
 #      GPU tests then run, or report "Skipped" where no GPU is present);
 #   3. runs CTest (tests on ../shared/data report "Skipped" where that folder is absent);
-#   4. installs the package and builds examples/minimal as an outside project against it;
+#   4. installs the package, builds examples/minimal as an outside project against it and compiles
+#      each public include the README names alone (tests/install);
 #   5. builds the Python package (pip install . in a virtual environment) and runs its pytest suite.
 # Environment: LWSCCD_BUILD_DIR (default build-tests), extra CMake arguments in LWSCCD_CMAKE_ARGS.
 set -euo pipefail
@@ -38,6 +39,9 @@ cmake --install "$build" --prefix "$prefix" >/dev/null
 cmake -S examples/minimal -B "$build/outside-minimal" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$build/outside-minimal" -j"$jobs"
 "$build/outside-minimal/lwsccd_minimal"
+echo "== the README's public includes, each alone, against the installed package"
+cmake -S tests/install -B "$build/outside-includes" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release ${LWSCCD_CMAKE_ARGS:-} | grep "lwsccd_public_includes"
+cmake --build "$build/outside-includes" -j"$jobs"
 echo "== Python package: pip install . (virtual environment $build/venv) and pytest"
 python3 -m venv "$build/venv"
 "$build/venv/bin/python" -m pip install -q --upgrade pip

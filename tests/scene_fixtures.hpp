@@ -5,7 +5,7 @@
 #include <random>
 #include <vector>
 
-#include "lwsccd/mesh.hpp"
+#include "lwsccd/geometry/mesh.hpp"
 
 namespace lwsccd_test {
 

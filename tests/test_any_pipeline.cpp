@@ -2,7 +2,7 @@
 // compile-time policies would, names are validated, and the CPU backend refuses device positions.
 #include <catch2/catch.hpp>
 
-#include "lwsccd/any_pipeline.hpp"
+#include "lwsccd/pipeline/any_pipeline.hpp"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 

@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "lwsccd/bv_traits.hpp"
+#include "lwsccd/geometry/bv_traits.hpp"
 
 using namespace lwsccd;
 using ld = long double;

@@ -2,8 +2,8 @@
 
 #include <cstring>
 
-#include "lwsccd/bvh.hpp"
-#include "lwsccd/error.hpp"
+#include "lwsccd/bvh/bvh.hpp"
+#include "lwsccd/core/error.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;

@@ -8,7 +8,7 @@
 #include <random>
 #include <string>
 
-#include "lwsccd/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/certified_ccd.hpp"
 
 using namespace lwsccd;
 

@@ -5,8 +5,8 @@
 #include <cstddef>
 #include <string>
 
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/io.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/io/mesh_io.hpp"
 #include "test_support.hpp"
 
 namespace lwsccd {

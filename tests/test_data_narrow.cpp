@@ -6,11 +6,11 @@
 #include <filesystem>
 #include <functional>
 
-#include "lwsccd/certified_ccd.hpp"
-#include "lwsccd/cubic_ccd.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/inclusion_ccd.hpp"
-#include "lwsccd/narrow_phase.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/narrow_phase/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/cubic_ccd.hpp"
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
 #include "test_support.hpp"
 
 using namespace lwsccd;

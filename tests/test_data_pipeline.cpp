@@ -6,9 +6,9 @@
 #include <chrono>
 #include <cstdio>
 
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/pipeline.hpp"
-#include "lwsccd/representative.hpp"
+#include "lwsccd/features/representative.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/pipeline/cpu_pipeline.hpp"
 #include "contact_compare.hpp"
 #include "test_support.hpp"
 

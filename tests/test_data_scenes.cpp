@@ -4,8 +4,8 @@
 #include <chrono>
 #include <cstdio>
 
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/oracle.hpp"
+#include "lwsccd/features/oracle.hpp"
+#include "lwsccd/io/dataset.hpp"
 #include "test_support.hpp"
 
 using namespace lwsccd;

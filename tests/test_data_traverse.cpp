@@ -5,9 +5,9 @@
 #include <algorithm>
 #include <cstdio>
 
-#include "lwsccd/bvtt.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/traverse.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/traversal/bvtt.hpp"
+#include "lwsccd/traversal/cpu_traverse.hpp"
 #include "test_support.hpp"
 
 using namespace lwsccd;

@@ -4,7 +4,7 @@
 
 #include <memory>
 
-#include "lwsccd/pipeline.hpp"
+#include "lwsccd/pipeline/cpu_pipeline.hpp"
 #include "fuzz_check.hpp"
 
 using namespace lwsccd;

@@ -5,9 +5,9 @@
 #include <numeric>
 #include <random>
 
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/io.hpp"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/io/mesh_io.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"
 

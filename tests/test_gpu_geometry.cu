@@ -5,9 +5,9 @@
 #include <random>
 #include <vector>
 
-#include "lwsccd/bv_traits.hpp"
-#include "lwsccd/cuda_check.cuh"
-#include "lwsccd/morton.hpp"
+#include "lwsccd/core/cuda_check.cuh"
+#include "lwsccd/geometry/bv_traits.hpp"
+#include "lwsccd/geometry/morton.hpp"
 
 using namespace lwsccd;
 

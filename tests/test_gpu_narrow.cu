@@ -4,11 +4,11 @@
 #include <cstring>
 #include <random>
 
-#include "lwsccd/certified_ccd.hpp"
-#include "lwsccd/cubic_ccd.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/inclusion_ccd.hpp"
-#include "lwsccd/narrow_phase.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/narrow_phase/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/cubic_ccd.hpp"
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.cuh"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"

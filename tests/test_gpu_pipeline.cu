@@ -6,12 +6,12 @@
 #include <cstring>
 #include <limits>
 
-#include "lwsccd/dataset.hpp"
+#include "lwsccd/features/representative.cuh"
+#include "lwsccd/io/dataset.hpp"
 #include "lwsccd/pipeline.cuh"
-#include "lwsccd/pipeline.hpp"
-#include "lwsccd/representative.cuh"
-#include "lwsccd/scenes.hpp"
-#include "lwsccd/simulation.hpp"
+#include "lwsccd/pipeline/cpu_pipeline.hpp"
+#include "lwsccd/simulation/scenes.hpp"
+#include "lwsccd/simulation/simulation.hpp"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"

@@ -2,8 +2,8 @@
 // testing every triangle, hit for hit.
 #include <catch2/catch.hpp>
 
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/dataset.hpp"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
 #include "lwsccd/traverse.cuh"
 #include "ray_fixtures.hpp"
 #include "scene_fixtures.hpp"

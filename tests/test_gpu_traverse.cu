@@ -5,12 +5,12 @@
 #include <stdexcept>
 #include <type_traits>
 
-#include "lwsccd/bvh.cuh"
-#include "lwsccd/bvtt.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/independent_traversal.cuh"
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/traversal/bvtt.hpp"
+#include "lwsccd/traversal/cpu_traverse.hpp"
+#include "lwsccd/traversal/independent_traversal.cuh"
 #include "lwsccd/traverse.cuh"
-#include "lwsccd/traverse.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"
 

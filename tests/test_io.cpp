@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/io.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/io/mesh_io.hpp"
 #include "test_support.hpp"
 
 namespace lwsccd {

@@ -5,8 +5,8 @@
 #include <random>
 #include <set>
 
-#include "lwsccd/error.hpp"
-#include "lwsccd/mesh.hpp"
+#include "lwsccd/core/error.hpp"
+#include "lwsccd/geometry/mesh.hpp"
 
 using namespace lwsccd;
 

@@ -2,7 +2,7 @@
 
 #include <random>
 
-#include "lwsccd/morton.hpp"
+#include "lwsccd/geometry/morton.hpp"
 
 using namespace lwsccd;
 

@@ -5,11 +5,11 @@
 #include <limits>
 #include <random>
 
-#include "lwsccd/cubic_ccd.hpp"
-#include "lwsccd/inclusion_ccd.hpp"
-#include "lwsccd/narrow_phase.hpp"
-#include "lwsccd/orphans.hpp"
-#include "lwsccd/scenes.hpp"
+#include "lwsccd/features/orphans.hpp"
+#include "lwsccd/narrow_phase/cubic_ccd.hpp"
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
+#include "lwsccd/simulation/scenes.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;

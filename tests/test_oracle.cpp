@@ -4,7 +4,7 @@
 #include <random>
 #include <set>
 
-#include "lwsccd/oracle.hpp"
+#include "lwsccd/features/oracle.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;

@@ -9,8 +9,8 @@
 #include <utility>
 #include <vector>
 
-#include "lwsccd/orphans.hpp"
-#include "lwsccd/scenes.hpp"
+#include "lwsccd/features/orphans.hpp"
+#include "lwsccd/simulation/scenes.hpp"
 #include "scene_fixtures.hpp"
 
 namespace lwsccd {

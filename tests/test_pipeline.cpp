@@ -5,9 +5,9 @@
 #include <cstdio>
 #include <string>
 
-#include "lwsccd/pipeline.hpp"
-#include "lwsccd/scenes.hpp"
-#include "lwsccd/simulation.hpp"
+#include "lwsccd/pipeline/cpu_pipeline.hpp"
+#include "lwsccd/simulation/scenes.hpp"
+#include "lwsccd/simulation/simulation.hpp"
 #include "contact_compare.hpp"
 #include "scene_fixtures.hpp"
 

@@ -1,8 +1,8 @@
 // The ray-casting task on the CPU engine against testing every triangle.
 #include <catch2/catch.hpp>
 
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/traverse.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/traversal/cpu_traverse.hpp"
 #include "ray_fixtures.hpp"
 #include "scene_fixtures.hpp"
 #include "test_support.hpp"

@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "lwsccd/narrow_phase.hpp"
-#include "lwsccd/representative.hpp"
-#include "lwsccd/scenes.hpp"
+#include "lwsccd/features/representative.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
+#include "lwsccd/simulation/scenes.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;

@@ -1,8 +1,8 @@
 // The built-in animated scene: deterministic, steps that chain, bodies, real self contacts.
 #include <catch2/catch.hpp>
 
-#include "lwsccd/pipeline.hpp"
-#include "lwsccd/simulation.hpp"
+#include "lwsccd/pipeline/cpu_pipeline.hpp"
+#include "lwsccd/simulation/simulation.hpp"
 
 using namespace lwsccd;
 

@@ -3,8 +3,8 @@
 
 #include <algorithm>
 
-#include "lwsccd/bvtt.hpp"
-#include "lwsccd/traverse.hpp"
+#include "lwsccd/traversal/bvtt.hpp"
+#include "lwsccd/traversal/cpu_traverse.hpp"
 #include "scene_fixtures.hpp"
 
 using namespace lwsccd;

@@ -2,7 +2,7 @@
 
 #include <limits>
 
-#include "lwsccd/vec.hpp"
+#include "lwsccd/geometry/vec.hpp"
 
 using namespace lwsccd;
 

@@ -3,7 +3,7 @@
 #include <cuda_runtime.h>
 
 #include "gpu_backend.hpp"
-#include "lwsccd/any_pipeline.cuh"
+#include "lwsccd/pipeline/any_pipeline.cuh"
 
 namespace lwsccd_python {
 

@@ -6,7 +6,7 @@
 #include <memory>
 #include <string>
 
-#include "lwsccd/any_pipeline.hpp"
+#include "lwsccd/pipeline/any_pipeline.hpp"
 
 namespace lwsccd_python {
 

@@ -15,11 +15,11 @@
 #include <vector>
 
 #include "gpu_backend.hpp"
-#include "lwsccd/any_pipeline.hpp"
-#include "lwsccd/dataset.hpp"
-#include "lwsccd/io.hpp"
-#include "lwsccd/render.hpp"
-#include "lwsccd/simulation.hpp"
+#include "lwsccd/io/dataset.hpp"
+#include "lwsccd/io/mesh_io.hpp"
+#include "lwsccd/io/render.hpp"
+#include "lwsccd/pipeline/any_pipeline.hpp"
+#include "lwsccd/simulation/simulation.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;

@@ -1,5 +1,5 @@
 // Must NOT compile: a bounding volume with no bv_traits specialization.
-#include "lwsccd/bv_traits.hpp"
+#include "lwsccd/geometry/bv_traits.hpp"
 struct Sphere {
   float r;
 };

@@ -1,5 +1,5 @@
 // Must NOT compile: a CCD method without edge_edge.
-#include "lwsccd/ccd_query.hpp"
+#include "lwsccd/narrow_phase/ccd_query.hpp"
 struct Method {
   static constexpr const char* name = "half";
   static constexpr bool conservative = false;

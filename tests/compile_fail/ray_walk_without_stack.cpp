@@ -1,4 +1,4 @@
 // Must NOT compile: a ray walk with no stack to keep the far children on.
-#include "lwsccd/ray_task.hpp"
+#include "lwsccd/traversal/ray_task.hpp"
 lwsccd::RayWalkTask<0> task;
 int main() {}

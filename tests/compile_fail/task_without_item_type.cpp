@@ -1,5 +1,5 @@
 // Must NOT compile: a traversal task without item_type.
-#include "lwsccd/traversal_task.hpp"
+#include "lwsccd/traversal/traversal_task.hpp"
 struct Task {
   using result_type = int;
   static constexpr int kMaxChildren = 1;

@@ -1,5 +1,5 @@
 // Must NOT compile: a traversal task without process().
-#include "lwsccd/traversal_task.hpp"
+#include "lwsccd/traversal/traversal_task.hpp"
 struct Task {
   using item_type = int;
   using result_type = int;

@@ -1,0 +1,129 @@
+// lwsccd — the LBVH on the GPU: build and refit in kernels, no host round trip in refit.
+//
+// Produces the same tree as cpu::Bvh for the same input (see bvh.hpp): identical leaf order,
+// children, parents and leaf ranges; AABB node values bit for bit; OBB values within rounding
+// (the device contracts multiply-adds).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "lwsccd/bvh/bvh.hpp"
+#include "lwsccd/core/device_buffer.cuh"
+
+namespace lwsccd::gpu {
+
+/// A step's topology and positions in device memory (P = float or double).
+template <class P>
+struct DeviceStep {
+  index_t num_vertices = 0;
+  DeviceBuffer<Face> faces;
+  DeviceBuffer<Vec3<P>> x0, x1;
+
+  DeviceStep() = default;
+  /// Uploads (and converts to P) a host step; positions are validated on the host first.
+  DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1,
+             cudaStream_t stream = nullptr);
+  /// Topology only; positions follow through set_positions or set_positions_from_device.
+  explicit DeviceStep(const TriangleMesh& mesh, cudaStream_t stream = nullptr);
+  /// Replaces the positions (same topology), e.g. for the next step of a sequence.
+  void set_positions(const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1, cudaStream_t stream = nullptr);
+  /// Replaces the positions from device memory (num_vertices points each; copied, so the
+  /// caller's arrays may change afterwards). Throws InputError unless both point to device
+  /// (or managed) memory. Non-finite values are reported by the next BVH build or refit.
+  void set_positions_from_device(const Vec3<P>* d0, const Vec3<P>* d1, cudaStream_t stream = nullptr);
+
+ private:
+  std::vector<Vec3<P>> staging_;
+};
+
+template <class BV>
+class Bvh {
+ public:
+  static_assert(require_bounding_volume<BV>::value, "");
+
+  Bvh() = default;
+  Bvh(const Bvh&) = delete;
+  Bvh& operator=(const Bvh&) = delete;
+  Bvh(Bvh&&) = default;
+  Bvh& operator=(Bvh&&) = default;
+
+  /// Builds over the device step. Synchronizes once at the end to report NaN/inf positions
+  /// (InputError) and launch failures (CudaError).
+  template <class P>
+  void build(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// Refits for the step's current positions: one kernel, asynchronous. Non-finite
+  /// positions are flagged on the device and reported by the next check_status().
+  template <class P>
+  void refit(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// refit, then rebuild if the policy says the tree decayed (synchronizes to read the cost).
+  template <class P>
+  bool refit_or_rebuild(const DeviceStep<P>& step, const RebuildPolicy& policy = {}, cudaStream_t stream = nullptr);
+
+  /// refit_or_rebuild without waiting: refits and enqueues the reads of the status flag and the
+  /// cost into pinned memory; collect_refit() reports them once `stream` has been synchronized.
+  /// The rebuild the cost calls for then comes a step later (gpu::CcdPipeline rebuilds before its
+  /// next traversal): a refitted tree is as exact as a rebuilt one, only slower to traverse.
+  template <class P>
+  void refit_enqueue(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// After refit_enqueue() and a synchronisation of its stream: throws InputError if the
+  /// positions were non-finite; otherwise returns whether `policy` says the tree decayed.
+  bool collect_refit(const RebuildPolicy& policy = {}, cudaStream_t stream = nullptr);
+
+  /// Sum of internal surface areas over the root's, computed on the device (synchronizes).
+  double sah_cost(cudaStream_t stream = nullptr) const;
+  /// Synchronizes and throws InputError if positions seen since the last check were non-finite.
+  void check_status(cudaStream_t stream = nullptr);
+
+  /// As cpu::Bvh::set_leaf_margin: every leaf grown by `margin` from the next build or refit on.
+  void set_leaf_margin(double margin) {
+    leaf_margin_ = lwsccd::detail::checked_margin<BV>(margin, "gpu::Bvh::set_leaf_margin");
+  }
+  double leaf_margin() const { return leaf_margin_; }
+
+  BvhView<BV> view() const {
+    return {num_leaves_, bvs_.data(), left_.data(), right_.data(), parent_.data(), ranges_.data(), leaf_primitive_.data()};
+  }
+  /// Copies every array to the host (synchronizes).
+  BvhNodes<BV> download(cudaStream_t stream = nullptr) const;
+  index_t num_leaves() const { return num_leaves_; }
+  std::uint64_t generation() const { return generation_; }
+  double cost_at_build() const { return cost_at_build_; }
+  /// Device bytes held by this BVH (nodes, codes, scratch).
+  std::size_t device_bytes() const;
+
+ private:
+  index_t num_leaves_ = 0;
+  std::uint64_t generation_ = 0;
+  double cost_at_build_ = 0;
+  typename bv_traits<BV>::scalar_type leaf_margin_ = 0;
+  DeviceBuffer<BV> bvs_;
+  DeviceBuffer<index_t> left_, right_, parent_, leaf_primitive_, primitive_scratch_;
+  DeviceBuffer<LeafRange> ranges_;
+  DeviceBuffer<std::uint64_t> codes_, codes_sorted_;
+  DeviceBuffer<int> arrivals_;  ///< per internal node, for the bottom-up pass; zero between passes
+  DeviceBuffer<int> status_;    ///< [0]: non-finite position seen
+  DeviceBuffer<unsigned char> scratch_;  ///< centres | scene box | CUB temporary storage
+  std::size_t temp_offset_ = 0;          ///< where the CUB part of scratch_ starts
+  mutable DeviceBuffer<double> cost_;
+  /// Pinned target of the small reads (cost, root box, status flag): copies that do not block.
+  struct Readback {
+    double cost;
+    BV root;
+    int status;
+  };
+  mutable PinnedBuffer<Readback> readback_;  // allocated on first use
+  Readback& readback() const {
+    readback_.ensure(1);
+    return readback_[0];
+  }
+  // Enqueues the cost's reduction and the copies of cost and root box into readback_.
+  void enqueue_cost(cudaStream_t stream) const;
+  double cost_from_readback() const;
+  void throw_if_flagged(int flag, cudaStream_t stream);
+};
+
+}  // namespace lwsccd::gpu
+
+#include "lwsccd/bvh/detail/bvh_kernels.cuh"

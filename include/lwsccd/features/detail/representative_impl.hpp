@@ -1,0 +1,282 @@
+// lwsccd — definitions for representative.hpp.
+#pragma once
+
+#include <algorithm>
+#include <numeric>
+#include <string>
+#include <thread>
+
+#include "lwsccd/core/error.hpp"
+
+#include "lwsccd/features/representative.hpp"
+
+namespace lwsccd {
+
+namespace detail {
+
+// (vertex_ring_of_face and edges_share_vertex: orphans_impl.hpp.)
+
+// Splits [0, n) into one contiguous range per worker, runs body(begin, end, worker) on each and
+// returns the per-worker outputs in range order (so the concatenation keeps the input order).
+template <class Part, class Body>
+std::vector<Part> ordered_parts(std::size_t n, Body body) {
+  const unsigned workers = std::max(1u, std::thread::hardware_concurrency());
+  std::vector<Part> parts(workers);
+  run_on_all_cores([&](unsigned w, unsigned nw) {
+    const std::size_t begin = n * w / nw, end = n * (w + 1) / nw;
+    body(begin, end, parts[w]);
+  });
+  return parts;
+}
+
+inline void append_parts(std::vector<FeaturePairs>& parts, FeaturePairs& out) {
+  std::size_t vf = out.vf.size(), ee = out.ee.size();
+  for (const auto& p : parts) vf += p.vf.size(), ee += p.ee.size();
+  out.vf.reserve(vf);
+  out.ee.reserve(ee);
+  for (const auto& p : parts) {
+    out.vf.insert(out.vf.end(), p.vf.begin(), p.vf.end());
+    out.ee.insert(out.ee.end(), p.ee.begin(), p.ee.end());
+  }
+}
+
+}  // namespace detail
+
+inline RepresentativeTriangles::RepresentativeTriangles(const TriangleMesh& mesh, BodyLayout layout)
+    : mesh_(&mesh), layout_(std::move(layout)) {
+  layout_.validate(mesh);
+  const index_t nf = mesh.num_faces(), nv = mesh.num_vertices(), ne = mesh.num_edges();
+  represents_.assign(static_cast<std::size_t>(nf), 0);
+  face_edges_.resize(static_cast<std::size_t>(nf));
+  for (index_t f = 0; f < nf; ++f) face_edges_[f] = {{mesh.face_edges(f)[0], mesh.face_edges(f)[1], mesh.face_edges(f)[2]}};
+
+  // Greedy balance: each feature goes to the incident face that represents the fewest of its kind
+  // so far (ties: the lowest face id), so that no triangle pair carries much more than another.
+  std::vector<unsigned char> vertices_held(static_cast<std::size_t>(nf), 0), edges_held(static_cast<std::size_t>(nf), 0);
+  vertex_owner_.assign(static_cast<std::size_t>(nv), -1);
+  for (index_t v = 0; v < nv; ++v) {
+    index_t best = -1;
+    for (const index_t f : mesh.vertex_faces(v))
+      if (best < 0 || vertices_held[f] < vertices_held[best]) best = f;
+    if (best < 0) continue;  // a vertex of no face is not part of the surface
+    vertex_owner_[v] = best;
+    ++vertices_held[best];
+    const Face& t = mesh.face(best);
+    for (int k = 0; k < 3; ++k)
+      if (t.v[k] == v) represents_[best] |= static_cast<unsigned char>(1u << k);
+  }
+  edge_owner_.assign(static_cast<std::size_t>(ne), -1);
+  // Edges with the fewest faces first (a boundary edge has no choice), then the others.
+  std::vector<index_t> edge_order(static_cast<std::size_t>(ne));
+  std::iota(edge_order.begin(), edge_order.end(), 0);
+  std::stable_sort(edge_order.begin(), edge_order.end(),
+                   [&](index_t a, index_t b) { return mesh.edge_faces(a).size() < mesh.edge_faces(b).size(); });
+  for (const index_t e : edge_order) {
+    index_t best = -1;
+    for (const index_t f : mesh.edge_faces(e))
+      if (best < 0 || edges_held[f] < edges_held[best]) best = f;
+    edge_owner_[e] = best;
+    ++edges_held[best];
+    for (int k = 0; k < 3; ++k)
+      if (face_edges_[best].e[k] == e) represents_[best] |= static_cast<unsigned char>(1u << (3 + k));
+  }
+
+  // Repair: a face left with three edges passes one along a short chain of faces (each hands an
+  // edge it holds to the face across it) to a face that holds at most one: an augmenting path,
+  // searched breadth-first within a bounded neighbourhood.
+  auto move_edge = [&](index_t e, index_t from, index_t to) {
+    for (int j = 0; j < 3; ++j) {
+      if (face_edges_[from].e[j] == e) represents_[from] &= static_cast<unsigned char>(~(1u << (3 + j)));
+      if (face_edges_[to].e[j] == e) represents_[to] |= static_cast<unsigned char>(1u << (3 + j));
+    }
+    --edges_held[from], ++edges_held[to];
+    edge_owner_[e] = to;
+  };
+  constexpr std::size_t kSearchFaces = 256;
+  std::vector<index_t> queue, parent_face, parent_edge;
+  for (index_t f = 0; f < nf; ++f) {
+    if (edges_held[f] <= 2) continue;
+    queue.assign(1, f);
+    parent_face.assign(1, -1);
+    parent_edge.assign(1, -1);
+    for (std::size_t head = 0; head < queue.size() && queue.size() < kSearchFaces; ++head) {
+      const index_t x = queue[head];
+      index_t found = -1;
+      for (int k = 0; k < 3 && found < 0; ++k) {
+        if (!((represents_[x] >> (3 + k)) & 1u)) continue;
+        const index_t e = face_edges_[x].e[k];
+        for (const index_t y : mesh.edge_faces(e)) {
+          if (std::find(queue.begin(), queue.end(), y) != queue.end()) continue;
+          queue.push_back(y);
+          parent_face.push_back(static_cast<index_t>(head));
+          parent_edge.push_back(e);
+          if (edges_held[y] < 2) {
+            found = static_cast<index_t>(queue.size() - 1);
+            break;
+          }
+        }
+      }
+      if (found >= 0) {
+        for (index_t at = found; parent_face[at] >= 0; at = parent_face[at])
+          move_edge(parent_edge[at], queue[parent_face[at]], queue[at]);
+        break;
+      }
+    }
+  }
+
+  // Orphans: the pairs whose representing faces share a vertex (the traversal skips those
+  // triangle pairs). A vertex's face partners lie in its representing face's vertex ring; an
+  // edge's edge partners are the edges that faces of that ring represent.
+  std::vector<index_t> ring;
+  for (index_t v = 0; v < nv; ++v) {
+    const index_t owner = vertex_owner_[v];
+    if (owner < 0) continue;
+    detail::vertex_ring_of_face(mesh, owner, ring);
+    for (const index_t g : ring) {
+      const Face& t = mesh.face(g);
+      if (t.v[0] == v || t.v[1] == v || t.v[2] == v) continue;  // incident: never a query
+      if (layout_.considers(owner, g)) orphans_.vf.emplace_back(mesh.vertex_feature_id(v), mesh.face_feature_id(g));
+    }
+  }
+  for (index_t e = 0; e < ne; ++e) {
+    const index_t owner = edge_owner_[e];
+    detail::vertex_ring_of_face(mesh, owner, ring);
+    for (const index_t g : ring) {
+      for (int k = 0; k < 3; ++k) {
+        if (!((represents_[g] >> (3 + k)) & 1u)) continue;
+        const index_t other = face_edges_[g].e[k];
+        if (other <= e || detail::edges_share_vertex(mesh.edge(e), mesh.edge(other))) continue;  // listed once; adjacent edges never
+        if (layout_.considers(owner, g)) orphans_.ee.emplace_back(mesh.edge_feature_id(e), mesh.edge_feature_id(other));
+      }
+    }
+  }
+  std::sort(orphans_.vf.begin(), orphans_.vf.end());
+  std::sort(orphans_.ee.begin(), orphans_.ee.end());
+}
+
+inline index_t RepresentativeTriangles::owner_of_feature(index_t id) const {
+  const index_t nv = mesh_->num_vertices(), ne = mesh_->num_edges();
+  if (id < nv) return vertex_owner_[id];
+  if (id < nv + ne) return edge_owner_[id - nv];
+  return id - nv - ne;
+}
+
+template <class P>
+std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
+                                 double margin) {
+  const float grow = detail::checked_margin<Aabbf>(margin, "feature_boxes");
+  const index_t n = mesh.num_vertices() + mesh.num_edges() + mesh.num_faces();
+  std::vector<Aabbf> boxes(static_cast<std::size_t>(n));
+  detail::run_on_all_cores([&](unsigned w, unsigned nw) {
+    for (index_t id = static_cast<index_t>(w); id < n; id += static_cast<index_t>(nw))
+      boxes[id] = feature_box(mesh.faces().data(), mesh.edges().data(), mesh.num_vertices(), mesh.num_edges(), x0.data(),
+                              x1.data(), id, grow);
+  });
+  return boxes;
+}
+
+inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::vector<TrianglePair>& candidates,
+                                       const std::vector<Aabbf>& boxes) {
+  return emit_feature_pairs(rep, candidates.data(), candidates.size(), boxes, true);
+}
+
+inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                                       const std::vector<Aabbf>& boxes, bool with_orphans) {
+  const TriangleMesh& mesh = rep.mesh();
+  const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
+  if (boxes.size() != features)
+    throw InputError("emit_feature_pairs", "boxes",
+                     "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
+  const EmissionView view = rep.view(boxes.data());
+  FeaturePairs out;
+  auto parts = detail::ordered_parts<FeaturePairs>(n, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const TrianglePair& p = candidates[i];
+      if (p.adjacent) continue;
+      emit_triangle_pair(
+          view, p.a, p.b, [&](index_t v, index_t f) { part.vf.emplace_back(v, f); },
+          [&](index_t x, index_t y) { part.ee.emplace_back(x, y); });
+    }
+  });
+  detail::append_parts(parts, out);
+  if (!with_orphans) return out;
+  const OrphanSets& orphans = rep.orphans();
+  for (const auto* list : {&orphans.vf, &orphans.ee}) {
+    auto& target = list == &orphans.vf ? out.vf : out.ee;
+    auto kept = detail::ordered_parts<std::vector<std::pair<index_t, index_t>>>(
+        list->size(), [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
+          for (std::size_t i = begin; i < end; ++i)
+            if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
+        });
+    for (const auto& part : kept) target.insert(target.end(), part.begin(), part.end());
+  }
+  return out;
+}
+
+namespace detail {
+
+// Classifies a pair of features with overlapping boxes as a query (or none) and appends it.
+inline void add_feature_query(const RepresentativeTriangles& rep, index_t x, index_t y, FeaturePairs& out) {
+  const TriangleMesh& mesh = rep.mesh();
+  const index_t nv = mesh.num_vertices(), ne = mesh.num_edges();
+  auto kind = [&](index_t id) { return id < nv ? 0 : id < nv + ne ? 1 : 2; };
+  if (kind(x) > kind(y)) std::swap(x, y);
+  const int kx = kind(x), ky = kind(y);
+  if (kx == 0 && ky == 2) {
+    if (rep.vertex_owner(x) < 0) return;
+    const Face& t = mesh.face(y - nv - ne);
+    if (t.v[0] == x || t.v[1] == x || t.v[2] == x || !rep.considers(x, y)) return;
+    out.vf.emplace_back(x, y);
+  } else if (kx == 1 && ky == 1) {
+    if (edges_share_vertex(mesh.edge(x - nv), mesh.edge(y - nv)) || !rep.considers(x, y)) return;
+    out.ee.emplace_back(std::min(x, y), std::max(x, y));
+  }
+}
+
+inline FeaturePairs sorted_union(std::vector<FeaturePairs>& parts) {
+  FeaturePairs out;
+  append_parts(parts, out);
+  std::sort(out.vf.begin(), out.vf.end());
+  std::sort(out.ee.begin(), out.ee.end());
+  return out;
+}
+
+}  // namespace detail
+
+inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes) {
+  const TriangleMesh& mesh = rep.mesh();
+  const index_t nv = mesh.num_vertices(), ne = mesh.num_edges(), nf = mesh.num_faces();
+  std::vector<FeaturePairs> parts(std::max(1u, std::thread::hardware_concurrency()));
+  detail::run_on_all_cores([&](unsigned w, unsigned nw) {
+    FeaturePairs& out = parts[w];
+    for (index_t v = static_cast<index_t>(w); v < nv; v += static_cast<index_t>(nw))
+      for (index_t f = 0; f < nf; ++f) {
+        const index_t id = mesh.face_feature_id(f);
+        if (boxes[v].overlaps(boxes[id])) detail::add_feature_query(rep, v, id, out);
+      }
+    for (index_t e = static_cast<index_t>(w); e < ne; e += static_cast<index_t>(nw))
+      for (index_t g = e + 1; g < ne; ++g)
+        if (boxes[nv + e].overlaps(boxes[nv + g])) detail::add_feature_query(rep, nv + e, nv + g, out);
+  });
+  return detail::sorted_union(parts);
+}
+
+inline FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes) {
+  const index_t n = static_cast<index_t>(boxes.size());
+  std::vector<index_t> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](index_t i, index_t j) {
+    return boxes[i].lo.x != boxes[j].lo.x ? boxes[i].lo.x < boxes[j].lo.x : i < j;
+  });
+  std::vector<FeaturePairs> parts(std::max(1u, std::thread::hardware_concurrency()));
+  detail::run_on_all_cores([&](unsigned w, unsigned nw) {
+    for (index_t k = static_cast<index_t>(w); k < n; k += static_cast<index_t>(nw)) {
+      const Aabbf& box = boxes[order[k]];
+      for (index_t m = k + 1; m < n && boxes[order[m]].lo.x <= box.hi.x; ++m)
+        if (box.overlaps(boxes[order[m]])) detail::add_feature_query(rep, order[k], order[m], parts[w]);
+    }
+  });
+  return detail::sorted_union(parts);
+}
+
+}  // namespace lwsccd

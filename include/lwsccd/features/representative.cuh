@@ -1,0 +1,342 @@
+// lwsccd — feature pairs produced once on the GPU: representative triangles and feature-box
+// culling (representative.hpp says what and why), with no sort.
+//
+// Three kernels and one small scan: the swept box of every feature; a count pass that runs the
+// shared emission test (emission_mask, orphan_kept) over every candidate triangle pair and every
+// orphan, stores each item's mask and sums each block's counts (vertex-face and edge-edge packed in
+// one 64-bit word, so one scan gives both offsets); an inclusive scan of the block totals; a write
+// pass that ranks the items within their block and decodes each mask at its offset, into buffers
+// sized by earlier runs (enqueue() leaves the totals on the device for the narrow phase; collect()
+// grows a buffer that was short and writes again). The pairs come in the order of the items
+// (candidates, then vertex-face orphans, then edge-edge orphans), the order cpu
+// emit_feature_pairs gives for the same candidate list.
+#pragma once
+
+#include <cub/block/block_reduce.cuh>
+#include <cub/block/block_scan.cuh>
+#include <cub/device/device_scan.cuh>
+
+#include <tuple>
+#include <utility>
+
+#include "lwsccd/core/cuda_check.cuh"
+#include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/features/representative.hpp"
+
+namespace lwsccd::gpu {
+
+/// Knobs of the GPU emission.
+struct EmissionPolicy {
+  static constexpr int kBlock = 256;  ///< threads per block, a thread per item (feature, triangle pair or orphan)
+};
+
+namespace detail {
+
+// The two counts of an item packed in one word: vertex-face in the high half, edge-edge in the low
+// half (a step's totals stay far below 2^32, so the scan never carries between the halves).
+LWSCCD_HD inline unsigned long long pack_counts(unsigned vf, unsigned ee) {
+  return (static_cast<unsigned long long>(vf) << 32) | ee;
+}
+
+template <class P>
+__global__ void feature_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec3<P>* x1, index_t n, float margin,
+                                     Aabbf* boxes) {
+  const index_t id = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (id >= n) return;
+  boxes[id] = feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, id, margin);
+}
+
+// Item i: candidate triangle pair i (i < n), then vertex-face orphan i - n, then edge-edge orphan.
+// Its emission mask: emission_mask for a candidate; bit 0 (vertex-face) or bit 6 (edge-edge) for a
+// kept orphan.
+template <class Pair>
+__device__ unsigned item_mask(const EmissionView& m, const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf,
+                              std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t i) {
+  if (i < n) {
+    const TrianglePair p = candidates[i];
+    return p.adjacent ? 0u : emission_mask(m, p.a, p.b);
+  }
+  if (i < n + num_orphan_vf) {
+    const Pair q = orphan_vf[i - n];
+    return orphan_kept(m, q.first, q.second) ? 1u : 0u;
+  }
+  const Pair q = orphan_ee[i - n - num_orphan_vf];
+  return orphan_kept(m, q.first, q.second) ? 1u << 6 : 0u;
+}
+
+__device__ inline unsigned long long mask_counts(unsigned mask) {
+  return pack_counts(static_cast<unsigned>(__popc(mask & kEmissionVfBits)), static_cast<unsigned>(__popc(mask & kEmissionEeBits)));
+}
+
+// Counting pass: every item's mask, and each block's packed totals (the write pass scans within
+// the block again, so only block totals need a device-wide scan).
+template <int kBlock, class Pair>
+__global__ void __launch_bounds__(kBlock)
+    emission_count_kernel(EmissionView m, const TrianglePair* candidates, DeviceCount candidate_count, const Pair* orphan_vf,
+                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t num_orphan_ee, unsigned short* masks,
+                          unsigned long long* block_totals) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
+  __shared__ typename Reduce::TempStorage storage;
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * kBlock + threadIdx.x;
+  const std::size_t n = candidate_count.get(), items = n + num_orphan_vf + num_orphan_ee;
+  unsigned mask = 0;
+  if (i < items) {
+    mask = item_mask(m, candidates, n, orphan_vf, num_orphan_vf, orphan_ee, i);
+    masks[i] = static_cast<unsigned short>(mask);
+  }
+  const unsigned long long total = Reduce(storage).Sum(mask_counts(mask));
+  if (threadIdx.x == 0) block_totals[blockIdx.x] = total;
+}
+
+// Writing pass: each item's offset = its block's (scanned totals) + its rank in the block; the
+// pairs are decoded from the mask (no box is read again).
+template <int kBlock, class Pair>
+__global__ void __launch_bounds__(kBlock)
+    emission_write_kernel(EmissionView m, const TrianglePair* candidates, DeviceCount candidate_count, const Pair* orphan_vf,
+                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t num_orphan_ee, const unsigned short* masks,
+                          const unsigned long long* block_inclusive, Pair* vf_out, std::size_t vf_room, Pair* ee_out,
+                          std::size_t ee_room) {
+  using Scan = cub::BlockScan<unsigned long long, kBlock>;
+  __shared__ typename Scan::TempStorage storage;
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * kBlock + threadIdx.x;
+  const std::size_t n = candidate_count.get(), items = n + num_orphan_vf + num_orphan_ee;
+  const unsigned mask = i < items ? masks[i] : 0u;
+  unsigned long long offset = 0;
+  Scan(storage).ExclusiveSum(mask_counts(mask), offset);
+  if (mask == 0) return;
+  offset += blockIdx.x ? block_inclusive[blockIdx.x - 1] : 0ull;
+  unsigned long long vf = offset >> 32, ee = offset & 0xffffffffull;
+  // (std::pair's assignment is host-only before C++20: the fields are written one by one.)
+  // Pairs past the room are not stored (the host sees the totals and writes again with more).
+  auto put = [](Pair* out, std::size_t room, unsigned long long& at, index_t x, index_t y) {
+    if (at < room) {
+      out[at].first = x;
+      out[at].second = y;
+    }
+    ++at;
+  };
+  if (i < n) {
+    const TrianglePair p = candidates[i];
+    decode_emission(
+        m, p.a, p.b, mask, [&](index_t x, index_t y) { put(vf_out, vf_room, vf, x, y); },
+        [&](index_t x, index_t y) { put(ee_out, ee_room, ee, x, y); });
+  } else if (i < n + num_orphan_vf) {
+    const Pair q = orphan_vf[i - n];
+    put(vf_out, vf_room, vf, q.first, q.second);
+  } else {
+    const Pair q = orphan_ee[i - n - num_orphan_vf];
+    put(ee_out, ee_room, ee, q.first, q.second);
+  }
+}
+
+}  // namespace detail
+
+/// Produces a step's feature pairs on the device from candidate triangle pairs (the traversal's
+/// output): each pair once, kept when its feature boxes overlap, plus the kept orphans. Owns the
+/// topology arrays (uploaded once) and its outputs and scratch (reused; they only grow).
+template <class Policy = EmissionPolicy>
+class FeatureEmitter {
+ public:
+  using Pair = std::pair<index_t, index_t>;
+
+  /// Uploads the representing faces and the orphans of `rep` (which may be dropped afterwards).
+  explicit FeatureEmitter(const RepresentativeTriangles& rep, cudaStream_t stream = nullptr)
+      : num_vertices_(rep.mesh().num_vertices()), num_edges_(rep.mesh().num_edges()), num_faces_(rep.mesh().num_faces()) {
+    faces_.upload(rep.mesh().faces(), stream);
+    edges_.upload(rep.mesh().edges(), stream);
+    face_edges_.upload(rep.face_edges(), stream);
+    represents_.upload(rep.represents(), stream);
+    orphan_vf_.upload(rep.orphans().vf, stream);
+    orphan_ee_.upload(rep.orphans().ee, stream);
+    boxes_.resize_discard(static_cast<std::size_t>(num_vertices_ + num_edges_ + num_faces_));
+  }
+
+  /// The feature pairs of `n` candidate triangle pairs (device memory; adjacent ones are skipped)
+  /// for the positions x0, x1 (device, one per vertex), and waits for them: the pairs stay on the
+  /// device (vf(), ee()), their numbers are known on the host.
+  template <class P>
+  void run(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr) {
+    enqueue(x0, x1, candidates, n, stream);
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    if (!collect(stream)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  }
+
+  /// As run() without waiting: the pairs go to buffers sized by earlier runs and their numbers stay
+  /// on the device (vf_list(), ee_list() give them to the narrow phase); call collect() after
+  /// `stream` has been synchronized. The candidates must stay valid until then. `with_orphans`
+  /// false leaves the orphans out (a step split into parts lists them a range at a time, below).
+  /// `boxes_current` true skips recomputing the feature boxes (they are those of an earlier
+  /// enqueue with the same positions).
+  template <class P>
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream = nullptr,
+               bool with_orphans = true, bool boxes_current = false) {
+    enqueue(x0, x1, candidates, n, stream, with_orphans ? OrphanRange{0, num_orphans()} : OrphanRange{}, boxes_current);
+  }
+
+  /// A range of the orphans, numbered vertex-face first, then edge-edge: [first, first + count)
+  /// of [0, num_orphans()).
+  struct OrphanRange {
+    std::size_t first = 0, count = 0;
+  };
+  std::size_t num_orphans() const { return orphan_vf_.size() + orphan_ee_.size(); }
+
+  /// As enqueue() above with a range of the orphans (a step split into parts lists them a range
+  /// at a time). Throws lwsccd::Error for a range past num_orphans().
+  template <class P>
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, std::size_t n, cudaStream_t stream,
+               OrphanRange orphans, bool boxes_current) {
+    enqueue(x0, x1, candidates, DeviceCount::known(n), stream, orphans, boxes_current);
+  }
+
+  /// As enqueue() above with the candidates' number on the device (e.g. TraversalOutput::
+  /// result_count() after traverse_async(): no host round trip between the stages). The launches
+  /// are sized for `count.room` candidates; those past the device's count do nothing.
+  template <class P>
+  void enqueue(const Vec3<P>* x0, const Vec3<P>* x1, const TrianglePair* candidates, DeviceCount count, cudaStream_t stream,
+               OrphanRange orphans, bool boxes_current) {
+    const std::size_t n = count.room;
+    if (orphans.first > num_orphans() || orphans.count > num_orphans() - orphans.first)
+      throw Error("gpu::FeatureEmitter::enqueue: orphan range [" + std::to_string(orphans.first) + ", " +
+                  std::to_string(orphans.first + orphans.count) + ") is past the " + std::to_string(num_orphans()) +
+                  " orphans");
+    const index_t features = num_vertices_ + num_edges_ + num_faces_;
+    const EmissionView m = view();
+    if (!boxes_current) {
+      detail::feature_boxes_kernel<<<static_cast<unsigned>((features + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
+                                     stream>>>(m, x0, x1, features, margin_, boxes_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
+    candidates_ = candidates;
+    candidate_count_ = count;
+    // The range split at the boundary between the two orphan lists.
+    const std::size_t vf_total = orphan_vf_.size(), end = orphans.first + orphans.count;
+    orphan_vf_first_ = std::min(orphans.first, vf_total);
+    num_orphan_vf_ = std::min(end, vf_total) - orphan_vf_first_;
+    orphan_ee_first_ = std::max(orphans.first, vf_total) - vf_total;
+    num_orphan_ee_ = std::max(end, vf_total) - vf_total - orphan_ee_first_;
+    const std::size_t items = n + num_orphan_vf_ + num_orphan_ee_;
+    blocks_ = (items + Policy::kBlock - 1) / Policy::kBlock;
+    vf_.resize_discard(std::max<std::size_t>(vf_room_, 1));
+    ee_.resize_discard(std::max<std::size_t>(ee_room_, 1));
+    if (items == 0) {
+      LWSCCD_CUDA_CHECK(cudaMemsetAsync(total_.data(), 0, sizeof(unsigned long long), stream));
+    } else {
+      masks_.resize_discard(items);
+      block_totals_.resize_discard(blocks_);
+      detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
+          m, candidates, count, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_, orphan_ee_.data() + orphan_ee_first_,
+          num_orphan_ee_, masks_.data(), block_totals_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      std::size_t bytes = 0;
+      LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
+                                                      static_cast<std::int64_t>(blocks_), stream));
+      scratch_.resize_discard(std::max<std::size_t>(bytes, 1));
+      LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, block_totals_.data(), block_totals_.data(),
+                                                      static_cast<std::int64_t>(blocks_), stream));
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(total_.data(), block_totals_.data() + blocks_ - 1, sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToDevice, stream));
+      write(stream);
+    }
+    host_total_.ensure(1);
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(host_total_.data(), total_.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream));
+  }
+
+  /// After `stream` (the last enqueue's) has been synchronized: reads the numbers of pairs. Returns
+  /// false when a list outgrew its buffer: the buffer is grown and the pairs written again on
+  /// `stream` (what read the short lists must run again); true when the lists were complete.
+  bool collect(cudaStream_t stream = nullptr) {
+    std::tie(num_vf_, num_ee_) = counted();
+    if (num_vf_ <= vf_room_ && num_ee_ <= ee_room_) return true;
+    // A quarter more room than needed, so that lists that grow a little do not repeat the writing.
+    vf_room_ = std::max(vf_room_, num_vf_ + num_vf_ / 4);
+    ee_room_ = std::max(ee_room_, num_ee_ + num_ee_ / 4);
+    vf_.resize_discard(std::max<std::size_t>(vf_room_, 1));
+    ee_.resize_discard(std::max<std::size_t>(ee_room_, 1));
+    write(stream);
+    return false;
+  }
+
+  /// After `stream` (the last enqueue's) has been synchronized: the numbers of vertex-face and
+  /// edge-edge pairs that enqueue counted, whether or not they fitted (collect() not needed).
+  std::pair<std::size_t, std::size_t> counted() const {
+    const unsigned long long total = host_total_[0];
+    return {static_cast<std::size_t>(total >> 32), static_cast<std::size_t>(total & 0xffffffffull)};
+  }
+  /// Bytes of the lists and the per-candidate scratch (what grows with a step's candidates).
+  std::size_t list_bytes() const {
+    return vf_.capacity_bytes() + ee_.capacity_bytes() + masks_.capacity_bytes() + block_totals_.capacity_bytes() +
+           scratch_.capacity_bytes();
+  }
+
+  /// The lists for the narrow phase, their lengths read on the device (valid after enqueue()).
+  PairList vf_list() const { return {vf_.data(), DeviceCount{total_.data(), DeviceCount::Part::high, vf_room_}}; }
+  PairList ee_list() const { return {ee_.data(), DeviceCount{total_.data(), DeviceCount::Part::low, ee_room_}}; }
+
+
+  /// Grows every feature box by `margin` from the next run on (as feature_boxes' margin).
+  void set_box_margin(double margin) { margin_ = lwsccd::detail::checked_margin<Aabbf>(margin, "gpu::FeatureEmitter"); }
+
+  const Pair* vf() const { return vf_.data(); }
+  const Pair* ee() const { return ee_.data(); }
+  /// The numbers of pairs of the last collected run.
+  std::size_t num_vf() const { return num_vf_; }
+  std::size_t num_ee() const { return num_ee_; }
+  /// The swept box of every feature id, from the last run.
+  const Aabbf* boxes() const { return boxes_.data(); }
+
+  /// The last run's pairs on the host, in emission order.
+  FeaturePairs download(cudaStream_t stream = nullptr) const {
+    FeaturePairs out;
+    out.vf.resize(num_vf_);
+    out.ee.resize(num_ee_);
+    if (num_vf_) LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.vf.data(), vf_.data(), num_vf_ * sizeof(Pair), cudaMemcpyDeviceToHost, stream));
+    if (num_ee_) LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.ee.data(), ee_.data(), num_ee_ * sizeof(Pair), cudaMemcpyDeviceToHost, stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    return out;
+  }
+
+  std::size_t device_bytes() const {
+    return faces_.capacity_bytes() + edges_.capacity_bytes() + face_edges_.capacity_bytes() + represents_.capacity_bytes() +
+           orphan_vf_.capacity_bytes() + orphan_ee_.capacity_bytes() + boxes_.capacity_bytes() + masks_.capacity_bytes() +
+           block_totals_.capacity_bytes() + total_.capacity_bytes() +
+           scratch_.capacity_bytes() + vf_.capacity_bytes() + ee_.capacity_bytes();
+  }
+
+ private:
+  // The writing pass of the last enqueue (the masks and the block totals are still there).
+  void write(cudaStream_t stream) {
+    const std::size_t items = candidate_count_.room + num_orphan_vf_ + num_orphan_ee_;
+    if (items == 0) return;
+    detail::emission_write_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
+        view(), candidates_, candidate_count_, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_,
+        orphan_ee_.data() + orphan_ee_first_, num_orphan_ee_, masks_.data(),
+        block_totals_.data(), vf_.data(), vf_room_, ee_.data(), ee_room_);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  }
+
+  EmissionView view() const {
+    return {faces_.data(), face_edges_.data(), edges_.data(), represents_.data(), boxes_.data(), num_vertices_, num_edges_};
+  }
+
+  index_t num_vertices_, num_edges_, num_faces_;
+  DeviceBuffer<Face> faces_;
+  DeviceBuffer<Edge> edges_;
+  DeviceBuffer<FaceEdgeIds> face_edges_;
+  DeviceBuffer<unsigned char> represents_, scratch_;
+  DeviceBuffer<Pair> orphan_vf_, orphan_ee_, vf_, ee_;
+  DeviceBuffer<Aabbf> boxes_;
+  DeviceBuffer<unsigned short> masks_;          ///< per item: its emission mask
+  DeviceBuffer<unsigned long long> block_totals_;  ///< per block: packed counts, then their inclusive scan
+  DeviceBuffer<unsigned long long> total_{1};     ///< the last run's packed totals (read by the narrow phase)
+  PinnedBuffer<unsigned long long> host_total_;  // allocated on first use
+  const TrianglePair* candidates_ = nullptr;
+  DeviceCount candidate_count_;  ///< the last enqueue's (room: the bound its launches were sized for)
+  std::size_t blocks_ = 0;
+  std::size_t num_orphan_vf_ = 0, num_orphan_ee_ = 0;      ///< orphans the last enqueue listed
+  std::size_t orphan_vf_first_ = 0, orphan_ee_first_ = 0;  ///< and where they start in each list
+  std::size_t vf_room_ = 0, ee_room_ = 0;         ///< room of vf_, ee_ (grown by collect())
+  std::size_t num_vf_ = 0, num_ee_ = 0;
+  float margin_ = 0;
+};
+
+}  // namespace lwsccd::gpu

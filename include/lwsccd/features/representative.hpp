@@ -1,0 +1,221 @@
+// lwsccd — feature pairs produced once: representative triangles (Curtis, Tamstorf & Manocha
+// 2008) and feature-box culling.
+//
+// Every vertex and every edge is represented by exactly one of its faces. A candidate triangle
+// pair (a, b) then produces the vertex-face pairs (v, b) for the vertices a represents (and
+// (v, a) for b's) and the edge-edge pairs of the edges a represents with those b represents: each
+// feature pair comes from one triangle pair only, so no sort and no de-duplication are needed.
+// Each pair is kept only when the swept boxes of its two features overlap (the features' points at
+// t0 and t1, rounded outward to float as the BVH's boxes are); a feature's box lies inside its
+// face's, so a feature pair whose boxes overlap comes from a triangle pair whose boxes overlap.
+//
+// The traversal skips triangle pairs that share a vertex. The feature pairs that only such a pair
+// would produce here - non-incident pairs whose representing faces share a vertex - are the
+// orphans of this assignment, listed once per topology and box-tested every step.
+//
+// What is produced equals, pair for pair, the brute-force set (brute_force_feature_pairs): every
+// vertex-face pair of a vertex and a face that does not contain it, every edge-edge pair of edges
+// with no common vertex, whose feature boxes overlap. With bodies, a feature belongs to the body
+// of the face that represents it (a vertex or edge shared by faces of several bodies belongs to
+// one of them: the lowest-numbered face among those with the fewest features represented).
+#pragma once
+
+#include <utility>
+#include <vector>
+
+#include "lwsccd/core/config.hpp"
+#include "lwsccd/features/oracle.hpp"
+#include "lwsccd/features/orphans.hpp"
+#include "lwsccd/geometry/aabb.hpp"
+#include "lwsccd/geometry/bv_traits.hpp"
+#include "lwsccd/geometry/mesh.hpp"
+
+namespace lwsccd {
+
+/// The three edge ids of a face (TriangleMesh::face_edges, as a plain struct for device code).
+struct FaceEdgeIds {
+  index_t e[3];
+};
+
+/// What the emission reads, as plain pointers (host or device memory): the faces, which features
+/// each face represents, and one box per feature id (vertices, then edges, then faces).
+struct EmissionView {
+  const Face* faces = nullptr;
+  const FaceEdgeIds* face_edges = nullptr;
+  const Edge* edges = nullptr;
+  /// Per face: bit k (k < 3) set when it represents vertex faces[f].v[k], bit 3 + k when it
+  /// represents edge face_edges[f].e[k].
+  const unsigned char* represents = nullptr;
+  const Aabbf* boxes = nullptr;  ///< indexed by feature id
+  index_t num_vertices = 0, num_edges = 0;
+
+  LWSCCD_HD index_t face_feature(index_t f) const { return num_vertices + num_edges + f; }
+  LWSCCD_HD index_t edge_feature(index_t e) const { return num_vertices + e; }
+};
+
+/// The swept box of feature `id` (dataset convention) from its points at t0 and t1, grown by
+/// `margin` on every side when it is positive (proximity queries: half the minimum separation).
+template <class P>
+LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_vertices, index_t num_edges,
+                            const Vec3<P>* x0, const Vec3<P>* x1, index_t id, float margin = 0) {
+  Aabbf box = Aabbf::empty();
+  auto add = [&](index_t v) {
+    box.expand(x0[v]);
+    box.expand(x1[v]);
+  };
+  if (id < num_vertices) {
+    add(id);
+  } else if (id < num_vertices + num_edges) {
+    const Edge e = edges[id - num_vertices];
+    add(e.v[0]);
+    add(e.v[1]);
+  } else {
+    const Face f = faces[id - num_vertices - num_edges];
+    add(f.v[0]);
+    add(f.v[1]);
+    add(f.v[2]);
+  }
+  return margin > 0 ? box.inflated(margin) : box;
+}
+
+/// Which feature pairs the non-adjacent candidate triangle pair (a, b) keeps (represented by a
+/// and b, boxes overlapping), as a mask: bit k (k < 3) the vertex faces[a].v[k] with face b, bit
+/// 3 + k the vertex faces[b].v[k] with face a, bit 6 + 3x + y the edges face_edges[a].e[x] and
+/// face_edges[b].e[y]. The GPU's counting pass stores it; its writing pass only decodes it.
+LWSCCD_HD inline unsigned emission_mask(const EmissionView& m, index_t a, index_t b) {
+  const unsigned ra = m.represents[a], rb = m.represents[b];
+  if (ra == 0 && rb == 0) return 0;
+  unsigned mask = 0;
+  const Aabbf box_a = m.boxes[m.face_feature(a)], box_b = m.boxes[m.face_feature(b)];
+  if (ra & 7u) {
+    const Face t = m.faces[a];
+    for (int k = 0; k < 3; ++k)
+      if ((ra >> k) & 1u && m.boxes[t.v[k]].overlaps(box_b)) mask |= 1u << k;
+  }
+  if (rb & 7u) {
+    const Face t = m.faces[b];
+    for (int k = 0; k < 3; ++k)
+      if ((rb >> k) & 1u && m.boxes[t.v[k]].overlaps(box_a)) mask |= 1u << (3 + k);
+  }
+  if ((ra >> 3) == 0 || (rb >> 3) == 0) return mask;
+  const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
+  for (int x = 0; x < 3; ++x) {
+    if (!((ra >> (3 + x)) & 1u)) continue;
+    const Aabbf box_x = m.boxes[m.edge_feature(ea.e[x])];
+    for (int y = 0; y < 3; ++y)
+      if ((rb >> (3 + y)) & 1u && box_x.overlaps(m.boxes[m.edge_feature(eb.e[y])])) mask |= 1u << (6 + 3 * x + y);
+  }
+  return mask;
+}
+
+/// Bits 0-5 of an emission mask (vertex-face pairs) and bits 6-14 (edge-edge pairs).
+constexpr unsigned kEmissionVfBits = 0x3fu, kEmissionEeBits = 0x7fc0u;
+
+/// Calls on_vf(vertex id, face feature id) and on_ee(smaller edge feature id, larger) for each
+/// pair of `mask` (emission_mask of (a, b)): vertices of a, then of b, then edges in (a's, b's)
+/// order. Host and device.
+template <class OnVf, class OnEe>
+LWSCCD_HD void decode_emission(const EmissionView& m, index_t a, index_t b, unsigned mask, OnVf&& on_vf, OnEe&& on_ee) {
+  if (mask & kEmissionVfBits) {
+    const Face ta = m.faces[a], tb = m.faces[b];
+    for (int k = 0; k < 3; ++k)
+      if ((mask >> k) & 1u) on_vf(ta.v[k], m.face_feature(b));
+    for (int k = 0; k < 3; ++k)
+      if ((mask >> (3 + k)) & 1u) on_vf(tb.v[k], m.face_feature(a));
+  }
+  if (mask & kEmissionEeBits) {
+    const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
+    for (int x = 0; x < 3; ++x)
+      for (int y = 0; y < 3; ++y)
+        if ((mask >> (6 + 3 * x + y)) & 1u) {
+          const index_t ex = m.edge_feature(ea.e[x]), ey = m.edge_feature(eb.e[y]);
+          ex < ey ? on_ee(ex, ey) : on_ee(ey, ex);
+        }
+  }
+}
+
+/// The kept feature pairs of the candidate pair (a, b): decode_emission of its emission_mask.
+template <class OnVf, class OnEe>
+LWSCCD_HD void emit_triangle_pair(const EmissionView& m, index_t a, index_t b, OnVf&& on_vf, OnEe&& on_ee) {
+  decode_emission(m, a, b, emission_mask(m, a, b), on_vf, on_ee);
+}
+
+/// True when the orphan pair (first, second) (feature ids) is kept: its boxes overlap.
+LWSCCD_HD inline bool orphan_kept(const EmissionView& m, index_t first, index_t second) {
+  return m.boxes[first].overlaps(m.boxes[second]);
+}
+
+/// The representing faces of a mesh and the orphan pairs of that assignment, for one topology
+/// (and body layout). Build once per mesh; emit_feature_pairs (CPU) and gpu::FeatureEmitter
+/// (GPU) use it every step.
+class RepresentativeTriangles {
+ public:
+  /// Assigns each vertex and edge to one incident face, balancing how many each face represents
+  /// (Curtis et al.: about half a vertex and one and a half edges per face), and lists the
+  /// orphans, without the pairs the layout does not consider (a feature's body is its
+  /// representing face's). Throws InputError for a layout that does not fit the mesh.
+  /// The mesh must outlive this object.
+  explicit RepresentativeTriangles(const TriangleMesh& mesh, BodyLayout layout = {});
+
+  /// Per face: the bits of EmissionView::represents.
+  const std::vector<unsigned char>& represents() const { return represents_; }
+  const std::vector<FaceEdgeIds>& face_edges() const { return face_edges_; }
+  /// The face that represents vertex v (-1 for a vertex of no face), or edge e.
+  index_t vertex_owner(index_t v) const { return vertex_owner_[v]; }
+  index_t edge_owner(index_t e) const { return edge_owner_[e]; }
+  /// The face that represents feature `id` (a face represents itself); -1 for an unused vertex.
+  index_t owner_of_feature(index_t id) const;
+  /// Non-incident pairs whose representing faces share a vertex (so no candidate triangle pair
+  /// produces them), in the FeaturePairs id convention, sorted.
+  const OrphanSets& orphans() const { return orphans_; }
+  const TriangleMesh& mesh() const { return *mesh_; }
+  const BodyLayout& layout() const { return layout_; }
+  /// True when the layout considers the pair of features (ids): their representing faces' bodies.
+  bool considers(index_t first, index_t second) const {
+    return layout_.considers(owner_of_feature(first), owner_of_feature(second));
+  }
+
+  /// The view over this object's host arrays and the given boxes (one per feature id).
+  EmissionView view(const Aabbf* boxes) const {
+    return {mesh_->faces().data(), face_edges_.data(), mesh_->edges().data(), represents_.data(), boxes,
+            mesh_->num_vertices(), mesh_->num_edges()};
+  }
+
+ private:
+  const TriangleMesh* mesh_;
+  BodyLayout layout_;
+  std::vector<unsigned char> represents_;
+  std::vector<FaceEdgeIds> face_edges_;
+  std::vector<index_t> vertex_owner_, edge_owner_;
+  OrphanSets orphans_;
+};
+
+/// One swept box per feature id (vertices, edges, faces) from the positions at t0 and t1, each
+/// grown by `margin` (>= 0; a pipeline uses half its minimum separation, as for the BVH's leaves).
+template <class P>
+std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
+                                 double margin = 0);
+
+/// The feature pairs of the candidate triangle pairs and of the orphans, each produced once and
+/// kept when its feature boxes overlap, on all cores. Adjacent candidate pairs are skipped (the
+/// orphans hold what they would give). Order: the candidates' pairs in candidate order, then the
+/// kept orphans in order - not sorted (the GPU emitter gives the same lists in the same order).
+FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::vector<TrianglePair>& candidates,
+                                const std::vector<Aabbf>& boxes);
+/// The same for n candidates from `candidates`, with the orphans' pairs only when `with_orphans`
+/// (a step split into parts lists them with one part).
+FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                                const std::vector<Aabbf>& boxes, bool with_orphans);
+
+/// The oracle: every non-incident vertex-face pair and every edge-edge pair without a common
+/// vertex whose feature boxes overlap (and, with a layout, that rep.considers), sorted; vertices
+/// of no face take no part. O(features^2): small meshes only.
+FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes);
+
+/// The same set as brute_force_feature_pairs, by sorting the boxes on x and sweeping: for the
+/// real scenes.
+FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes);
+
+}  // namespace lwsccd
+
+#include "lwsccd/features/detail/representative_impl.hpp"

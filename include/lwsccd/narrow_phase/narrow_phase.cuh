@@ -1,0 +1,250 @@
+// lwsccd — the narrow phase on the GPU: a thread per candidate feature pair, hits appended on the
+// device into an output that grows as needed (nothing is dropped), no host round trip inside a run.
+#pragma once
+
+#include <cub/device/device_radix_sort.cuh>
+
+#include <algorithm>
+#include <utility>
+
+#include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/narrow_phase/ccd_filters.hpp"
+#include "lwsccd/narrow_phase/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
+
+namespace lwsccd::gpu {
+
+/// Faces and edges on the device, for turning feature ids into query points.
+struct DeviceMeshFeatures {
+  DeviceBuffer<Face> faces;
+  DeviceBuffer<Edge> edges;
+  index_t num_vertices = 0, num_edges = 0;
+
+  DeviceMeshFeatures() = default;
+  explicit DeviceMeshFeatures(const TriangleMesh& mesh, cudaStream_t stream = nullptr)
+      : num_vertices(mesh.num_vertices()), num_edges(mesh.num_edges()) {
+    faces.upload(mesh.faces(), stream);
+    edges.upload(mesh.edges(), stream);
+  }
+  MeshFeatures view() const { return {faces.data(), edges.data(), num_vertices, num_edges}; }
+  /// Vertices, edges and faces together: every feature id is below this.
+  std::size_t num_features() const { return static_cast<std::size_t>(num_vertices) + num_edges + faces.size(); }
+};
+
+/// Knobs of the GPU narrow phase.
+struct NarrowPhasePolicy {
+  static constexpr int kBlock = 128;               ///< threads per block, a thread per query
+  static constexpr int kThreadRounds = 6;   ///< InclusionCcd: rounds of the one-thread attempt per query
+  static constexpr int kThreadBoxes = 64;   ///< InclusionCcd: live boxes the one-thread attempt may keep
+  static constexpr int kSearchWarpsPerBlock = 2;   ///< InclusionCcd's searches left open: a warp per query (~11 KiB of shared memory each)
+  /// InclusionCcd: a list of at most this many queries skips the one-thread attempt (its warp
+  /// searches run at once; CertifiedCcd's few fallbacks); 0 always makes the attempt.
+  static constexpr int kWarpSearchDirect = 1024;
+  /// CertifiedCcd: refinements that would halve intervals this deep (width 2^-level) go to a
+  /// second kernel, so that the long searches of contacts do not hold up warps of quick misses.
+  /// On an H100 levels 3 and 4 were fastest (cloth-ball narrow 3.3 ms against 3.5 at level 8,
+  /// built-in 100K 1.05 against 1.5; docs/BENCHMARKS.md).
+  static constexpr int kRefineDeferLevel = 4;
+  /// CertifiedCcd: at most this many deferred refinements run a warp each (inside tests by
+  /// subtrees: the long coplanar searches' latency ~5x shorter), more a thread each; 0: always a thread.
+  static constexpr int kRefineWarpBelow = 1024;
+  /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
+  /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
+  /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.
+  static constexpr int kRefineMinBlocks = 1;
+  /// CertifiedCcd's refinement starts with its filter (CertifiedFilter): a thread per pair prunes
+  /// the cubic's pieces to the first inside-test level, then a thread per listed interval runs the
+  /// inside test, so the costliest step no longer diverges; the pairs it cannot exclude are
+  /// searched whole. Same answers as without (false, and always in mode set: refine_kernel's
+  /// levels, then the rest). H100, cloth-ball narrow phase, mode contacts: 2.34-2.53 -> 1.66-2.09 ms.
+  static constexpr bool kRefineFilter = true;
+  /// The filter's list of intervals starts with room for this percentage of the screened pairs'
+  /// room (~1.03 intervals per listed pair on the scenes); pairs whose intervals do not fit are
+  /// searched whole (same answers) and the room grows for the next run.
+  static constexpr int kFilterRoomPercent = 100;
+  /// The filter's second round: an interval whose inside test is unknown is split as the search
+  /// would split it, down to the next inside-test level (CertifiedFilter::expand), and those
+  /// intervals are tested a thread each too; only pairs with an interval not certainly outside
+  /// there are searched whole (on cloth-ball 301 K edge-edge pairs -> 105 K, 95 K of them contacts).
+  /// Mode contacts only: in mode earliest the short windows leave it little, and its two launches
+  /// per window cost more (H100: cloth-ball narrow, contacts 1.89 -> 1.28 ms, earliest 0.43 -> 0.45).
+  static constexpr bool kFilterSecondRound = true;
+  /// Its list's starting room, as a percentage of the screened pairs' room (grown like the first's).
+  static constexpr int kDeepRoomPercent = 100;
+  /// Kernels whose input length is read on the device loop over it (grid-stride) in a grid of
+  /// this many blocks per SM (or fewer, where the input's room is smaller).
+  static constexpr int kGridBlocksPerSm = 16;
+};
+
+/// Sorts device hits by (first, second), the order of the CPU backend's results (CUB radix sort
+/// on a 64-bit key). Owns its scratch (reused; it only grows).
+template <class T>
+class HitSorter {
+ public:
+  /// Sorts the first n hits of `hits` by (first, second) on `stream`; every id is below
+  /// `id_limit` (the mesh's feature count: only the bits that takes are sorted). The sorted hits
+  /// end up in `hits` by an exchange of buffers (the old one becomes this sorter's scratch), so
+  /// `hits` keeps at least its size.
+  void sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::size_t id_limit, cudaStream_t stream = nullptr);
+  std::size_t device_bytes() const {
+    return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes();
+  }
+
+ private:
+  DeviceBuffer<FeatureHit<T>> sorted_;
+  DeviceBuffer<unsigned long long> keys_, sorted_keys_;
+  DeviceBuffer<unsigned char> scratch_;
+};
+
+/// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as
+/// cpu::test_feature_pairs, with the same answers). CertifiedCcd classifies every pair in the
+/// first pass, a thread per pair (its hits are stored at once), and runs its fallback only on the
+/// undecided ones. Other methods with a quick_reject (the conservative inclusion method, filtered
+/// methods) run their cheap first step on every pair, then the full test on the survivors. The
+/// inclusion method's full test runs a thread per query for a few rounds, then a warp per query
+/// still open.
+///
+/// No host round trip inside a run: every list is appended on the device (an atomic counter per
+/// list, warp-aggregated) into buffers sized from earlier runs, every kernel reads its input's
+/// length on the device (grid-stride loops), and mode earliest's windows are all enqueued, each
+/// skipped on the device once an earlier one holds a contact. The host reads the counters once at
+/// the end (collect()); where a list outgrew its buffer the run is enqueued again with room for it,
+/// so nothing is lost. Owns its buffers (reused; they only grow).
+template <class Method, class T, class Policy = NarrowPhasePolicy>
+class NarrowPhase {
+ public:
+  static_assert(require_ccd_method<Method>::value, "");
+  using Pair = std::pair<index_t, index_t>;
+
+  /// Output buffers start with room for `initial_capacity` pairs, or for the input's room where
+  /// that is less (a list never holds more than its input: a streamed step's small parts keep
+  /// small buffers), and grow (with a rerun) whenever a run needed more (tests force tiny values).
+  explicit NarrowPhase(std::size_t initial_capacity = 1 << 16)
+      : initial_capacity_(std::max<std::size_t>(initial_capacity, 1)) {}
+
+  /// Tests `num_vf` vertex-face and `num_ee` edge-edge pairs (device arrays of id pairs) and waits
+  /// for the answer (enqueue, then collect until complete). The hits stay on the device until
+  /// download().
+  template <class P>
+  void run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Pair* vf, std::size_t num_vf,
+           const Pair* ee, std::size_t num_ee, const CcdParams<T>& params, cudaStream_t stream = nullptr) {
+    run(mesh, x0, x1, PairList{vf, DeviceCount::known(num_vf)}, PairList{ee, DeviceCount::known(num_ee)}, params, stream);
+  }
+  template <class P>
+  void run(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList vf, PairList ee,
+           const CcdParams<T>& params, cudaStream_t stream = nullptr) {
+    do {
+      enqueue(mesh, x0, x1, vf, ee, params, stream);
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    } while (!collect());
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+  }
+
+  /// Enqueues a run on `stream` without waiting (the two lists run on streams of their own,
+  /// ordered after `stream`'s earlier work; `stream` waits for them). The inputs must stay valid
+  /// until collect() returns true.
+  template <class P>
+  void enqueue(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList vf, PairList ee,
+               const CcdParams<T>& params, cudaStream_t stream = nullptr);
+
+  /// After `stream` (the last enqueue's) has been synchronized: reads the run's counters. Returns
+  /// false when an output outgrew its buffer (now grown: enqueue the same run again); true when
+  /// the run is complete, in which case the hits' sort by (first, second) is enqueued on `stream`.
+  bool collect();
+
+  NarrowPhase(const NarrowPhase&) = delete;
+  NarrowPhase& operator=(const NarrowPhase&) = delete;
+  ~NarrowPhase() {
+    for (auto& l : lists_) {
+      if (l.stream) cudaStreamDestroy(l.stream);
+      if (l.done) cudaEventDestroy(l.done);
+    }
+    if (start_) cudaEventDestroy(start_);
+    if (joined_) cudaEventDestroy(joined_);
+  }
+
+  /// The method that runs on the first pass's survivors: CertifiedCcd's fallback, or Method.
+  using FullTest = typename lwsccd::detail::full_test_of<Method>::type;
+  static constexpr bool kCertified = lwsccd::detail::certified_of<Method>::value;
+  static constexpr bool kTwoPass = kCertified || lwsccd::detail::has_quick_reject<Method>::value;
+
+  // Results of the last collected run:
+  std::size_t num_vf_hits() const { return lists_[0].count; }
+  std::size_t num_ee_hits() const { return lists_[1].count; }
+  /// Pairs of the last run left for the full test by the first pass (all pairs for one-pass methods).
+  std::size_t survivors() const { return lists_[0].num_full + lists_[1].num_full; }
+  /// Queries of the last run that the one-thread attempt left to a warp search (InclusionCcd).
+  std::size_t warp_searches() const { return lists_[0].warp_searches + lists_[1].warp_searches; }
+  /// CertifiedCcd: refinements the first pass's filter could not decide, searched whole (all of
+  /// them without the filter), in the last run (mode earliest: its last window).
+  std::size_t whole_searches() const { return lists_[0].whole_searches + lists_[1].whole_searches; }
+  T earliest_toi() const { return earliest_; }
+  std::size_t gave_up() const { return gave_up_; }
+  /// Runs enqueued again because an output outgrew its buffer, since construction.
+  std::size_t reruns() const { return reruns_; }
+  /// How the last run answered each list's pairs (vertex-face, edge-edge).
+  NarrowPhaseCounts counts(int list) const { return lists_[list].counts; }
+  /// Copies the hits to the host, sorted by (first, second) like the CPU backend's.
+  NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
+  /// The hits of the last collected run on the device (sorted once `stream` reaches them).
+  const FeatureHit<T>* vf_hits() const { return lists_[0].hits.data(); }
+  const FeatureHit<T>* ee_hits() const { return lists_[1].hits.data(); }
+  std::size_t device_bytes() const {
+    std::size_t bytes = control_.capacity_bytes();
+    for (const auto& l : lists_)
+      bytes += l.hits.capacity_bytes() + l.sorter.device_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
+               l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes() + l.intervals.capacity_bytes() +
+               l.listed.capacity_bytes() + l.expanded.capacity_bytes() + l.deep.capacity_bytes();
+    return bytes;
+  }
+
+ private:
+  // One list's buffers (vertex-face or edge-edge) and its stream.
+  struct List {
+    DeviceBuffer<FeatureHit<T>> hits;
+    HitSorter<T> sorter;                         ///< the ordering by (first, second)
+    DeviceBuffer<Pair> survivors;                ///< pairs the first pass keeps
+    DeviceBuffer<FeatureHit<T>> undecided;       ///< CertifiedCcd: left to the fallback, with the time excluded before
+    DeviceBuffer<unsigned> deferred, open;       ///< indices: refinements deferred, searches left to a warp
+    DeviceBuffer<unsigned long long> intervals;  ///< CertifiedCcd's filter: intervals to test for inside (detail::filter_item)
+    DeviceBuffer<unsigned long long> expanded;   ///< the filter's second round: intervals to split further (room: interval_room)
+    DeviceBuffer<unsigned long long> deep;       ///< the second round's intervals to test for inside
+    DeviceBuffer<unsigned> listed;               ///< the filter: a bit per pair, set once it is deferred
+    DeviceBuffer<unsigned long long> counters;   ///< detail::NarrowCounter words
+    PinnedBuffer<unsigned long long> host_counters;
+    std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors, undecided, deferred and open
+    std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
+    NarrowPhaseCounts counts;
+    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0;
+    cudaStream_t stream = nullptr;
+    cudaEvent_t done = nullptr;
+  };
+
+  void ensure_streams();
+  void join_lists(cudaStream_t stream);
+  /// Whether the filter's second round runs (NarrowPhasePolicy::kFilterSecondRound).
+  static constexpr bool second_round(CcdMode mode) { return Policy::kRefineFilter && Policy::kFilterSecondRound && mode == CcdMode::contacts; }
+  template <class P, bool kVertexFace>
+  void enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
+                          const CcdParams<T>& params, List& list);
+  template <class P, bool kVertexFace>
+  void enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
+                         const CcdParams<T>& params, const unsigned long long* limit, List& list);
+  unsigned grid_for(std::size_t room, int block, int per_sm) const;
+
+  std::size_t initial_capacity_;
+  List lists_[2];  ///< vertex-face, edge-edge
+  cudaEvent_t start_ = nullptr, joined_ = nullptr;
+  cudaStream_t stream_ = nullptr;  ///< the last enqueue's
+  std::size_t id_limit_ = 0;       ///< the last enqueue's mesh: its feature count (ids are below it)
+  DeviceBuffer<unsigned long long> control_;  ///< detail::NarrowControl words
+  std::size_t gave_up_ = 0, reruns_ = 0;
+  T earliest_ = T(1);
+  int sms_ = 1;
+  bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
+};
+
+}  // namespace lwsccd::gpu
+
+#include "lwsccd/narrow_phase/detail/narrow_phase_kernels.cuh"

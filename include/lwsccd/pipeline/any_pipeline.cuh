@@ -1,0 +1,82 @@
+// lwsccd — the GPU backend of AnyPipeline (any_pipeline.hpp): gpu::make_any_pipeline builds a
+// gpu::CcdPipeline with policies chosen by name, the scheduler included. Compiling this header
+// instantiates every combination of policies (3 schedulers x 2 BVs x 4 methods x 2 precisions),
+// so include it in one translation unit of a program.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <string>
+
+#include "lwsccd/pipeline/any_pipeline.hpp"
+#include "lwsccd/pipeline/gpu_pipeline.cuh"
+
+namespace lwsccd::gpu {
+
+/// AnyPipeline over gpu::CcdPipeline: also steps from device positions and leaves contacts there.
+template <class Pipeline>
+class AnyPipelineAdapter final : public PipelineAdapter<Pipeline> {
+ public:
+  template <class... Args>
+  explicit AnyPipelineAdapter(Args&&... args) : PipelineAdapter<Pipeline>("gpu", std::forward<Args>(args)...) {}
+
+  StepOutcome step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) override {
+    auto r = this->pipeline_.step_from_device(device_x0, device_x1);
+    return {r.stats, lwsccd::detail::to_double(std::move(r.contacts))};
+  }
+
+  AnyDeviceContacts step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) override {
+    const auto r = this->pipeline_.step_on_device(device_x0, device_x1);
+    using Hit = std::remove_cv_t<std::remove_pointer_t<decltype(r.contacts.vf)>>;
+    AnyDeviceContacts out;
+    out.stats = r.stats;
+    out.vf = r.contacts.vf;
+    out.ee = r.contacts.ee;
+    out.num_vf = r.contacts.num_vf;
+    out.num_ee = r.contacts.num_ee;
+    out.toi_is_double = std::is_same<decltype(Hit::toi), double>::value;
+    out.hit_bytes = sizeof(Hit);
+    out.earliest_toi = static_cast<double>(r.contacts.earliest_toi);
+    out.gave_up = r.contacts.gave_up;
+    out.vf_counts = r.contacts.vf_counts;
+    out.ee_counts = r.contacts.ee_counts;
+    return out;
+  }
+};
+
+/// A GPU pipeline with the chosen policies. Throws InputError for unknown names, bad parameters
+/// or a bad mesh/layout, and lwsccd::Error when there is no CUDA device.
+inline std::unique_ptr<AnyPipeline> make_any_pipeline(std::shared_ptr<const TriangleMesh> mesh, const BodyLayout& layout,
+                                                      const PipelineParams& params, const PolicyChoice& choice) {
+  int devices = 0;
+  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) {
+    cudaGetLastError();  // clear the "no device" error
+    throw Error("lwsccd: no CUDA device for the GPU backend");
+  }
+  return dispatch_policies(choice, [&](auto bv, auto method, auto scalar) -> std::unique_ptr<AnyPipeline> {
+    using BV = typename decltype(bv)::type;
+    using Method = typename decltype(method)::type;
+    using T = typename decltype(scalar)::type;
+    auto make = [&](auto scheduler) -> std::unique_ptr<AnyPipeline> {
+      using Pipeline = CcdPipeline<BV, typename decltype(scheduler)::type, Method, T>;
+      return std::make_unique<AnyPipelineAdapter<Pipeline>>(mesh, layout, params);
+    };
+    if (choice.scheduler == "static") return make(PolicyTag<StaticTaskList<>>{});
+    if (choice.scheduler == "gproximity") return make(PolicyTag<GProximityBalancer<>>{});
+    return make(PolicyTag<LazyStealScheduler<>>{});
+  });
+}
+
+/// The first CUDA device's name, or "" when there is none.
+inline std::string device_name() {
+  int devices = 0;
+  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) {
+    cudaGetLastError();
+    return "";
+  }
+  cudaDeviceProp prop{};
+  LWSCCD_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
+  return prop.name;
+}
+
+}  // namespace lwsccd::gpu
