@@ -1,0 +1,321 @@
+// lwsccd — what every GPU scheduler shares on the device: the launch counters, the outputs a
+// block appends to, a round of items processed by a block (children scanned into its stack), the
+// breadth-first and flat kernels, and the two-level (shared, then global) stack loop.
+#pragma once
+
+#include <cub/block/block_reduce.cuh>
+#include <cub/block/block_scan.cuh>
+#include <cuda/atomic>
+
+#include <algorithm>
+#include <atomic>
+#include <cassert>
+#include <string>
+#include <type_traits>
+
+#include "lwsccd/core/error.hpp"
+#include "lwsccd/traversal/gpu_traverse.cuh"
+
+namespace lwsccd::gpu::detail {
+
+enum Counter : int {
+  kResults = 0,    ///< results appended (may exceed the capacity: then the output grows)
+  kFront = 1,      ///< front items appended (same)
+  kProcessed = 2,  ///< items processed
+  kAppended = 3,   ///< items appended to the next list (expansion) or handed back (resume)
+  kIdle = 4,       ///< blocks that ran out of work (gProximity)
+  kHalted = 5,     ///< blocks that stopped because their global stack was full
+  kLevels = 6,     ///< breadth-first levels one block expanded in one launch (expand_small_levels_kernel)
+  kPending = 7,    ///< LazyStealScheduler: the live items of a launch (see the termination note)
+  kStartItems = 8,  ///< LazyStealScheduler: the length of the launch's start list
+  kStartTaken = 9,  ///< LazyStealScheduler: how much of the start list blocks have taken
+  kLost = 10,       ///< LazyStealScheduler: items a list had no room for (the pass is rerun with more)
+  kHungry = 11,     ///< LazyStealScheduler: blocks in a search for work (kShareWhenHungry)
+  kCounters = 12
+};
+
+template <class Task>
+struct Outputs {
+  typename Task::result_type* results;
+  std::size_t result_capacity;
+  typename Task::item_type* front;
+  std::size_t front_capacity;
+  unsigned long long* counters;
+  bool record_front;
+};
+
+// Collects one item's children, results and front entry in registers; the block appends them
+// together afterwards (flush_outputs), one atomic per block and round.
+template <class Task>
+struct DeviceEmitter {
+  using Item = typename Task::item_type;
+  using Result = typename Task::result_type;
+  Item children[Task::kMaxChildren];
+  Result results[Task::kMaxResults];
+  Item front;
+  int count = 0, num_results = 0, num_front = 0;
+  bool record_front = false;
+
+  __device__ void push_item(const Item& x) {
+    assert(count < Task::kMaxChildren && "a task pushed more than kMaxChildren items");
+    children[count++] = x;
+  }
+  __device__ void push_result(const Result& r) {
+    assert(num_results < Task::kMaxResults && "a task pushed more than kMaxResults results");
+    results[num_results++] = r;
+  }
+  __device__ void push_front(const Item& x) {
+    assert(num_front == 0 && "a task pushed two front entries in one call");
+    if (!record_front) return;
+    front = x;
+    num_front = 1;
+  }
+};
+
+// Appends the block's results and front entries: a block scan, one atomic, coalesced writes.
+// All threads of the block must call it.
+template <class Task, class Scan>
+__device__ void flush_outputs(const DeviceEmitter<Task>& e, const Outputs<Task>& out, typename Scan::TempStorage& storage,
+                              unsigned long long& base) {
+  int offset = 0, total = 0;
+  Scan(storage).ExclusiveSum(e.num_results, offset, total);
+  if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kResults], static_cast<unsigned long long>(total));
+  __syncthreads();
+  for (int r = 0; r < e.num_results; ++r)
+    if (base + offset + r < out.result_capacity) out.results[base + offset + r] = e.results[r];
+  if (!out.record_front) {
+    __syncthreads();
+    return;
+  }
+  __syncthreads();
+  Scan(storage).ExclusiveSum(e.num_front, offset, total);
+  if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kFront], static_cast<unsigned long long>(total));
+  __syncthreads();
+  if (e.num_front && base + offset < out.front_capacity) out.front[base + offset] = e.front;
+  __syncthreads();
+}
+
+// One breadth-first level: every item processed once, children appended to `next`, which holds
+// `next_room` (kAppended counts them all: a caller that sized it below n * kMaxChildren checks).
+template <class Task, int kThreads>
+__global__ void __launch_bounds__(kThreads) expand_kernel(Task task, const typename Task::item_type* in, std::size_t n,
+                                                          typename Task::item_type* next, std::size_t next_room,
+                                                          Outputs<Task> out) {
+  using Scan = cub::BlockScan<int, kThreads>;
+  __shared__ typename Scan::TempStorage storage;
+  __shared__ unsigned long long base;
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  DeviceEmitter<Task> e;
+  e.record_front = out.record_front;
+  if (i < n) task.process(in[i], e);
+  int offset = 0, total = 0;
+  Scan(storage).ExclusiveSum(e.count, offset, total);
+  if (threadIdx.x == 0 && total) base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(total));
+  __syncthreads();
+  for (int c = 0; c < e.count; ++c)
+    if (base + offset + c < next_room) next[base + offset + c] = e.children[c];
+  __syncthreads();
+  flush_outputs<Task, Scan>(e, out, storage, base);
+}
+
+// The first breadth-first levels of a small start (the root) in one block and one launch:
+// level after level, from `a` into `b` and back, while a level holds fewer than `stop_at` items
+// (a level per launch cost a launch and a host synchronisation each: 6-7 of them from a root).
+// Writes the last level's size to kAppended and the number of levels to kLevels (odd: the last
+// level is in `b`). Both buffers hold `room` items, at least stop_at * kMaxChildren.
+template <class Task, int kThreads>
+__global__ void __launch_bounds__(kThreads)
+    expand_small_levels_kernel(Task task, typename Task::item_type* a, typename Task::item_type* b, std::size_t n,
+                               std::size_t stop_at, std::size_t room, Outputs<Task> out) {
+  using Item = typename Task::item_type;
+  using Scan = cub::BlockScan<int, kThreads>;
+  __shared__ typename Scan::TempStorage storage;
+  __shared__ unsigned long long level_size, flush_base;
+  Item* in = a;
+  Item* next = b;
+  unsigned long long levels = 0;
+  while (n > 0 && n < stop_at) {
+    assert(n * Task::kMaxChildren <= room && "expand_small_levels_kernel: a level's children overflow their buffer");
+    if (threadIdx.x == 0) level_size = 0;
+    __syncthreads();
+    for (std::size_t first = 0; first < n; first += kThreads) {
+      const std::size_t i = first + threadIdx.x;
+      DeviceEmitter<Task> e;
+      e.record_front = out.record_front;
+      if (i < n) task.process(in[i], e);
+      int offset = 0, total = 0;
+      Scan(storage).ExclusiveSum(e.count, offset, total);
+      const unsigned long long base = level_size;  // read by all before thread 0 moves it on
+      __syncthreads();
+      if (threadIdx.x == 0) level_size += static_cast<unsigned long long>(total);
+      for (int c = 0; c < e.count; ++c) next[base + offset + c] = e.children[c];
+      flush_outputs<Task, Scan>(e, out, storage, flush_base);  // synchronises the block
+    }
+    if (threadIdx.x == 0) out.counters[kProcessed] += n;
+    n = static_cast<std::size_t>(level_size);
+    Item* done = in;
+    in = next;
+    next = done;
+    ++levels;
+    __syncthreads();  // level_size read by all before the next level resets it
+  }
+  if (threadIdx.x == 0) {
+    out.counters[kAppended] = n;
+    out.counters[kLevels] = levels;
+  }
+}
+
+// Drops the `count` oldest items of a shared stack (they were copied elsewhere): the rest moves
+// down, staged through registers so that overlapping ranges are safe. All threads call it.
+template <class Item, int kShared, int kThreads>
+__device__ void drop_oldest(Item* s_items, int& s_size, int count) {
+  constexpr int kPerThread = (kShared + kThreads - 1) / kThreads;
+  Item keep[kPerThread];
+  const int remaining = s_size - count;
+  for (int j = 0; j < kPerThread; ++j) {
+    const int i = threadIdx.x + j * kThreads;
+    if (i < remaining) keep[j] = s_items[i + count];
+  }
+  __syncthreads();
+  for (int j = 0; j < kPerThread; ++j) {
+    const int i = threadIdx.x + j * kThreads;
+    if (i < remaining) s_items[i] = keep[j];
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) s_size = remaining;
+  __syncthreads();
+}
+
+// One round: the top `take` items of the shared stack are processed, one per thread; their
+// children go back on the stack, results and front entries to the outputs. Returns (on every
+// thread) how many children were pushed. All threads call it; Scan is a cub::BlockScan of 64-bit words.
+//
+// A round is latency-bound where a block holds few items (a subtree's last levels, one level a
+// round), so it is kept short: the three counts of a thread (children, results, front entries)
+// go through one block scan as fields of one word, and the results' and the front's places are
+// reserved by two threads at once - instead of a scan and a synchronisation per list and two
+// atomics one after the other.
+template <class Task, class Scan>
+__device__ int process_round(const Task& task, typename Task::item_type* s_items, int& s_size, int take,
+                             typename Scan::TempStorage& storage, unsigned long long (&out_base)[2], const Outputs<Task>& out) {
+  constexpr int kField = 21;  // bits per count: a block's totals stay far below 2^21
+  constexpr unsigned long long kMask = (1ull << kField) - 1;
+  static_assert(Task::kMaxChildren < 1024 && Task::kMaxResults < 1024, "lwsccd: process_round packs counts in 21-bit fields");
+  DeviceEmitter<Task> e;
+  e.record_front = out.record_front;
+  typename Task::item_type item;
+  const bool active = static_cast<int>(threadIdx.x) < take;
+  if (active) item = s_items[s_size - take + threadIdx.x];
+  __syncthreads();  // taken: the children may overwrite those slots
+  if (threadIdx.x == 0) s_size -= take;
+  if (active) task.process(item, e);
+  const unsigned long long counts = static_cast<unsigned long long>(e.count) |
+                                    (static_cast<unsigned long long>(e.num_results) << kField) |
+                                    (static_cast<unsigned long long>(e.num_front) << (2 * kField));
+  unsigned long long offsets = 0, totals = 0;
+  Scan(storage).ExclusiveSum(counts, offsets, totals);
+  const int total_children = static_cast<int>(totals & kMask), total_results = static_cast<int>((totals >> kField) & kMask),
+            total_front = static_cast<int>(totals >> (2 * kField));
+  if (threadIdx.x == 0 && total_results)
+    out_base[0] = atomicAdd(&out.counters[kResults], static_cast<unsigned long long>(total_results));
+  if (threadIdx.x == 32 % blockDim.x && total_front)
+    out_base[1] = atomicAdd(&out.counters[kFront], static_cast<unsigned long long>(total_front));
+  __syncthreads();  // s_size updated, places reserved, scan storage free
+  const int child_at = s_size + static_cast<int>(offsets & kMask);
+  for (int c = 0; c < e.count; ++c) s_items[child_at + c] = e.children[c];
+  const unsigned long long result_at = out_base[0] + ((offsets >> kField) & kMask);
+  for (int r = 0; r < e.num_results; ++r)
+    if (result_at + r < out.result_capacity) out.results[result_at + r] = e.results[r];
+  const unsigned long long front_at = out_base[1] + (offsets >> (2 * kField));
+  if (e.num_front && front_at < out.front_capacity) out.front[front_at] = e.front;
+  __syncthreads();  // children stored (and out_base read) before the stack grows
+  if (threadIdx.x == 0) {
+    s_size += total_children;
+    atomicAdd(&out.counters[kProcessed], static_cast<unsigned long long>(take));
+  }
+  return total_children;
+}
+
+// The per-block two-level stack loop shared by the schedulers. `region` is this block's global
+// stack (capacity `global_capacity`), holding `region_size` items on entry. Returns with every
+// remaining item in the region (its new size in `region_size`) unless `hand_back` is set, in which
+// case the items left go to hand_back (when the region would overflow).
+template <class Task, class Policy>
+__device__ void run_block_stack(const Task& task, typename Task::item_type* region, int& region_size, int global_capacity,
+                                const Outputs<Task>& out, const unsigned long long* idle_blocks, unsigned idle_limit,
+                                typename Task::item_type* hand_back) {
+  using Item = typename Task::item_type;
+  constexpr int kThreads = Policy::kBlockThreads;
+  constexpr int kShared = Policy::kSharedStack;
+  constexpr int kK = Task::kMaxChildren;
+  static_assert(kShared >= 2 * kThreads * kK, "lwsccd: kSharedStack must hold at least 2 * kBlockThreads * kMaxChildren items");
+  using Scan = cub::BlockScan<unsigned long long, kThreads>;
+  __shared__ Item s_items[kShared];
+  __shared__ typename Scan::TempStorage scan_storage;
+  __shared__ int s_size, g_size, take, refill, spill, stop;  // stop: 0 run, 1 done, 2 pause, 3 full
+  __shared__ unsigned long long out_base[2];
+  const int t = threadIdx.x;
+  if (t == 0) {
+    s_size = 0;
+    g_size = region_size;
+  }
+  __syncthreads();
+  while (true) {
+    if (t == 0) {
+      refill = 0;
+      spill = 0;
+      stop = 0;
+      if (s_size == 0 && g_size == 0) stop = 1;
+      else if (idle_blocks && *reinterpret_cast<const volatile unsigned long long*>(idle_blocks) >= idle_limit) stop = 2;
+      else {
+        if (s_size == 0) refill = ::min(g_size, kShared / 2);
+        const int size = s_size + refill;
+        take = ::min(size, kThreads);
+        const int need = size - take + take * kK;
+        if (need > kShared) {
+          spill = need - kShared;
+          if (g_size - refill + spill > global_capacity) stop = 3;
+        }
+      }
+    }
+    __syncthreads();
+    if (stop) break;
+    if (refill) {  // bring the global stack's top into shared memory
+      for (int i = t; i < refill; i += kThreads) s_items[i] = region[g_size - refill + i];
+      __syncthreads();
+      if (t == 0) {
+        g_size -= refill;
+        s_size = refill;
+      }
+      __syncthreads();
+    }
+    if (spill) {  // oldest shared items to the global stack, the rest shifted down
+      for (int i = t; i < spill; i += kThreads) region[g_size + i] = s_items[i];
+      drop_oldest<Item, kShared, kThreads>(s_items, s_size, spill);  // synchronizes: copies done
+      if (t == 0) g_size += spill;
+      __syncthreads();
+    }
+    process_round<Task, Scan>(task, s_items, s_size, take, scan_storage, out_base, out);
+  }
+  // Leave every remaining item in the region, or hand everything back when it would not fit.
+  if (stop == 1) {
+    if (t == 0) region_size = 0;
+    return;
+  }
+  __shared__ unsigned long long base;
+  if (stop == 3 || g_size + s_size > global_capacity) {
+    if (t == 0) {
+      base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(g_size + s_size));
+      atomicAdd(&out.counters[kHalted], 1ull);
+    }
+    __syncthreads();
+    for (int i = t; i < g_size; i += kThreads) hand_back[base + i] = region[i];
+    for (int i = t; i < s_size; i += kThreads) hand_back[base + g_size + i] = s_items[i];
+    if (t == 0) region_size = 0;
+    return;
+  }
+  for (int i = t; i < s_size; i += kThreads) region[g_size + i] = s_items[i];
+  if (t == 0) region_size = g_size + s_size;
+}
+
+}  // namespace lwsccd::gpu::detail
