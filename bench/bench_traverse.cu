@@ -217,6 +217,11 @@ void write_timelines(const std::string& dir, const std::vector<std::pair<std::st
       const bool from_root = std::string(start) == "root";
       gpu::traverse<gpu::LazyStealScheduler<>>(task, from_root ? root : d_front.data(), from_root ? 1 : front.size(), out, true);
       const std::vector<gpu::BlockTimeline> timeline = out.download_timeline();
+      if (timeline.empty()) {  // the flat launch ended every item: no lazy launch to show
+        std::printf("%-18s %-5s: no lazy launch (the flat launch ended all %zu start items)\n", name.c_str(), start,
+                    out.stats().flat_start_items);
+        continue;
+      }
       unsigned long long first = ~0ull, last = 0, working = 0, dropped = 0, steals = 0;
       for (const auto& b : timeline) {
         dropped += b.recorded - b.events.size();

@@ -362,6 +362,34 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   CHECK(device_result_count(out) == out.num_results());
 }
 
+TEST_CASE("GPU lazy stealing: a start the flat launch ends reports no lazy launch", "[gpu][traverse][front]") {
+  const DeviceFoldedCloth<Aabbf> cloth(40, 1);
+  const SelfCollisionTask<Aabbf> task = cloth.task();
+  gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
+  out.record_timeline(64);
+  const auto from_root = gpu_pairs<FlatLazy>(task, {NodePair{0, 0}}, out, true);
+  REQUIRE(out.launched_blocks() > 0);
+  REQUIRE(out.download_block_activity().size() == static_cast<std::size_t>(out.launched_blocks()));
+  REQUIRE(out.download_timeline().size() == static_cast<std::size_t>(out.launched_blocks()));
+  // The same positions from the front: every item ends in the flat launch (leaf pairs, boxes
+  // apart), so no lazy launch follows - and the activity and timeline of the root's launch, which
+  // a benchmark would otherwise read as this traversal's, are not reported.
+  const std::vector<NodePair> front = out.download_front();
+  REQUIRE(front.size() >= static_cast<std::size_t>(out.launched_blocks()));
+  REQUIRE(gpu_pairs<FlatLazy>(task, front, out, true) == from_root);
+  CHECK(out.stats().flat_start_items == front.size());
+  CHECK(out.stats().items_processed == front.size());
+  CHECK(out.launched_blocks() == 0);
+  CHECK(out.download_block_activity().empty());
+  CHECK(out.download_timeline().empty());
+  // Another scheduler on the same output reports none either.
+  REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out, true) == from_root);
+  REQUIRE(out.launched_blocks() > 0);
+  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out, true) == from_root);
+  CHECK(out.launched_blocks() == 0);
+  CHECK(out.download_block_activity().empty());
+}
+
 TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees with the activity counters", "[gpu][traverse]") {
   const DeviceFoldedCloth<Aabbf> cloth(40, 3);
   const SelfCollisionTask<Aabbf> task = cloth.task();

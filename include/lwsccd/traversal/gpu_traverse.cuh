@@ -189,12 +189,15 @@ class TraversalOutput {
   const result_type* results() const { return results_.data(); }
   const item_type* front() const { return front_.data(); }
   const TraversalStats& stats() const { return stats_; }
-  /// LazyStealScheduler: what each persistent block did in the last launch.
+  /// LazyStealScheduler: what each persistent block did in the last launch of the lazy kernel in
+  /// the last traversal (empty when it launched none: a start that the flat launch ended, as a
+  /// front restarted on unchanged positions is, or another scheduler).
   std::vector<BlockActivity> download_block_activity(cudaStream_t stream = nullptr) const {
     return prefix(block_activity_, std::min<std::size_t>(launched_blocks_, block_activity_.size()), stream);
   }
-  /// LazyStealScheduler: the persistent blocks of the last launch (SMs x the blocks per SM that
-  /// its kernel can keep resident, at most the policy's kBlocksPerSm).
+  /// LazyStealScheduler: the persistent blocks of the last launch in the last traversal (SMs x the
+  /// blocks per SM that its kernel can keep resident, at most the policy's kBlocksPerSm; 0 when
+  /// that traversal launched the lazy kernel not at all).
   int launched_blocks() const { return launched_blocks_; }
   /// LazyStealScheduler: record every block's timeline in the following traversals, up to
   /// `events_per_block` events per block (0, the default: off). Costs a global-timer read and a
@@ -203,10 +206,11 @@ class TraversalOutput {
     if (events_per_block < 0) throw std::invalid_argument("lwsccd: record_timeline: events_per_block must be >= 0");
     timeline_capacity_ = events_per_block;
   }
-  /// The timelines of the last launch of the lazy kernel (empty when not recorded).
+  /// The timelines of the last launch of the lazy kernel in the last traversal (empty when not
+  /// recorded, or when that traversal launched none).
   std::vector<BlockTimeline> download_timeline(cudaStream_t stream = nullptr) const {
     std::vector<BlockTimeline> blocks;
-    if (timeline_capacity_ == 0 || timeline_counts_.size() == 0) return blocks;
+    if (timeline_capacity_ == 0 || timeline_counts_.size() == 0 || launched_blocks_ == 0) return blocks;
     const std::vector<unsigned> counts =
         prefix(timeline_counts_, std::min<std::size_t>(launched_blocks_, timeline_counts_.size()), stream);
     const std::vector<TimelineEvent> events = prefix(timeline_, timeline_.size(), stream);

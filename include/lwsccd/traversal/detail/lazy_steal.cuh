@@ -334,7 +334,6 @@ int prepare_lazy(TraversalOutput<Task>& out, TimelineSink& timeline, cudaStream_
   static std::atomic<int> fit_per_device[16];  // zero-initialized (static storage)
   const int blocks =
       co_resident_blocks(lazy_steal_kernel<Task, Policy>, Policy::kBlockThreads, Policy::kBlocksPerSm, fit_per_device);
-  out.launched_blocks_ = blocks;
   ensure(out.locks_, blocks);
   ensure(out.deque_ends_, 2 * static_cast<std::size_t>(blocks));
   ensure(out.block_activity_, static_cast<std::size_t>(blocks));
@@ -361,6 +360,7 @@ void launch_lazy(const Task& task, TraversalOutput<Task>& out, unsigned long lon
                  const TimelineSink& timeline, bool record_front, cudaStream_t stream) {
   ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
   ensure(out.next_, out.list_room_);
+  out.launched_blocks_ = blocks;  // what download_block_activity / download_timeline read
   if (timeline.events) LWSCCD_CUDA_CHECK(cudaMemsetAsync(timeline.counts, 0, blocks * sizeof(unsigned), stream));
   const unsigned long long start_room = n == kCountOnDevice ? out.list_room_ : n;
   lazy_start_kernel<256><<<1, 256, 0, stream>>>(out.counters_.data(), out.deque_ends_.data(), out.locks_.data(), blocks, n,

@@ -33,6 +33,7 @@ void prepare_outputs(TraversalOutput<Task>& out, bool record_front) {
   if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
   out.stats_ = {};
   out.complete_ = true;
+  out.launched_blocks_ = 0;  // until a lazy launch: a start the flat launch ends, or another scheduler, has none
   out.front_complete_ = true;
   out.awaiting_collect_ = false;  // what an earlier traverse_async() left uncollected is superseded
 }
