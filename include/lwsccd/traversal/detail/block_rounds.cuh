@@ -1,6 +1,7 @@
 // lwsccd — what every GPU scheduler shares on the device: the launch counters, the outputs a
 // block appends to, a round of items processed by a block (children scanned into its stack), the
 // breadth-first and flat kernels, and the two-level (shared, then global) stack loop.
+// Part of traverse_kernels.cuh: include <lwsccd/traverse.cuh>, not this file.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>

@@ -1,6 +1,7 @@
 // lwsccd — GProximityBalancer: per-block queues, a traversal kernel that stops when too many
 // blocks idle, and a balancing kernel that spreads the queues again, looped from the host
 // (dissertation Algorithms 3.1-3.4).
+// Part of traverse_kernels.cuh: include <lwsccd/traverse.cuh>, not this file.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>

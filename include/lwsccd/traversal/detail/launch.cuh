@@ -1,5 +1,6 @@
 // lwsccd — what every GPU scheduler shares on the host: buffers sized on demand, the number of
 // blocks resident at once, the counters read back, and a start expanded breadth first.
+// Part of traverse_kernels.cuh: include <lwsccd/traverse.cuh>, not this file.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>

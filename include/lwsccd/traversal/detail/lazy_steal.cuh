@@ -1,6 +1,7 @@
 // lwsccd — LazyStealScheduler: persistent blocks, shared stacks, per-block deques in global
 // memory and lazy steals (dissertation Algorithms 3.7-3.13); why it terminates and why ABA cannot
 // occur is below.
+// Part of traverse_kernels.cuh: include <lwsccd/traverse.cuh>, not this file.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>

@@ -1,5 +1,6 @@
 // lwsccd — StaticTaskList: the start expanded to a cut, split evenly over the blocks, each block
 // finishing its share on its own stack.
+// Part of traverse_kernels.cuh: include <lwsccd/traverse.cuh>, not this file.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>
