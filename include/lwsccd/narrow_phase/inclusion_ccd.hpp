@@ -424,7 +424,7 @@ LWSCCD_HD BoxVerdict examine_box(const Q& q, const InclusionSetup<T>& s, const D
 /// contact can come before it: everything earlier is excluded); otherwise it goes back, marked,
 /// and the earlier boxes' halves are looked at first. The live boxes are kept sorted (by
 /// box_before, a total order), the round's new boxes merged in: one thread does it in turn here,
-/// a warp does it in parallel on the GPU (narrow_phase_kernels.cuh), with the same sets, rounds and
+/// a warp does it in parallel on the GPU (narrow_phase/detail/inclusion_kernels.cuh), with the same sets, rounds and
 /// answers.
 ///
 /// Bounded memory: when more than kMaxBoxes boxes are live after a round, only the earliest

@@ -1,0 +1,212 @@
+// lwsccd — the certified filter (the first levels of the refinement as a pass over the screened
+// pairs, noting lower bounds) and certified_classify (screen, then refine).
+// Part of certified_ccd.hpp: include <lwsccd/narrow_phase/certified_ccd.hpp>, not this file.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#include "lwsccd/core/detail/fp.hpp"
+#include "lwsccd/core/detail/rounding.hpp"
+#include "lwsccd/narrow_phase/detail/certified_refine.hpp"
+
+namespace lwsccd::detail {
+
+/// The refinement's first levels as a filter without a stack, for batches that run the inside
+/// tests apart (a GPU thread per test keeps its warp's lanes busy; the search proper diverges).
+/// The cubic's pieces down to level Policy::kInsideFrom are pruned exactly as certified_refine
+/// prunes them (past the time limit, or of one sign beyond the perturbed bound); a piece it would
+/// treat otherwise before that level (set mode's early hit test) makes the whole search necessary;
+/// a piece excluded only as given lowers `lower` as it would there. What is left are the intervals that certified_refine tests for inside
+/// next: those of that level, less the ones whose halves both keep a sign (it skips their test),
+/// and pieces of coplanar motion above it. A query whose every such interval is `outside` is a
+/// miss there too (undecided from `lower` when `noted`: the fallback's case), by the same tests on
+/// the same values; any other query is searched whole. Returns -1 (search whole) or the number of those intervals, as the bits of `mask`: bit
+/// 2^level + k for interval [k, k + 1] 2^-level (a binary heap's numbering).
+/// A lower bound noted by CertifiedFilter: the earliest piece excluded only for the query as given.
+template <class T>
+struct Noted {
+  bool any = false;
+  T lower = T(0);
+};
+
+template <class Policy>
+struct CertifiedFilter {
+  static constexpr int kLevel = Policy::kInsideFrom;
+  static constexpr int kMaxIntervals = 1 << kLevel;
+  static_assert(kLevel >= 1 && kLevel <= 4, "lwsccd: the certified filter runs to levels 1 to 4 (kInsideFrom)");
+  static_assert(Policy::kInsideEvery > 0, "lwsccd: the certified filter needs the inside tests at kInsideFrom");
+
+  template <int kAt, class W, class T>
+  LWSCCD_HD static bool visit(const BernsteinPiece<W>& p, std::uint32_t index, const CcdParams<T>& params, std::uint32_t& mask,
+                              Noted<T>& noted) {
+    const T lo = static_cast<T>(index) * exact_pow2_neg<T>(kAt);
+    if (lo >= params.time_limit) return true;
+    if (same_sign_beyond(p.c, p.bound)) return true;
+    if (same_sign_beyond(p.c, p.exact)) {  // the search notes a lower bound here and goes on
+      if (!noted.any || lo < noted.lower) noted = {true, lo};
+      return true;
+    }
+    const bool coplanar = all_within(p.c, p.exact);  // tested for inside at any level
+    if constexpr (kAt == kLevel) {
+      if (Policy::kLookAhead && !coplanar && halves_keep_sign<Policy>(p)) return true;
+      mask |= 1u << ((1u << kAt) + index);
+      return true;
+    } else {
+      if (coplanar) {
+        mask |= 1u << ((1u << kAt) + index);
+        return true;
+      }
+      const bool crossing = (p.c[0] < -p.exact && p.c[3] > p.exact) || (p.c[0] > p.exact && p.c[3] < -p.exact);
+      if ((kAt & 3) == 0 && params.mode == CcdMode::set && crossing) return false;  // set mode's hit test
+      BernsteinPiece<W> left, right;
+      bernstein_halves<Policy>(p, left, right);
+      return visit<kAt + 1>(left, 2u * index, params, mask, noted) && visit<kAt + 1>(right, 2u * index + 1u, params, mask, noted);
+    }
+  }
+
+  template <class Q, class T>
+  LWSCCD_HD static int intervals(const Q& q_in, const CcdParams<T>& params, std::uint32_t& mask, Noted<T>& noted) {
+    using W = typename certified_compute<T>::type;
+    mask = 0;
+    noted = {};
+    if (params.min_separation > T(0)) return -1;
+    if (certified_max_level(params.tolerance) <= kLevel) return -1;  // leaves within the filter's levels
+    const auto q = q_in.template cast<W>();
+    const W perturbation = unit_roundoff<T>();
+    const Vec3<W> m = coordinate_magnitude(q);
+    const W mag = fmul(W(4), max_component(m));
+    BernsteinPiece<W> root;
+    if (!cubic_on_step<Policy>(q, mag, perturbation, root)) return -1;
+    if (same_sign_beyond(root.c, root.bound)) return 0;
+    if (!finite_value(underflow_slack(mag, 4))) return -1;
+    if (!visit<0>(root, 0u, params, mask, noted)) return -1;
+    int n = 0;
+    for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
+    return n;
+  }
+
+  /// The inside test certified_refine runs over the interval numbered `node`, on the same values.
+  template <class Q, class T>
+  LWSCCD_HD static InsideVerdict inside_verdict(const Q& q_in, const CcdParams<T>& /*params: their T*/, unsigned node) {
+    int level = 0;
+    while ((node >> (level + 1)) != 0u) ++level;
+    const unsigned index = node - (1u << level);
+    using W = typename certified_compute<T>::type;
+    const auto q = q_in.template cast<W>();
+    const W perturbation = unit_roundoff<T>();
+    const Vec3<W> m = coordinate_magnitude(q);
+    const W inside_slack = underflow_slack(fmul(W(4), max_component(m)), 4);
+    const T lo = static_cast<T>(index) * exact_pow2_neg<T>(level);
+    const W half = exact_pow2_neg<W>(level + 1);
+    return inside_over<Policy>(q, fadd(W(lo), half), half, m, perturbation, inside_slack);
+  }
+  /// True when the query is certainly outside over the interval numbered `node`.
+  template <class Q, class T>
+  LWSCCD_HD static bool excluded(const Q& q, const CcdParams<T>& params, unsigned node) {
+    return inside_verdict(q, params, node) == InsideVerdict::outside;
+  }
+
+  /// The second round, below one interval of level kLevel whose inside test was `unknown` (not
+  /// inside, not outside as given): certified_refine halves it there and runs the next inside
+  /// tests kInsideEvery levels down. Its pieces to that level (kDeepLevel) are pruned as the search
+  /// prunes them; returns -1 (search whole: a lower bound would be noted) or the number of
+  /// intervals left, the bits of `mask` numbered within the subtree (bit 2^d + k: level
+  /// kLevel + d, the k-th below `node`; deep_node() gives the global number). With every such
+  /// interval `outside`, the search excludes the interval `node` after these very splits.
+  static constexpr int kDeepLevel = kLevel + Policy::kInsideEvery;
+  static_assert(kDeepLevel <= 7, "lwsccd: the certified filter's second round numbers intervals to level 7 (one byte)");
+  /// Whether the search can split every interval of this round without passing kMaxSplits: the
+  /// levels above kLevel (2^kLevel - 1 splits) and, for each of `count` intervals, its subtree to
+  /// the level above kDeepLevel. A query with more intervals is searched whole.
+  LWSCCD_HD static constexpr bool expandable(int count) {
+    return (1 << kLevel) - 1 + count * ((1 << Policy::kInsideEvery) - 1) <= Policy::kMaxSplits;
+  }
+  LWSCCD_HD static constexpr unsigned deep_node(unsigned node, unsigned local) {
+    unsigned depth = 0;
+    while ((local >> (depth + 1)) != 0u) ++depth;
+    return (node << depth) + (local - (1u << depth));
+  }
+
+  template <int kAt, class W, class T>
+  LWSCCD_HD static bool visit_deep(const BernsteinPiece<W>& p, std::uint32_t index, std::uint32_t local, const CcdParams<T>& params,
+                                   std::uint32_t& mask) {
+    const T lo = static_cast<T>(index) * exact_pow2_neg<T>(kAt);
+    if (lo >= params.time_limit) return true;
+    if (same_sign_beyond(p.c, p.bound)) return true;
+    if (same_sign_beyond(p.c, p.exact)) return false;  // the search notes a lower bound here: whole
+    if constexpr (kAt == kDeepLevel) {
+      if (Policy::kLookAhead && !all_within(p.c, p.exact) && halves_keep_sign<Policy>(p)) return true;
+      mask |= 1u << local;
+      return true;
+    } else {
+      if (all_within(p.c, p.exact)) {  // coplanar: tested for inside at any level
+        mask |= 1u << local;
+        return true;
+      }
+      BernsteinPiece<W> left, right;
+      bernstein_halves<Policy>(p, left, right);
+      return visit_deep<kAt + 1>(left, 2u * index, 2u * local, params, mask) &&
+             visit_deep<kAt + 1>(right, 2u * index + 1u, 2u * local + 1u, params, mask);
+    }
+  }
+
+  template <class Q, class T>
+  LWSCCD_HD static int expand(const Q& q_in, const CcdParams<T>& params, unsigned node, std::uint32_t& mask) {
+    using W = typename certified_compute<T>::type;
+    mask = 0;
+    if (params.mode == CcdMode::set || node < (1u << kLevel) || node >= (2u << kLevel)) return -1;
+    if (certified_max_level(params.tolerance) <= kDeepLevel) return -1;  // leaves within these levels
+    const auto q = q_in.template cast<W>();
+    const W perturbation = unit_roundoff<T>();
+    const Vec3<W> m = coordinate_magnitude(q);
+    const W mag = fmul(W(4), max_component(m));
+    BernsteinPiece<W> piece;
+    if (!cubic_on_step<Policy>(q, mag, perturbation, piece)) return -1;
+    // The interval's piece, by the halvings the search made on the way (the same values).
+    for (int d = kLevel - 1; d >= 0; --d) {
+      BernsteinPiece<W> left, right;
+      bernstein_halves<Policy>(piece, left, right);
+      piece = ((node >> d) & 1u) ? right : left;
+    }
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(piece, left, right);
+    const std::uint32_t index = node - (1u << kLevel);
+    if (!visit_deep<kLevel + 1>(left, 2u * index, 2u, params, mask) || !visit_deep<kLevel + 1>(right, 2u * index + 1u, 3u, params, mask))
+      return -1;
+    int n = 0;
+    for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
+    return n;
+  }
+
+  /// Both rounds on one thread, as a GPU batch runs them apart (the tests' reference): true when
+  /// the filter decides the query (then certified_refine answers a miss, or undecided from
+  /// noted.lower when noted.any); false when the whole search must run.
+  template <class Q, class T>
+  static bool decides(const Q& q, const CcdParams<T>& params, Noted<T>& noted, bool second_round = true) {
+    std::uint32_t mask = 0;
+    const int count = intervals(q, params, mask, noted);
+    if (count < 0 || (count > 0 && noted.any)) return false;
+    for (unsigned node = 0; node < 32; ++node) {
+      if (!((mask >> node) & 1u)) continue;
+      const InsideVerdict v = inside_verdict(q, params, node);
+      if (v == InsideVerdict::outside) continue;
+      std::uint32_t deep = 0;
+      if (!second_round || v != InsideVerdict::unknown || !expandable(count) || expand(q, params, node, deep) < 0) return false;
+      for (unsigned local = 0; local < 32; ++local)
+        if (((deep >> local) & 1u) && !excluded(q, params, deep_node(node, local))) return false;
+    }
+    return true;
+  }
+};
+
+/// The whole certified classification of one query: the screen, then the refinement.
+template <class Policy, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q, const CcdParams<T>& params) {
+  if (certified_screen<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
+  return certified_refine<Policy>(q, params);
+}
+
+}  // namespace lwsccd::detail

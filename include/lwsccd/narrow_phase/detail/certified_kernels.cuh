@@ -1,0 +1,301 @@
+// lwsccd — CertifiedCcd on the GPU: the screen (pass 1), the refinement in parts (searches deferred
+// past a level, the filter and its second round, whole searches a thread or a warp per pair) and the
+// undecided queries settled.
+// Part of narrow_phase_kernels.cuh: include <lwsccd/narrow_phase/narrow_phase.cuh>, not this file.
+#pragma once
+
+#include <cooperative_groups.h>
+#include <cooperative_groups/reduce.h>
+#include <cooperative_groups/scan.h>
+#include <cstring>
+
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.cuh"
+#include "lwsccd/narrow_phase/detail/narrow_lists.cuh"
+
+namespace lwsccd::gpu::detail {
+
+// The first step of a two-pass method on one query: true when it certainly rejects the pair
+// (CertifiedCcd: its screen; other methods: their quick_reject).
+template <class Method, class Q, class T>
+__device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
+  if constexpr (lwsccd::detail::certified_of<Method>::value) return Method::screen(q, params);
+  else return Method::quick_reject(q, params);
+}
+
+// Pass 1: the pairs that the method's cheap first step does not reject, appended to `kept`.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList in, CcdParams<T> params,
+                              const unsigned long long* control, std::pair<index_t, index_t>* kept, std::size_t room,
+                              unsigned long long* counters) {
+  if (control[kSkip]) return;
+  const std::size_t n = in.count.get();
+  LWSCCD_GRID_STRIDE(i, n) {
+    const std::pair<index_t, index_t> p = in.pairs[i];
+    if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) continue;
+    const unsigned long long at = append_index(counters + kSurvivors);
+    if (at < room) {  // (std::pair's assignment is host-only before C++20)
+      kept[at].first = p.first;
+      kept[at].second = p.second;
+    }
+  }
+}
+
+// A refinement's answer stored: a certified hit appended to the hits, an undecided query to the
+// fallback's list with the time before which contact was excluded (a certain miss: nothing).
+template <class T>
+__device__ void settle_refined(const CertifiedAnswer<T>& a, index_t first, index_t second, unsigned long long* counters,
+                               FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided) {
+  if (a.certainty == Certainty::hit) {
+    push_hit(FeatureHit<T>{first, second, a.lo}, hits, hit_room, counters);
+    atomicAdd(counters + kCertifiedHits, 1ull);
+  } else if (a.certainty == Certainty::undecided) {
+    undecided[append_index(counters + kUndecided)] = FeatureHit<T>{first, second, a.lo};
+  }
+}
+
+// CertifiedCcd's refinement of the screened pairs, first part: searches that would halve
+// intervals at kDeferLevel or deeper stop (with a stack only that deep) and are listed in
+// `deferred` (they are the contacts, resolved at the time tolerance, and would hold up whole warps
+// of quick misses); the others settle their answer.
+template <class Method, bool kVertexFace, int kDeferLevel, int kBlock, int kMinBlocks, class T, class P>
+__global__ void __launch_bounds__(kBlock, kMinBlocks)
+    refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
+                  std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                  FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    const std::pair<index_t, index_t> p = kept[i];
+    bool later = false;
+    const CertifiedAnswer<T> a =
+        Method::template refine_until<kDeferLevel, false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
+    if (later) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
+    else settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// CertifiedCcd's refinement with the filter (CertifiedPolicy's CertifiedFilter), first kernel: a
+// thread per screened pair runs the filter's levels; a pair to be searched whole is deferred, the
+// others list their intervals for the inside test (a word each: filter_item). The list's room
+// grows from run to run (kIntervals counts what was asked); a pair whose intervals do not fit is
+// deferred instead, and the slots it took are marked empty, so nothing reruns.
+constexpr unsigned long long kNoInterval = ~0ull;
+// A listed interval: the pair's index, whether its search may take the filter's second round
+// (CertifiedFilter::expandable), and the interval's heap number (< 256: levels <= 7).
+__device__ inline unsigned long long filter_item(std::size_t pair, bool expandable, unsigned node) {
+  return (static_cast<unsigned long long>(pair) << 9) | (expandable ? 256u : 0u) | node;
+}
+__device__ inline unsigned item_pair_index(unsigned long long item) { return static_cast<unsigned>(item >> 9); }
+__device__ inline bool item_expandable(unsigned long long item) { return (item >> 8) & 1u; }
+__device__ inline unsigned item_node(unsigned long long item) { return static_cast<unsigned>(item & 255u); }
+
+// Appends `count` words to a list with `room` slots (one atomic per converged group) and returns
+// the first one's slot; `fits` is false when they do not all fit (the slots that do are then the
+// caller's to mark empty).
+__device__ inline unsigned long long append_run(unsigned long long* counter, unsigned count, std::size_t room, bool& fits) {
+  namespace cg = cooperative_groups;
+  const cg::coalesced_group g = cg::coalesced_threads();
+  const unsigned long long offset = cg::exclusive_scan(g, static_cast<unsigned long long>(count));
+  unsigned long long base = 0;
+  if (g.thread_rank() == g.size() - 1) base = atomicAdd(counter, offset + static_cast<unsigned long long>(count));
+  base = g.shfl(base, g.size() - 1) + offset;
+  fits = base + count <= room;
+  return base;
+}
+
+// Defers pair `i` to the whole search once (its bit in `listed` marks it; cleared before the run).
+__device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long long* counters, unsigned* deferred) {
+  const unsigned bit = 1u << (i & 31u);
+  if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
+}
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
+                              std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* undecided,
+                              unsigned* deferred) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    std::uint32_t found = 0;
+    lwsccd::detail::Noted<T> noted;
+    const int count = Filter::intervals(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, found, noted);
+    // A lower bound noted: with no interval left the search's answer is undecided from it (the
+    // fallback's, once settle_undecided_kernel has looked); with some, the whole search decides (rare).
+    bool whole = count < 0 || (count > 0 && noted.any);
+    if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
+    if (count > 0 && !whole) {
+      bool fits = true;
+      const unsigned long long base = append_run(counters + kIntervals, static_cast<unsigned>(count), interval_room, fits);
+      whole = !fits;
+      const bool expandable = Filter::expandable(count);
+      for (int k = 0; k < count; ++k, found &= found - 1u)
+        if (base + k < interval_room)
+          intervals[base + k] = whole ? kNoInterval : filter_item(i, expandable, static_cast<unsigned>(__ffs(found) - 1));
+    }
+    if (whole) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
+  }
+}
+
+// Second kernel: a thread per listed interval runs the inside test there; a pair not certainly
+// outside is deferred to the whole search, once (defer_once). In the first round
+// (`expanded` not null) an interval of the filter's level whose test is unknown is listed in
+// `expanded` for the second round instead, when its pair may take it; in the second round
+// (`counter` kDeepIntervals) every interval must be outside.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, CcdParams<T> params,
+                                     const unsigned long long* control, unsigned long long* counters, int counter,
+                                     const unsigned long long* intervals, std::size_t interval_room, unsigned* listed,
+                                     unsigned* deferred, unsigned long long* expanded) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  using lwsccd::detail::InsideVerdict;
+  if (control[kSkip]) return;
+  const std::size_t n = counters[counter] < interval_room ? static_cast<std::size_t>(counters[counter]) : interval_room;
+  LWSCCD_GRID_STRIDE(j, n) {
+    const unsigned long long item = intervals[j];
+    if (item == kNoInterval) continue;
+    const unsigned i = item_pair_index(item), node = item_node(item);
+    const InsideVerdict verdict = Filter::inside_verdict(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, node);
+    if (verdict == InsideVerdict::outside) continue;
+    // Its own slot in `expanded`, whose room is the first round's list's.
+    if (expanded && verdict == InsideVerdict::unknown && item_expandable(item) && (node >> Filter::kLevel) == 1u)
+      expanded[append_index(counters + kExpanded)] = item;
+    else
+      defer_once(i, listed, counters, deferred);
+  }
+}
+
+// The filter's second round: a thread per interval left unknown by the first lists the intervals
+// below it that the search would test next (CertifiedFilter::expand), in the list of the second
+// round's inside tests; a pair already deferred is skipped, one the round cannot take (or whose
+// intervals do not fit: slots marked empty, room grown for the next run) is deferred.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, CcdParams<T> params,
+                                     const unsigned long long* control, unsigned long long* counters,
+                                     const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
+                                     unsigned* listed, unsigned* deferred) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kExpanded]);
+  LWSCCD_GRID_STRIDE(j, n) {
+    const unsigned long long item = expanded[j];
+    const unsigned i = item_pair_index(item), node = item_node(item);
+    if ((listed[i >> 5] >> (i & 31u)) & 1u) continue;  // deferred already (a racing read is only a missed shortcut)
+    std::uint32_t below = 0;
+    const int count = Filter::expand(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, node, below);
+    bool fits = count >= 0;
+    if (count > 0) {
+      const unsigned long long base = append_run(counters + kDeepIntervals, static_cast<unsigned>(count), deep_room, fits);
+      for (int k = 0; k < count; ++k, below &= below - 1u)
+        if (base + k < deep_room)
+          deep[base + k] = fits ? filter_item(i, false, Filter::deep_node(node, static_cast<unsigned>(__ffs(below) - 1))) : kNoInterval;
+    }
+    if (!fits) defer_once(i, listed, counters, deferred);
+  }
+}
+
+// Second part: the deferred searches, whole (a grid-stride loop keeps the warps full).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                       const std::pair<index_t, index_t>* kept, const unsigned* deferred, CcdParams<T> params,
+                                       const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
+                                       std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  if (n <= warp_below) return;  // refine_deferred_warp_kernel's
+  LWSCCD_GRID_STRIDE(w, n) {
+    const std::pair<index_t, index_t> p = kept[deferred[w]];
+    const CertifiedAnswer<T> a = Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
+    settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// The inside tests of a refinement run by a whole warp (every lane runs the same search on the
+// same values, so all ask for the same test at once): a test not at hand is evaluated with its
+// subtree, the interval and its descendants down to 4 levels below, a lane each (31 lanes); every
+// lane keeps the 31 verdicts (2 bits each, by two ballots). The search asks next for a child or a
+// later sibling most of the time: cloth-funnel's longest coplanar edge-edge search (186 tests)
+// evaluates 37 subtrees (CPU count).
+struct WarpInsideSubtree {
+  static constexpr int kDepth = 5;  // levels of a subtree; 2^5 - 1 = 31 intervals
+  int lane = 0, max_level = 0;
+  int root_level = -1;
+  std::uint32_t root_index = 0;
+  unsigned low_bits = 0, high_bits = 0;  // verdict bit 0 and bit 1 of each subtree interval (heap order)
+
+  template <class Compute>
+  __device__ lwsccd::detail::InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) {
+    using lwsccd::detail::InsideVerdict;
+    const int depth = level - root_level;
+    const bool held = root_level >= 0 && depth >= 0 && depth < kDepth && (index >> depth) == root_index;
+    if (!held) {
+      root_level = level, root_index = index;
+      // This lane's interval: heap place lane + 1 = 2^d + offset, d levels below the root.
+      const int d = 31 - __clz(lane + 1);
+      const std::uint32_t offset = static_cast<std::uint32_t>(lane + 1 - (1 << d));
+      const int lane_level = level + d;
+      InsideVerdict v = InsideVerdict::unknown;
+      if (lane < 31 && lane_level <= max_level) v = compute(lane_level, (index << d) | offset);
+      const unsigned bits = static_cast<unsigned>(v);
+      low_bits = __ballot_sync(0xffffffffu, bits & 1u);
+      high_bits = __ballot_sync(0xffffffffu, bits & 2u);
+    }
+    const int d = level - root_level;
+    const int place = (1 << d) - 1 + static_cast<int>(index - (root_index << d));
+    return static_cast<InsideVerdict>(((low_bits >> place) & 1u) | (((high_bits >> place) & 1u) << 1));
+  }
+};
+
+// Second part for a short list (at most `warp_below` deferred pairs): a warp per pair, the inside
+// tests by subtrees (WarpInsideSubtree); the same answers as refine_deferred_kernel. Its pairs are
+// the long searches (cloth-funnel's coplanar edge-edge ones: 96 halvings and ~190 inside tests one
+// after the other took ~255 us in one thread on an H100).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                            const std::pair<index_t, index_t>* kept, const unsigned* deferred,
+                                            CcdParams<T> params, const unsigned long long* control,
+                                            unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room,
+                                            FeatureHit<T>* undecided, std::size_t warp_below) {
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  if (n > warp_below) return;
+  const int lane = static_cast<int>(threadIdx.x) % 32;
+  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
+  for (std::size_t w = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; w < n; w += warps) {
+    const std::pair<index_t, index_t> p = kept[deferred[w]];
+    WarpInsideSubtree inside;
+    inside.lane = lane;
+    inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
+    const CertifiedAnswer<T> a = Method::template refine_with<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, inside);
+    if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+    __syncwarp();
+  }
+}
+
+// Third part: the undecided queries, a thread each, settled as the whole search settles them
+// (CertifiedCcd::undecided_from: a contact within the tolerance after the lower bound is a hit,
+// counted with the certified hits). A settled query stays in the list with nothing left to search
+// (from time 1), so the fallback's launches keep their count. Apart from the refinement kernels so
+// that their registers do not pay for a test most pairs never reach.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void settle_undecided_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, CcdParams<T> params,
+                                        const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
+                                        std::size_t hit_room, FeatureHit<T>* undecided, std::size_t room) {
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kUndecided] < room ? static_cast<std::size_t>(counters[kUndecided]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    FeatureHit<T>& item = undecided[i];
+    const CertifiedAnswer<T> a =
+        Method::undecided_from(gather_query<kVertexFace, T>(mesh, x0, x1, item_pair(item)), params, item.toi);
+    if (a.certainty != Certainty::hit) continue;
+    push_hit(FeatureHit<T>{item.first, item.second, a.lo}, hits, hit_room, counters);
+    atomicAdd(counters + kCertifiedHits, 1ull);
+    atomicAdd(counters + kSettled, 1ull);
+    item.toi = T(1);
+  }
+}
+
+}  // namespace lwsccd::gpu::detail

@@ -1,0 +1,316 @@
+// lwsccd — the certified refinement: contact candidates and the tolerance test, the undecided
+// answer, and certified_refine (time halved until every piece is decided, or the fallback's).
+// Part of certified_ccd.hpp: include <lwsccd/narrow_phase/certified_ccd.hpp>, not this file.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#include "lwsccd/core/detail/fp.hpp"
+#include "lwsccd/core/detail/rounding.hpp"
+#include "lwsccd/narrow_phase/detail/certified_screen.hpp"
+
+namespace lwsccd::detail {
+
+/// Points (u, v) of the domain near which a query's F(t, u, v) is smallest at time t: the plane's
+/// least-squares point brought into the domain and the closest points on the domain's edges.
+/// Only where to look: any point of the domain is sound (tolerance_contact tests a box around it).
+template <class W>
+LWSCCD_HD int contact_candidates(const VertexFaceQuery<W>& q, W t, W u[4], W v[4]) {
+  const Vec3<W> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t);
+  const Vec3<W> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t), a), ac = vsub(vadd_scaled(q.c0, vsub(q.c1, q.c0), t), a);
+  const Vec3<W> ap = vsub(vadd_scaled(q.p0, vsub(q.p1, q.p0), t), a), bc = vsub(ac, ab);
+  const W aa = vdot(ab, ab), ab_ac = vdot(ab, ac), cc = vdot(ac, ac), pa = vdot(ap, ab), pc = vdot(ap, ac), bb = vdot(bc, bc);
+  const W det = fsub(fmul(aa, cc), fmul(ab_ac, ab_ac));
+  int n = 0;
+  if (det > W(0)) {
+    W x = fsub(fmul(cc, pa), fmul(ab_ac, pc)) / det, y = fsub(fmul(aa, pc), fmul(ab_ac, pa)) / det;
+    x = x > W(0) ? x : W(0);
+    y = y > W(0) ? y : W(0);
+    const W sum = fadd(x, y);
+    if (sum > W(1)) x = x / sum, y = y / sum;
+    u[n] = x, v[n++] = y;
+  }
+  if (aa > W(0)) u[n] = unit_clamp(pa / aa), v[n++] = W(0);
+  if (cc > W(0)) u[n] = W(0), v[n++] = unit_clamp(pc / cc);
+  if (bb > W(0)) {
+    const W s = unit_clamp(vdot(vsub(ap, ab), bc) / bb);
+    u[n] = fsub(W(1), s), v[n++] = s;
+  }
+  return n;
+}
+template <class W>
+LWSCCD_HD int contact_candidates(const EdgeEdgeQuery<W>& q, W t, W u[5], W v[5]) {
+  const Vec3<W> a = vadd_scaled(q.a0, vsub(q.a1, q.a0), t), c = vadd_scaled(q.c0, vsub(q.c1, q.c0), t);
+  const Vec3<W> ab = vsub(vadd_scaled(q.b0, vsub(q.b1, q.b0), t), a), cd = vsub(vadd_scaled(q.d0, vsub(q.d1, q.d0), t), c);
+  const Vec3<W> ca = vsub(a, c);
+  const W aa = vdot(ab, ab), ab_cd = vdot(ab, cd), cc = vdot(cd, cd), ra = -vdot(ab, ca), rc = vdot(cd, ca);
+  const W det = fsub(fmul(aa, cc), fmul(ab_cd, ab_cd));
+  int n = 0;
+  if (det > W(0)) u[n] = unit_clamp(fadd(fmul(cc, ra), fmul(ab_cd, rc)) / det), v[n++] = unit_clamp(fadd(fmul(ab_cd, ra), fmul(aa, rc)) / det);
+  if (cc > W(0)) {
+    u[n] = W(0), v[n++] = unit_clamp(rc / cc);
+    u[n] = W(1), v[n++] = unit_clamp(vdot(cd, vadd(ca, ab)) / cc);
+  }
+  if (aa > W(0)) {
+    u[n] = unit_clamp(ra / aa), v[n++] = W(0);
+    u[n] = unit_clamp(vdot(ab, vsub(cd, ca)) / aa), v[n++] = W(1);
+  }
+  return n;
+}
+
+/// Contact within the tolerance over [from, to]: a small box of (t, u, v) there
+/// that the inclusion test accepts (not excluded by the time filter, an axis or a separating
+/// direction, and F within the distance the features move in `tolerance` of time) - the answer
+/// the fallback would give when it finds such a box with everything before it excluded. The boxes
+/// tried: each half of the window in time, around the candidates of its middle (u and v +- an
+/// eighth of that distance over the query's extent). Used where the certified search has
+/// excluded every time before `from` but cannot prove a contact: features that touch on a
+/// boundary (a vertex sliding along an edge), where no sign is certain.
+template <class Q, class W>
+LWSCCD_HD bool tolerance_contact(const Q& q, const CcdParams<W>& params, W from, W to) {
+  const InclusionSetup<W> s = inclusion_setup(q, params);
+  if (s.separated) return false;
+  const Vec3<W>* pts = q.points();
+  W extent = W(0);
+  for (int i = 1; i < 8; ++i) extent = fmax_of(extent, max_component(abs(vsub(pts[i], pts[0]))));
+  const W radius = extent > W(0) ? fmul(s.delta, W(0.125)) / extent : W(0);
+  const W half = fmul(fsub(to, from), W(0.5));
+  constexpr int kCandidates = 5;
+  for (int h = 0; h < 2; ++h) {
+    const W t[2] = {h == 0 ? from : fadd(from, half), h == 0 ? fadd(from, half) : to};
+    W cu[kCandidates], cv[kCandidates];
+    const int n = contact_candidates(q, fmul(fadd(t[0], t[1]), W(0.5)), cu, cv);
+    for (int k = 0; k < n; ++k) {
+      const W u[2] = {fmax_of(W(0), fsub(cu[k], radius)), fmin_of(W(1), fadd(cu[k], radius))};
+      const W v[2] = {fmax_of(W(0), fsub(cv[k], radius)), fmin_of(W(1), fadd(cv[k], radius))};
+      RangeTest<W> r;
+      test_ranges(q, s, t, u, v, true, false, r);
+      if (r.verdict == BoxVerdict::accepted) return true;
+    }
+  }
+  return false;
+}
+
+/// The certified answer for a query whose search excluded every time before `lower` and proved no
+/// contact after it: undecided from `lower` (the fallback's), or, with Policy::kToleranceContacts,
+/// a hit at `lower` when tolerance_contact finds contact within the tolerance right after it.
+/// The test runs in T with the inclusion test's rounding bound for T, as the fallback would (a float
+/// query's contact within float's rounding is one for the fallback too).
+template <class Policy, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<T>& params, T lower) {
+  const CertifiedAnswer<T> undecided{Certainty::undecided, lower, T(1)};
+  if (!Policy::kToleranceContacts || params.min_separation > T(0) || !(lower < T(1)) || !(lower < params.time_limit))
+    return undecided;
+  // Two of the search's leaves (dyadic: lower is a multiple of them, so the end is exact), or one
+  // where the level's cap makes two wider than the tolerance.
+  const int level = certified_max_level(params.tolerance);
+  const T width = exact_pow2_neg<T>(level - 1) <= params.tolerance ? exact_pow2_neg<T>(level - 1) : exact_pow2_neg<T>(level);
+  const T to = fadd(lower, width) < T(1) ? fadd(lower, width) : T(1);
+  if (!tolerance_contact(q_in.template cast<T>(), params, lower, to)) return undecided;
+  return {Certainty::hit, lower, to, true};
+}
+
+/// The refinement's inside tests as they are asked for, one at a time (certified_refine's
+/// `inside_at`: called with an interval's level and index, and a function that computes the
+/// verdict there). The GPU's warp per search evaluates a whole subtree of them at once instead.
+struct InsideOneByOne {
+  template <class Compute>
+  LWSCCD_HD InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) const {
+    return compute(level, index);
+  }
+};
+
+/// The certified classification of a query that certified_screen did not reject (see the file
+/// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
+/// query the screen would reject (it then finds the miss itself, at more cost).
+/// `defer_level`: when an interval that deep would have to be halved, the search stops, answers
+/// undecided and sets *deferred; a second call without the limit then gives the whole answer (the
+/// same as one call without it). A GPU batch uses this to keep the long searches (contacts,
+/// resolved at the tolerance) out of the warps that decide misses in a few levels.
+/// `kStack`: pending intervals held at most (one per level; defer_level + 2 suffice): a GPU
+/// thread keeps them in local memory, so a short search holds a short stack.
+/// `kSettle` false: an undecided answer is returned as it is, for a batch that settles its
+/// undecided queries apart (certified_undecided): the GPU keeps that test's code out of its
+/// refinement kernels, whose registers it would cost on every pair.
+/// `inside_at`: where the inside tests are asked for (InsideOneByOne's contract); any evaluator
+/// that returns each test's own verdict gives the same answer.
+template <class Policy, int kStack = 34, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
+LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
+                                              bool* deferred = nullptr, InsideAt&& inside_at = InsideOneByOne{}) {
+  using W = typename certified_compute<T>::type;
+  const auto q = q_in.template cast<W>();
+  const W perturbation = unit_roundoff<T>();
+  CertifiedAnswer<T> undecided;
+  if (params.min_separation > T(0)) return undecided;  // the cubic only speaks of contact
+  const Vec3<W> m = coordinate_magnitude(q);
+  // The cubic and its coefficient bound (ccd_filters.hpp), plus underflow's share.
+  const W mag = fmul(W(4), max_component(m));  // bounds every difference and its motion
+  BernsteinPiece<W> root;
+  if (!cubic_on_step<Policy>(q, mag, perturbation, root)) return undecided;
+  if (same_sign_beyond(root.c, root.bound)) return {Certainty::miss, T(0), T(1)};
+  const W inside_slack = underflow_slack(mag, 4);
+  if (!finite_value(inside_slack)) return undecided;
+  const int max_level = certified_max_level(params.tolerance);
+  const bool set_mode = params.mode == CcdMode::set;
+
+  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
+  // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
+  // the query as given does (only that proves a contact). Between them lies rounding's share of
+  // the inputs: in double about u of the geometry; in float it can move a contact by more than
+  // the tolerance, and the reported lower bound is then that much earlier.
+  struct Entry {
+    BernsteinPiece<W> piece;
+    std::uint32_t index;
+    int level;
+  };
+  static_assert(kStack >= 3 && kStack <= 34, "lwsccd: certified_refine holds 3 to 34 pending intervals");
+  Entry stack[kStack];  // one pending right half per level, levels <= 30
+  int top = 0, splits = 0, leaves = 0;
+  T lower = T(0), open_from = T(0);  // earliest time not excluded for a perturbed query / as given
+  bool has_lower = false, has_open = false, open_inside = true;
+  bool descent = Policy::kCertainDescent && !set_mode && (Policy::kDescentBeforeDefer || defer_level >= max_level);
+  int open_sign = 0;  // sign of f (as given) at open_from, 0 when uncertain
+  auto note_lower = [&](T t) {
+    if (!has_lower) lower = t, has_lower = true;  // intervals come in time order
+  };
+  // Undecided from `from` (every earlier time excluded), unless contact within the tolerance
+  // right after it settles the query.
+  auto settle = [&](T from) {
+    if constexpr (kSettle) return certified_undecided<Policy>(q, params, from);
+    else return CertifiedAnswer<T>{Certainty::undecided, from, T(1)};
+  };
+  stack[top++] = {root, 0u, 0};
+  while (top > 0) {
+    const Entry e = stack[--top];
+    // Dyadic with at most certified_max_level(T) bits: exact in T and W.
+    const T scale = exact_pow2_neg<T>(e.level);
+    const T lo = static_cast<T>(e.index) * scale, hi = static_cast<T>(e.index + 1u) * scale;
+    if (lo >= params.time_limit) continue;  // later than what the caller still wants
+    const W* c = e.piece.c;
+    const W bound = e.piece.bound, exact = e.piece.exact;
+    if (same_sign_beyond(c, bound)) continue;  // no root here, even perturbed
+    if (same_sign_beyond(c, exact)) {          // none as given; a perturbed query's may be here
+      note_lower(lo);
+      continue;
+    }
+    // f(lo) = c[0], f(hi) = c[3]: a certain sign change proves a root of the query as given.
+    const bool crossing = (c[0] < -exact && c[3] > exact) || (c[0] > exact && c[3] < -exact);
+    const bool leaf = e.level >= max_level;
+    // Set mode needs no tight time: a crossing interval is tried every fourth level on the way.
+    const bool try_hit = leaf || (set_mode && crossing && (e.level & 3) == 0);
+    const bool coarse = Policy::kInsideEvery > 0 && e.level >= Policy::kInsideFrom &&
+                        (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
+    const bool coplanar = all_within(c, exact);
+    // Both halves of one sign (a root of the control polygon, not of the cubic): no root here even
+    // perturbed, so the costly inside test is skipped (before it, the interval was only split).
+    if (Policy::kLookAhead && coarse && !leaf && !coplanar && halves_keep_sign<Policy>(e.piece)) continue;
+    InsideVerdict inside = InsideVerdict::unknown;
+    if (try_hit || coarse || coplanar) {
+      // The test over interval `index` of `level` (this one, or another that inside_at evaluates
+      // ahead): the same operations on the same values, so the same verdict.
+      inside = inside_at(e.level, e.index, [&](int level, std::uint32_t index) {
+        const W half_width = exact_pow2_neg<W>(level + 1);
+        const T from = static_cast<T>(index) * exact_pow2_neg<T>(level);
+        return inside_over<Policy>(q, fadd(W(from), half_width), half_width, m, perturbation, inside_slack);
+      });
+      if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
+        if (inside == InsideVerdict::outside_as_given) note_lower(lo);
+        if (leaf && ++leaves > Policy::kMaxLeaves) return settle(has_lower ? lower : lo);
+        continue;
+      }
+    }
+    // Certain descent: over this interval every perturbed cubic has one root and a root is a
+    // contact of the query as given. Halving keeps the half that holds the query's root, by the
+    // sign of f at the middle (the left half's last coefficient): of c[0]'s sign beyond the
+    // perturbed bound, no perturbed root lies in the left half; beyond only the as-given bound, the
+    // query's root is right of it but a perturbed one may not be (the lower bound stops there); of
+    // c[3]'s sign, the query's root is in the left half, and what lies right is later. A middle
+    // value within its as-given error (a root on the grid) ends the descent: everything it noted
+    // is undone and this interval is searched as usual.
+    if (descent && inside == InsideVerdict::inside && !leaf && !has_open && single_crossing(c, bound)) {
+      const int first = c[0] > W(0) ? 1 : -1;
+      const T saved_lower = lower;
+      const bool saved_has_lower = has_lower;
+      const int saved_splits = splits;
+      BernsteinPiece<W> piece = e.piece;
+      std::uint32_t index = e.index;
+      int level = e.level;
+      for (;;) {
+        const T step = exact_pow2_neg<T>(level);
+        const T from = static_cast<T>(index) * step, to = static_cast<T>(index + 1u) * step;
+        // Within the tolerance; an interval past the caller's time limit is narrowed to the leaves,
+        // where the limit cuts as it does in the search (a root past it is no answer).
+        if ((to - from <= params.tolerance && to <= params.time_limit) || level >= max_level) {
+          note_lower(from);
+          return {Certainty::hit, lower, to};
+        }
+        if (++splits > Policy::kMaxSplits) return settle(has_lower ? lower : from);
+        BernsteinPiece<W> left, right;
+        bernstein_halves<Policy>(piece, left, right);
+        const W middle = left.c[3];
+        const int sign = sign_beyond(middle, left.exact);
+        if (sign == 0) break;  // the only way out of the loop but a return
+        ++level;
+        if (sign == first) {
+          if (sign_beyond(middle, left.bound) == 0) note_lower(from);
+          piece = right;
+          index = 2u * index + 1u;
+          // The query's root is past the caller's time limit; so is everything still stacked.
+          if (static_cast<T>(index) * exact_pow2_neg<T>(level) >= params.time_limit)
+            return has_lower ? settle(lower) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
+        } else {
+          piece = left;
+          index = 2u * index;
+        }
+      }
+      lower = saved_lower, has_lower = saved_has_lower, splits = saved_splits;
+      descent = false;
+      stack[top++] = e;
+      continue;
+    }
+    if (try_hit) {
+      // A root is certain across this leaf, or from the start of the unresolved leaves before it
+      // (a root on the grid point between two leaves makes neither a crossing alone); those
+      // leaves join the interval, which must stay within the tolerance.
+      const int sign_lo = c[0] < -exact ? -1 : (c[0] > exact ? 1 : 0), sign_hi = c[3] < -exact ? -1 : (c[3] > exact ? 1 : 0);
+      const bool is_inside = inside == InsideVerdict::inside;
+      const bool joined = has_open && open_inside && is_inside && open_sign != 0 && sign_hi == -open_sign;
+      const T from = has_open ? open_from : lo;
+      if (((is_inside && crossing) || joined) && (set_mode || hi - from <= params.tolerance)) {
+        note_lower(lo);
+        return {Certainty::hit, lower, hi};
+      }
+      if (leaf) {
+        note_lower(lo);  // not excluded (a wider interval tried in set mode is split instead)
+        if (!has_open) open_from = lo, has_open = true, open_sign = sign_lo, open_inside = true;
+        open_inside = open_inside && is_inside;
+        if (++leaves > Policy::kMaxLeaves || (!set_mode && hi + (hi - lo) - open_from > params.tolerance))
+          return settle(lower);
+        continue;  // touching, tangent or on a boundary: look further
+      }
+    }
+    const T open = has_lower ? lower : lo;
+    // f is zero within its error here (motion that stays coplanar): only the inside test can
+    // still exclude time, when the features are apart within the plane; it was not certain over
+    // this interval, so halves (with less motion each) are tried, unless they are certainly in
+    // contact in the plane (no sign of f left to resolve).
+    if (coplanar && inside == InsideVerdict::inside) return settle(open);
+    if (++splits > Policy::kMaxSplits || top + 2 > kStack) return settle(open);
+    if (e.level >= defer_level) {
+      if (deferred) *deferred = true;
+      return undecided;
+    }
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(e.piece, left, right);
+    stack[top++] = {right, 2u * e.index + 1u, e.level + 1};
+    stack[top++] = {left, 2u * e.index, e.level + 1};
+  }
+  // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
+  if (has_lower) return settle(lower);
+  return {Certainty::miss, T(0), T(1)};
+}
+
+}  // namespace lwsccd::detail

@@ -1,0 +1,170 @@
+// lwsccd — the certified screen: the cheap Bernstein bound of the coplanarity cubic, swept and
+// window boxes, and certified_screen (a pair it rejects cannot touch in the step).
+// Part of certified_ccd.hpp: include <lwsccd/narrow_phase/certified_ccd.hpp>, not this file.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#include "lwsccd/core/detail/fp.hpp"
+#include "lwsccd/core/detail/rounding.hpp"
+#include "lwsccd/narrow_phase/detail/certified_motion.hpp"
+
+namespace lwsccd::detail {
+
+/// The cubic's Bernstein coefficients on [0, 1] (in b) and a cheap, looser bound on their error:
+/// the majorant of every coefficient has at most 18 monomials |p_i| |a_j| |b_k| (k_1 and k_2 are
+/// three times the middle coefficients), each at most M_P M_A M_B with M the largest |coordinate|
+/// of the difference vectors at t = 0 and t = 1. So coplanarity_bernstein's bound, (majorant
+/// change under the perturbation e) (1 + 8 u) + 16 u (perturbed majorant), is at most 18 times
+/// that expression for the product M_P M_A M_B (a polynomial with positive coefficients grows most
+/// at the largest arguments); (1 + 16 u) covers rounding this bound. Most pairs that reach the
+/// cubic are rejected by it, for a third of the operations of the full bound.
+template <class Q, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE W screening_bernstein(const Q& q, W b[4], const Vec3<W>& m, W perturbation) {
+  const Coplanarity<W> c = coplanarity_of(q);
+  W k[4];
+  bernstein_controls(c, k);
+  b[0] = k[0];
+  b[1] = k[1] / W(3);
+  b[2] = k[2] / W(3);
+  b[3] = k[3];
+  const W mp = max_component(max(abs(c.p0), abs(c.p1))), ma = max_component(max(abs(c.a0), abs(c.a1)));
+  const W mb = max_component(max(abs(c.b0), abs(c.b1))), e = fmul(max_component(m), W(2) * perturbation);
+  const W u = unit_roundoff<W>();
+  const W pe = fadd(mp, e), ae = fadd(ma, e), be = fadd(mb, e);
+  const W grown = fmul(fmul(pe, ae), be);  // (M_P + e)(M_A + e)(M_B + e)
+  // (M_P + e)(M_A + e)(M_B + e) - M_P M_A M_B as a sum of positive terms (no cancellation).
+  const W change = fadd(fadd(fmul(e, fmul(ae, be)), fmul(mp, fmul(e, be))), fmul(mp, fmul(ma, e)));
+  const W bound = fadd(fmul(change, W(1) + W(8) * u), fmul(W(16) * u, grown));
+  return fadd(fmul(fmul(W(18), bound), W(1) + W(16) * u), std::numeric_limits<W>::denorm_min());
+}
+
+/// The finest level of the time intervals: width 2^-level <= tolerance / 2, so that a root
+/// interval may span two of them.
+template <class T>
+LWSCCD_HD int certified_max_level(T tolerance) {
+  int level = static_cast<int>(std::ceil(-std::log2(static_cast<double>(tolerance)))) + 1;
+  level = level < 1 ? 1 : level;
+  const int mantissa = std::numeric_limits<T>::digits - 2;
+  level = level > mantissa ? mantissa : level;
+  return level > 30 ? 30 : level;
+}
+
+/// True when the features' swept boxes (each point at t = 0 and t = 1; a point's path and a
+/// feature at any time lie in the hull of those) are apart by more than `pad` per axis: then they
+/// never touch, even with every coordinate perturbed by pad / 4 (the pad is 4 p m; 2 p m is needed).
+template <class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool boxes_apart(const Vec3<W>* a, int na, const Vec3<W>* b, int nb, const Vec3<W>& pad) {
+  Vec3<W> alo = a[0], ahi = a[0], blo = b[0], bhi = b[0];
+  for (int i = 1; i < na; ++i) alo = min(alo, a[i]), ahi = max(ahi, a[i]);
+  for (int i = 1; i < nb; ++i) blo = min(blo, b[i]), bhi = max(bhi, b[i]);
+  for (int k = 0; k < 3; ++k)
+    if (fadd(ahi[k], pad[k]) < blo[k] || fadd(bhi[k], pad[k]) < alo[k]) return true;
+  return false;
+}
+template <class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool swept_boxes_apart(const VertexFaceQuery<W>& q, const Vec3<W>& pad) {
+  const Vec3<W> vertex[2] = {q.p0, q.p1}, face[6] = {q.a0, q.b0, q.c0, q.a1, q.b1, q.c1};
+  return boxes_apart(vertex, 2, face, 6, pad);
+}
+template <class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& pad) {
+  const Vec3<W> first[4] = {q.a0, q.b0, q.a1, q.b1}, second[4] = {q.c0, q.d0, q.c1, q.d1};
+  return boxes_apart(first, 4, second, 4, pad);
+}
+
+/// True when, over the window [0, w] (w a power of two <= 1/2), the features' boxes are apart by
+/// more than `pad` per axis: each point's path up to w lies between its position at 0 and at w.
+/// The positions at w are computed (x0 + w (x1 - x0): w's product is exact, the two roundings
+/// move a point by at most 3 u m for w <= 1/2); a perturbation of the inputs by e moves them by at
+/// most e m. So pad = 20 e m (+ underflow's share) covers both sides' errors twice over (e >= u).
+template <class W>
+LWSCCD_HD LWSCCD_HOST_INLINE Vec3<W> position_at(const Vec3<W>& x0, const Vec3<W>& x1, W w) {
+  return {fadd(x0.x, fmul(w, fsub(x1.x, x0.x))), fadd(x0.y, fmul(w, fsub(x1.y, x0.y))), fadd(x0.z, fmul(w, fsub(x1.z, x0.z)))};
+}
+template <class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool window_boxes_apart(const VertexFaceQuery<W>& q, W w, const Vec3<W>& pad) {
+  const Vec3<W> vertex[2] = {q.p0, position_at(q.p0, q.p1, w)};
+  const Vec3<W> face[6] = {q.a0, q.b0, q.c0, position_at(q.a0, q.a1, w), position_at(q.b0, q.b1, w), position_at(q.c0, q.c1, w)};
+  return boxes_apart(vertex, 2, face, 6, pad);
+}
+template <class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool window_boxes_apart(const EdgeEdgeQuery<W>& q, W w, const Vec3<W>& pad) {
+  const Vec3<W> first[4] = {q.a0, q.b0, position_at(q.a0, q.a1, w), position_at(q.b0, q.b1, w)};
+  const Vec3<W> second[4] = {q.c0, q.d0, position_at(q.c0, q.c1, w), position_at(q.d0, q.d1, w)};
+  return boxes_apart(first, 4, second, 4, pad);
+}
+
+/// Where the certified path computes: float queries in double (the cubic's coefficients carry
+/// about 16 u of error, which in float is the size of a 1e-6 step's change), others as given.
+template <class T>
+struct certified_compute {
+  using type = T;
+};
+template <>
+struct certified_compute<float> {
+  using type = double;
+};
+
+/// The certified path's cheap first step: true when the query is certainly a miss by its swept
+/// boxes or by the cubic's coefficients under the screening bound (with params.time_limit < 1:
+/// no contact before it, the cubic restricted to [0, time_limit)). Most pairs of a real step end
+/// here; a batch runs it on every pair and certified_refine on the others.
+template <class Policy, class Q, class T>
+LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
+  using W = typename certified_compute<T>::type;
+  if (params.min_separation > T(0)) return false;  // the cubic only speaks of contact
+  const auto q = q_in.template cast<W>();
+  const W perturbation = unit_roundoff<T>();
+  const Vec3<W> m = coordinate_magnitude(q);
+  // Swept boxes apart: no arithmetic but the pad, so it goes first.
+  if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
+  // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
+  // [0, w] that covers it, which are far smaller than the whole step's when w is short.
+  if (params.time_limit <= T(0.5)) {
+    W w = W(0.5);
+    for (int level = 1; level < 30 && w / 2 >= W(params.time_limit); ++level) w /= 2;
+    const W tiny = W(4) * std::numeric_limits<W>::denorm_min();
+    const Vec3<W> pad = vscale(m, W(20) * perturbation);
+    if (window_boxes_apart(q, w, Vec3<W>{fadd(pad.x, tiny), fadd(pad.y, tiny), fadd(pad.z, tiny)})) return true;
+  }
+  W b[4];
+  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
+  const W screen = fadd(fmul(k, screening_bernstein(q, b, m, perturbation)), slack);
+  const bool finite = finite_value(screen) && finite_value(b[0]) && finite_value(b[1]) && finite_value(b[2]) && finite_value(b[3]);
+  if (!finite) return false;
+  if (same_sign_beyond(b, screen)) return true;
+  if (!(params.time_limit < T(1))) return false;
+  // Only [0, time_limit) is asked for (mode earliest's windows): the cubic on the smallest dyadic
+  // [0, 2^-k] that covers it, by k left halvings, each adding its rounding to the bound as in the
+  // refinement (a halving is a convex combination, so the bound on [0, 1] still bounds the error).
+  BernsteinPiece<W> piece{{b[0], b[1], b[2], b[3]}, screen, screen};
+  // A wider piece that keeps its sign already covers the window: stop there (most pairs do early).
+  for (int level = 0; level < 30 && exact_pow2_neg<W>(level + 1) >= W(params.time_limit); ++level) {
+    if (level > 0 && same_sign_beyond(piece.c, piece.bound)) return true;
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(piece, left, right);
+    piece = left;
+  }
+  return same_sign_beyond(piece.c, piece.bound);
+}
+
+/// The cubic's Bernstein piece on [0, 1] with its perturbed and as-given bounds (the coefficient
+/// bound of ccd_filters.hpp, plus underflow's share for differences up to `mag`); false when a
+/// value is not finite (overflow: the caller leaves the query undecided).
+template <class Policy, class Q, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool cubic_on_step(const Q& q, W mag, W perturbation, BernsteinPiece<W>& root) {
+  const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
+  W rounding_bound = W(0);
+  const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound);
+  root.bound = fadd(fmul(k, coefficient_bound), slack);
+  root.exact = fadd(fmul(k, rounding_bound), slack);
+  bool finite = finite_value(root.bound);
+  for (int i = 0; i < 4; ++i) finite = finite && finite_value(root.c[i]);
+  return finite;
+}
+
+}  // namespace lwsccd::detail

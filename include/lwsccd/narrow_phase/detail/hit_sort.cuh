@@ -1,0 +1,71 @@
+// lwsccd — hits in (first, second) order: their keys, a one-block sort for short lists, and the
+// sizes (id bits, grown room) the host loops use.
+// Part of narrow_phase_kernels.cuh: include <lwsccd/narrow_phase/narrow_phase.cuh>, not this file.
+#pragma once
+
+#include <cooperative_groups.h>
+#include <cooperative_groups/reduce.h>
+#include <cooperative_groups/scan.h>
+#include <cstring>
+
+#include "lwsccd/narrow_phase/inclusion_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.cuh"
+#include "lwsccd/narrow_phase/detail/narrow_lists.cuh"
+
+namespace lwsccd::gpu::detail {
+
+// The sort key of a hit: (first, second) as one word, first shifted by `id_bits` (every id is
+// below 2^id_bits, so the key's order is the pair's and it has 2 id_bits bits to sort).
+template <class T>
+__global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id_bits, unsigned long long* keys) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  assert(static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) >> id_bits == 0 &&
+         static_cast<unsigned long long>(static_cast<unsigned>(hits[i].second)) >> id_bits == 0 && "a feature id past the mesh's features");
+  keys[i] = (static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) << id_bits) | static_cast<unsigned>(hits[i].second);
+}
+
+// A sort of at most kThreads hits in one block, a thread per hit: its place is the number of
+// keys below its own plus the equal ones before it (stable, as the radix sort). A step's few
+// hits (horse-gallop: a handful) took a radix sort's ~14 us single-tile pass plus the key
+// kernel; the block compares every pair of keys in shared memory instead.
+template <class T, int kThreads>
+__global__ void __launch_bounds__(kThreads)
+    small_hit_sort_kernel(const FeatureHit<T>* hits, int n, int id_bits, FeatureHit<T>* sorted) {
+  __shared__ unsigned long long keys[kThreads];
+  const int i = static_cast<int>(threadIdx.x);
+  FeatureHit<T> hit;
+  unsigned long long key = 0;
+  if (i < n) {
+    hit = hits[i];
+    assert(static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) >> id_bits == 0 &&
+           static_cast<unsigned long long>(static_cast<unsigned>(hit.second)) >> id_bits == 0 && "a feature id past the mesh's features");
+    key = (static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) << id_bits) | static_cast<unsigned>(hit.second);
+    keys[i] = key;
+  }
+  __syncthreads();
+  if (i >= n) return;
+  int place = 0;
+  for (int j = 0; j < n; ++j) {
+    const unsigned long long other = keys[j];
+    place += other < key || (other == key && j < i);
+  }
+  sorted[place] = hit;
+}
+constexpr int kSmallHitSort = 256;  ///< hits sorted by small_hit_sort_kernel (more: the radix sort)
+
+// Bits of the largest feature id below `id_limit` (at least 1, at most 32).
+inline int id_bits_below(std::size_t id_limit) {
+  int bits = 1;
+  while (bits < 32 && (std::size_t(1) << bits) < id_limit) ++bits;
+  return bits;
+}
+
+// Room for a list that needed `needed`: a quarter more, so that a list that grows a little from
+// step to step does not repeat runs.
+inline std::size_t grown_room(unsigned long long needed) {
+  const std::size_t n = static_cast<std::size_t>(needed);
+  return n + n / 4 + 1024;
+}
+
+}  // namespace lwsccd::gpu::detail
