@@ -21,6 +21,7 @@
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
 #include "lwsccd/narrow_phase/inclusion_ccd.hpp"
 #include "lwsccd/narrow_phase/narrow_phase.hpp"
+#include "lwsccd/pipeline/stage_sequence.hpp"
 #include "lwsccd/traversal/bvtt.hpp"
 #include "lwsccd/traversal/cpu_traverse.hpp"
 
@@ -208,56 +209,17 @@ class CcdPipeline {
   }
 
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
-    using clock = std::chrono::steady_clock;
-    auto ms = [](clock::time_point a) { return std::chrono::duration<double, std::milli>(clock::now() - a).count(); };
     StepResult<T> r;
-    const auto start = clock::now();
-    auto t = clock::now();
-    if (!built_) {
-      bvh_.build(*mesh_, x0, x1);
-      built_ = r.stats.rebuilt = true;
+    StepInProgress step{r, x0, x1};
+    if (params_.part_pairs) {  // the traversal, feature pairs and narrow phase a part at a time
+      stage_refit(step);
+      stage_done(lwsccd::detail::PipelineStage::refit, step);
+      const std::vector<NodePair>& seeds = step_seeds(r.stats);  // sets restarted_from_root, read next
+      step_in_parts(traversal_task(), seeds, r.stats.restarted_from_root, x0, x1, r);
     } else {
-      r.stats.rebuilt = bvh_.refit_or_rebuild(x0, x1, RebuildPolicy{params_.rebuild_factor});
+      lwsccd::detail::run_stage_sequence(*this, step);
     }
-    if (!self_collides_.empty() && bvh_.generation() != node_body_generation_) {
-      node_body_ = node_bodies(bvh_.view(), layout_.face_body);  // topology changed
-      node_body_generation_ = bvh_.generation();
-    }
-    r.stats.refit_ms = ms(t);
-    t = clock::now();
-    const bool bodies = !self_collides_.empty();
-    SelfCollisionTask<BV> task{bvh_.view(),
-                               LeafFilter{bodies ? layout_.face_body.data() : nullptr, bodies ? self_collides_.data() : nullptr,
-                                          mesh_->faces().data(), true, bodies ? node_body_.data() : nullptr}};
-    const std::vector<NodePair> root{NodePair{0, 0}};
-    const auto& seeds = params_.front_tracking ? tracker_.seeds(bvh_.generation()) : root;
-    r.stats.restarted_from_root = !params_.front_tracking || tracker_.last_was_restart();
-    if (params_.part_pairs) {
-      step_in_parts(task, seeds, r.stats.restarted_from_root, x0, x1, r);
-      r.stats.total_ms = ms(start);
-      return r;
-    }
-    auto traversal = cpu::traverse(task, seeds, params_.front_tracking, WorkStealingScheduler{});
-    if (params_.front_tracking) tracker_.update(std::move(traversal.front));
-    r.stats.traverse_ms = ms(t);
-    r.stats.bvtt_nodes = traversal.stats.items_processed;
-    r.stats.front_size = tracker_.size();
-    r.stats.triangle_pairs = traversal.results.size();
-    t = clock::now();
-    const FeaturePairs features = emit_feature_pairs(representatives_, traversal.results,
-                                                         feature_boxes(*mesh_, x0, x1, params_.min_separation / 2));
-    r.stats.features_ms = ms(t);
-    r.stats.feature_pairs_vf = features.vf.size();
-    r.stats.feature_pairs_ee = features.ee.size();
-    t = clock::now();
-    r.contacts = test_feature_pairs<Method, T>(*mesh_, x0, x1, features, ccd_params());
-    r.stats.narrow_vf = r.contacts.vf_counts;
-    r.stats.narrow_ee = r.contacts.ee_counts;
-    r.stats.narrow_ms = ms(t);
-    r.stats.hits_vf = r.contacts.vf.size();
-    r.stats.hits_ee = r.contacts.ee.size();
-    r.stats.gave_up = r.contacts.gave_up;
-    r.stats.total_ms = ms(start);
+    r.stats.total_ms = ms_since(step.start);
     return r;
   }
 
@@ -266,6 +228,84 @@ class CcdPipeline {
   const PipelineParams& params() const { return params_; }
 
  private:
+  using Task = SelfCollisionTask<BV>;
+  using clock = std::chrono::steady_clock;
+  static double ms_since(clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); }
+
+  // One step on its way through the stages (lwsccd::detail::run_stage_sequence): its result, its
+  // positions, and what each stage hands the next.
+  struct StepInProgress {
+    StepResult<T>& result;
+    const std::vector<Vec3d>& x0;
+    const std::vector<Vec3d>& x1;
+    clock::time_point start = clock::now(), stage_start = start;
+    std::vector<TrianglePair> candidates;
+    FeaturePairs features;
+  };
+  friend void lwsccd::detail::run_stage_sequence<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
+
+  // Build on the first step, refit (or rebuild where the tree decayed) after it.
+  void stage_refit(StepInProgress& step) {
+    StepStats& stats = step.result.stats;
+    if (!built_) {
+      bvh_.build(*mesh_, step.x0, step.x1);
+      built_ = stats.rebuilt = true;
+    } else {
+      stats.rebuilt = bvh_.refit_or_rebuild(step.x0, step.x1, RebuildPolicy{params_.rebuild_factor});
+    }
+    if (!self_collides_.empty() && bvh_.generation() != node_body_generation_) {
+      node_body_ = node_bodies(bvh_.view(), layout_.face_body);  // topology changed
+      node_body_generation_ = bvh_.generation();
+    }
+  }
+  // From the kept front (FrontTracker), or the root.
+  void stage_traversal(StepInProgress& step) {
+    StepStats& stats = step.result.stats;
+    auto traversal = cpu::traverse(traversal_task(), step_seeds(stats), params_.front_tracking, WorkStealingScheduler{});
+    if (params_.front_tracking) tracker_.update(std::move(traversal.front));
+    stats.bvtt_nodes = traversal.stats.items_processed;
+    stats.front_size = tracker_.size();
+    stats.triangle_pairs = traversal.results.size();
+    step.candidates = std::move(traversal.results);
+  }
+  void stage_feature_pairs(StepInProgress& step) {
+    step.features = emit_feature_pairs(representatives_, step.candidates,
+                                       feature_boxes(*mesh_, step.x0, step.x1, params_.min_separation / 2));
+    step.result.stats.feature_pairs_vf = step.features.vf.size();
+    step.result.stats.feature_pairs_ee = step.features.ee.size();
+  }
+  void stage_narrow_phase(StepInProgress& step) {
+    StepResult<T>& r = step.result;
+    r.contacts = test_feature_pairs<Method, T>(*mesh_, step.x0, step.x1, step.features, ccd_params());
+    r.stats.narrow_vf = r.contacts.vf_counts;
+    r.stats.narrow_ee = r.contacts.ee_counts;
+  }
+  // A stage's time, measured from the end of the one before.
+  void stage_done(lwsccd::detail::PipelineStage stage, StepInProgress& step) {
+    StepStats& stats = step.result.stats;
+    double* times[lwsccd::detail::kPipelineStages] = {&stats.refit_ms, &stats.traverse_ms, &stats.features_ms, &stats.narrow_ms};
+    *times[static_cast<int>(stage)] = ms_since(step.stage_start);
+    step.stage_start = clock::now();
+  }
+  void complete_step(StepInProgress& step) {
+    StepResult<T>& r = step.result;
+    r.stats.hits_vf = r.contacts.vf.size();
+    r.stats.hits_ee = r.contacts.ee.size();
+    r.stats.gave_up = r.contacts.gave_up;
+  }
+
+  Task traversal_task() const {
+    const bool bodies = !self_collides_.empty();
+    return Task{bvh_.view(), LeafFilter{bodies ? layout_.face_body.data() : nullptr, bodies ? self_collides_.data() : nullptr,
+                                        mesh_->faces().data(), true, bodies ? node_body_.data() : nullptr}};
+  }
+  // The step's seeds: the tracked front, or the root (also when front tracking is off).
+  const std::vector<NodePair>& step_seeds(StepStats& stats) {
+    const std::vector<NodePair>& seeds = params_.front_tracking ? tracker_.seeds(bvh_.generation()) : root_;
+    stats.restarted_from_root = !params_.front_tracking || tracker_.last_was_restart();
+    return seeds;
+  }
+
   CcdParams<T> ccd_params() const { return detail::ccd_params_of<T>(params_); }
 
   // The step in parts (PipelineParams::part_pairs): a cut below the root when the traversal
@@ -358,6 +398,7 @@ class CcdPipeline {
   Bvh<BV> bvh_;
   bool built_ = false;
   FrontTracker tracker_;
+  const std::vector<NodePair> root_{NodePair{0, 0}};
 };
 
 }  // namespace cpu

@@ -24,6 +24,7 @@
 #include "lwsccd/features/representative.cuh"
 #include "lwsccd/narrow_phase/narrow_phase.cuh"
 #include "lwsccd/pipeline/cpu_pipeline.hpp"
+#include "lwsccd/pipeline/stage_sequence.hpp"
 #include "lwsccd/traversal/gpu_traverse.cuh"
 
 namespace lwsccd::gpu {
@@ -234,37 +235,47 @@ class CcdPipeline {
     emitter_sized_ = true;
   }
 
-  // Every stage of a step on the device, one host round trip at its end (the refit's reads, the
-  // traversal's, the feature pairs' and the narrow phase's counters); the narrow phase's hits
-  // stay there (sorted on the default stream once collected).
+  // Every stage of a step on the device (lwsccd::detail::run_stage_sequence), one host round trip
+  // at its end (the refit's reads, the traversal's, the feature pairs' and the narrow phase's
+  // counters); the narrow phase's hits stay there (sorted on the default stream once collected).
   void run_stages(StepStats& stats) {
     streamed_ = params_.device_memory_budget > 0 || params_.part_pairs > 0;
     if (streamed_) return run_streamed_stages(stats);
     LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
-    bool refit_pending = refit_stage(stats, false);
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[1]));
-    const bool restart = traverse_step();
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[2]));
-    enqueue_feature_pairs();
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[3]));
-    const CcdParams<T> ccd = ccd_params();
-    // Where a count outgrew its buffer, the buffer is grown and what read the short list runs again.
+    lwsccd::detail::run_stage_sequence(*this, stats);
+  }
+
+  // The stages as the sequence asks for them: each enqueues its work on the stream, and
+  // stage_done marks its end with an event (mark_[k + 1]; mark_[0] is the step's start).
+  void stage_refit(StepStats& stats) { refit_pending_ = refit_stage(stats, false); }
+  void stage_traversal(StepStats&) { restarted_ = traverse_step(); }
+  void stage_feature_pairs(StepStats&) { enqueue_feature_pairs(); }
+  void stage_narrow_phase(StepStats&) {
+    narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd_params());
+  }
+  void stage_done(lwsccd::detail::PipelineStage stage, StepStats&) {
+    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[static_cast<int>(stage) + 1]));
+  }
+  // The step's one wait. Where a count outgrew its buffer, the buffer is grown and what read the
+  // short list runs again.
+  void complete_step(StepStats& stats) {
     while (true) {
-      narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd);
-      LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[4]));
       LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[4]));
-      if (refit_pending) collect_refit();
-      refit_pending = false;
+      if (refit_pending_) collect_refit();
+      refit_pending_ = false;
       if (!traversal_.collect()) {  // an output or a deque overflowed: the traversal again, waiting
         traverse<Scheduler>(traversal_task(), seeds_.data(), front_size_, traversal_, params_.front_tracking);
         enqueue_feature_pairs();
         ++stats.reruns;
-        continue;
+      } else if (emitter_.collect() && narrow_.collect()) {
+        break;
+      } else {
+        ++stats.reruns;
       }
-      if (emitter_.collect() && narrow_.collect()) break;
-      ++stats.reruns;
+      stage_narrow_phase(stats);
+      stage_done(lwsccd::detail::PipelineStage::narrow_phase, stats);
     }
-    keep_front(restart, stats);
+    keep_front(restarted_, stats);
     stats.refit_ms = elapsed(mark_[0], mark_[1]);
     stats.traverse_ms = elapsed(mark_[1], mark_[2]);
     stats.features_ms = elapsed(mark_[2], mark_[3]);
@@ -272,6 +283,7 @@ class CcdPipeline {
     stats.feature_pairs_vf = emitter_.num_vf();
     stats.feature_pairs_ee = emitter_.num_ee();
   }
+  friend void lwsccd::detail::run_stage_sequence<CcdPipeline, StepStats>(CcdPipeline&, StepStats&);
 
   // LeafFilter::node_body for the current tree (after a build: topology only).
   void update_node_bodies() {
@@ -660,6 +672,8 @@ class CcdPipeline {
   cudaEvent_t mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
   // Streaming under a budget:
   bool streamed_ = false;                        ///< the last step was streamed
+  bool refit_pending_ = false;                   ///< this step's refit reads await collect_refit()
+  bool restarted_ = false;                       ///< this step's traversal started from the root
   DeviceBuffer<NodePair> cut_, next_front_;      ///< a cut below the root; the front being recorded
   DeviceBuffer<FeatureHit<T>> gathered_[2];      ///< the parts' hits (vertex-face, edge-edge)
   HitSorter<T> gathered_sorter_;
