@@ -1,19 +1,17 @@
 // lwsccd — the end-to-end CCD pipeline on the GPU: same API and same answers as
-// cpu::CcdPipeline (cpu_pipeline.hpp). Everything between the positions' upload and the hits'
-// download stays on the device: refit (or rebuild), traversal from the front kept on the device,
-// feature pairs produced once (representative triangles, culled by their boxes), the narrow
-// phase. The feature pairs and the narrow phase run without a host round trip: their lengths stay
-// on the device, and the host reads them once, after the narrow phase (stage times are events,
-// read then too).
+// cpu::CcdPipeline (cpu_pipeline.hpp; the types both share are in pipeline_types.hpp). Everything
+// between the positions' upload and the hits' download stays on the device: refit (or rebuild),
+// traversal from the front kept on the device, feature pairs produced once (representative
+// triangles, culled by their boxes), the narrow phase. The feature pairs and the narrow phase run
+// without a host round trip: their lengths stay on the device, and the host reads them once, after
+// the narrow phase (stage times are events, read then too).
 //
 // Under a device-memory budget (PipelineParams::device_memory_budget), or with parts asked for
-// (PipelineParams::part_pairs), a step streams instead: the traversal runs from its seeds (the kept
-// front, or a cut of the BVTT below the root) a part at a time, and each part's triangle pairs go
-// through the feature pairs and the narrow phase in parts that fit; the hits gather on the device
-// and are sorted once. Same answer, more synchronisations.
+// (PipelineParams::part_pairs), a step runs in parts instead (detail/gpu_step_in_parts.cuh): the
+// traversal runs from its seeds (the kept front, or a cut of the BVTT below the root) a part at a
+// time, and each part's triangle pairs go through the feature pairs and the narrow phase in parts
+// that fit; the hits gather on the device and are sorted once. Same answer, more synchronisations.
 #pragma once
-
-#include <cub/device/device_scan.cuh>
 
 #include <algorithm>
 #include <memory>
@@ -23,30 +21,11 @@
 #include "lwsccd/bvh/bvh.cuh"
 #include "lwsccd/features/representative.cuh"
 #include "lwsccd/narrow_phase/narrow_phase.cuh"
-#include "lwsccd/pipeline/cpu_pipeline.hpp"
+#include "lwsccd/pipeline/pipeline_types.hpp"
 #include "lwsccd/pipeline/stage_sequence.hpp"
 #include "lwsccd/traversal/gpu_traverse.cuh"
 
 namespace lwsccd::gpu {
-
-namespace detail {
-
-// Body changes between consecutive sorted leaves (the node_bodies prefix, before the scan).
-template <class Index>
-__global__ void body_change_kernel(const Index* leaf_primitive, Index n, const Index* face_body, Index* changes) {
-  const Index k = static_cast<Index>(blockIdx.x * blockDim.x + threadIdx.x);
-  if (k >= n) return;
-  changes[k] = k > 0 && face_body[leaf_primitive[k]] != face_body[leaf_primitive[k - 1]];
-}
-
-template <class BV>
-__global__ void node_body_kernel(BvhView<BV> bvh, const index_t* changes, const index_t* face_body, index_t* node_body) {
-  const index_t node = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
-  if (node >= bvh.num_nodes()) return;
-  node_body[node] = lwsccd::detail::node_body_of(bvh.ranges[node], changes, bvh.leaf_primitive, face_body);
-}
-
-}  // namespace detail
 
 template <class BV = Aabbf, class Scheduler = LazyStealScheduler<>, class Method = CertifiedCcd, class T = double>
 class CcdPipeline {
@@ -194,115 +173,115 @@ class CcdPipeline {
   // otherwise. `wait` false leaves the refit's reads (positions' status, the cost) on their way to
   // the host, for collect_refit() with the step's other counters: the rebuild the cost calls for
   // then comes a step later. Returns whether reads await collect_refit().
-  bool refit_stage(StepStats& stats, bool wait) {
-    bool pending = false;
-    if (!built_ || rebuild_due_) {
-      bvh_.build(*step_);
-      built_ = stats.rebuilt = true;
-      rebuild_due_ = false;
-    } else if (wait) {
-      stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
-    } else {
-      bvh_.refit_enqueue(*step_);
-      pending = true;
-    }
-    if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
-    return pending;
-  }
+  bool refit_stage(StepStats& stats, bool wait);
 
   // The refit's reads, once the step's stream has been synchronized. Non-finite positions throw
   // InputError; the front this step recorded (over boxes that were not finite) is then dropped.
-  void collect_refit() {
-    try {
-      rebuild_due_ = bvh_.collect_refit(RebuildPolicy{params_.rebuild_factor});
-    } catch (...) {
-      front_size_ = 0;
-      throw;
-    }
-  }
+  void collect_refit();
 
   // The feature pairs of the traversal's candidates, their number read on the device. The first
   // step waits for their numbers (to size their buffers); later steps reuse the room earlier
   // ones needed and leave the numbers on the device.
-  void enqueue_feature_pairs() {
-    using OrphanRange = typename FeatureEmitter<>::OrphanRange;
-    emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.result_count(), nullptr,
-                     OrphanRange{0, emitter_.num_orphans()}, false);
-    if (!emitter_sized_) {
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
-      if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
-    }
-    emitter_sized_ = true;
-  }
+  void enqueue_feature_pairs();
 
-  // Every stage of a step on the device (lwsccd::detail::run_stage_sequence), one host round trip
-  // at its end (the refit's reads, the traversal's, the feature pairs' and the narrow phase's
-  // counters); the narrow phase's hits stay there (sorted on the default stream once collected).
+  // One step on its way through the stages (lwsccd::detail::run_stage_sequence): its statistics
+  // and, in a step streamed in parts, where the parts have got to.
+  struct StepInProgress {
+    explicit StepInProgress(StepStats& s) : stats(s) {}
+    StepStats& stats;
+    bool in_parts = false;
+    bool traversed = false, tested = false;  ///< a whole step's one traversal part and one narrow part
+    // In parts: stage times are host time, each stage waiting for its work.
+    std::chrono::steady_clock::time_point stage_start = std::chrono::steady_clock::now();
+    bool planned = false;          ///< the budget checked, the seeds chosen (the first traversal part)
+    std::size_t budget = 0;        ///< the budget, or kUnlimited
+    CcdParams<T> ccd;
+    bool restart = false;          ///< this step's traversal starts from the root
+    bool expansion_due = false;    ///< the cut below the root is still to be made (the first traversal part)
+    bool traversal_over = false;
+    std::size_t front_room = 0;    ///< the bytes the kept fronts may take
+    std::size_t next_front = 0;    ///< entries of the next step's front recorded so far (next_front_)
+    const NodePair* seeds = nullptr;
+    std::size_t num_seeds = 0, next_seed = 0, seeds_per_part = 0, max_seeds_per_part = 0;
+    // The candidates the narrow-phase parts go through now: a traversal part's, the pairs the cut
+    // met, or the orphans; the next one to test; this part's range; the part size.
+    enum class Source { none, traversal, met, orphans };
+    Source source = Source::none;
+    Source last_source = Source::none;  ///< the leftovers (met, orphans) opened so far after the traversal
+    const TrianglePair* candidates = nullptr;
+    std::size_t num_candidates = 0, next_candidate = 0, part_first = 0, part_count = 0, part_size = 0;
+  };
+
+  // Every stage of a step on the device (lwsccd::detail::run_stage_sequence). A whole step makes
+  // one host round trip at its end (the refit's reads, the traversal's, the feature pairs' and the
+  // narrow phase's counters); its narrow phase's hits stay there (sorted on the default stream
+  // once collected). A step in parts (a memory budget, or part_pairs) waits for each part.
   void run_stages(StepStats& stats) {
     streamed_ = params_.device_memory_budget > 0 || params_.part_pairs > 0;
-    if (streamed_) return run_streamed_stages(stats);
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
-    lwsccd::detail::run_stage_sequence(*this, stats);
+    StepInProgress step(stats);
+    step.in_parts = streamed_;
+    if (!streamed_) LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
+    lwsccd::detail::run_stage_sequence(*this, step);
   }
 
-  // The stages as the sequence asks for them: each enqueues its work on the stream, and
-  // stage_done marks its end with an event (mark_[k + 1]; mark_[0] is the step's start).
-  void stage_refit(StepStats& stats) { refit_pending_ = refit_stage(stats, false); }
-  void stage_traversal(StepStats&) { restarted_ = traverse_step(); }
-  void stage_feature_pairs(StepStats&) { enqueue_feature_pairs(); }
-  void stage_narrow_phase(StepStats&) {
+  // The stages as the sequence asks for them. In a whole step each enqueues its work on the
+  // stream, and stage_done marks its end with an event (mark_[k + 1]; mark_[0] is the step's
+  // start); in parts each waits for its work (pipeline/detail/gpu_step_in_parts.cuh), and
+  // stage_done adds up host time.
+  void stage_refit(StepInProgress& step) {
+    if (step.in_parts) return refit_part(step);
+    refit_pending_ = refit_stage(step.stats, false);
+  }
+  bool next_traversal_part(StepInProgress& step) {
+    if (step.in_parts) return next_traversal_part_in_parts(step);
+    const bool first = !step.traversed;
+    step.traversed = true;
+    return first;
+  }
+  void stage_traversal(StepInProgress& step) {
+    if (step.in_parts) return traversal_part(step);
+    restarted_ = traverse_step();
+  }
+  bool next_narrow_part(StepInProgress& step) {
+    if (step.in_parts) return next_narrow_part_in_parts(step);
+    const bool first = step.traversed && !step.tested;  // after the one traversal part
+    step.tested = step.traversed;
+    return first;
+  }
+  void stage_feature_pairs(StepInProgress& step) {
+    if (step.in_parts) return feature_pairs_part(step);
+    enqueue_feature_pairs();
+  }
+  void stage_narrow_phase(StepInProgress& step) {
+    if (step.in_parts) return narrow_phase_part(step);
+    enqueue_narrow_phase();
+  }
+  void stage_done(lwsccd::detail::PipelineStage stage, StepInProgress& step) {
+    if (!step.in_parts) {
+      LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[static_cast<int>(stage) + 1]));
+      return;
+    }
+    using clock = std::chrono::steady_clock;
+    double* times[lwsccd::detail::kPipelineStages] = {&step.stats.refit_ms, &step.stats.traverse_ms, &step.stats.features_ms,
+                                                       &step.stats.narrow_ms};
+    *times[static_cast<int>(stage)] += std::chrono::duration<double, std::milli>(clock::now() - step.stage_start).count();
+    step.stage_start = clock::now();
+  }
+  // A whole step's one wait: where a count outgrew its buffer, the buffer is grown and what read
+  // the short list runs again. A step in parts: its front kept, its gathered hits sorted.
+  void complete_step(StepInProgress& step) {
+    if (step.in_parts) return complete_step_in_parts(step);
+    complete_whole_step(step);
+  }
+  void complete_whole_step(StepInProgress& step);  // pipeline/detail/gpu_whole_step.cuh
+  friend void lwsccd::detail::run_stage_sequence<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
+  friend void lwsccd::detail::run_narrow_parts<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
+  void enqueue_narrow_phase() {
     narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd_params());
   }
-  void stage_done(lwsccd::detail::PipelineStage stage, StepStats&) {
-    LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[static_cast<int>(stage) + 1]));
-  }
-  // The step's one wait. Where a count outgrew its buffer, the buffer is grown and what read the
-  // short list runs again.
-  void complete_step(StepStats& stats) {
-    while (true) {
-      LWSCCD_CUDA_CHECK(cudaEventSynchronize(mark_[4]));
-      if (refit_pending_) collect_refit();
-      refit_pending_ = false;
-      if (!traversal_.collect()) {  // an output or a deque overflowed: the traversal again, waiting
-        traverse<Scheduler>(traversal_task(), seeds_.data(), front_size_, traversal_, params_.front_tracking);
-        enqueue_feature_pairs();
-        ++stats.reruns;
-      } else if (emitter_.collect() && narrow_.collect()) {
-        break;
-      } else {
-        ++stats.reruns;
-      }
-      stage_narrow_phase(stats);
-      stage_done(lwsccd::detail::PipelineStage::narrow_phase, stats);
-    }
-    keep_front(restarted_, stats);
-    stats.refit_ms = elapsed(mark_[0], mark_[1]);
-    stats.traverse_ms = elapsed(mark_[1], mark_[2]);
-    stats.features_ms = elapsed(mark_[2], mark_[3]);
-    stats.narrow_ms = elapsed(mark_[3], mark_[4]);
-    stats.feature_pairs_vf = emitter_.num_vf();
-    stats.feature_pairs_ee = emitter_.num_ee();
-  }
-  friend void lwsccd::detail::run_stage_sequence<CcdPipeline, StepStats>(CcdPipeline&, StepStats&);
 
   // LeafFilter::node_body for the current tree (after a build: topology only).
-  void update_node_bodies() {
-    const BvhView<BV> view = bvh_.view();
-    const index_t n = view.num_leaves;
-    body_changes_.resize_discard(static_cast<std::size_t>(n));
-    node_body_.resize_discard(static_cast<std::size_t>(view.num_nodes()));
-    detail::body_change_kernel<<<static_cast<unsigned>((n + 255) / 256), 256>>>(view.leaf_primitive, n, face_body_.data(),
-                                                                                 body_changes_.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, body_changes_.data(), body_changes_.data(), n));
-    scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
-    LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, body_changes_.data(), body_changes_.data(), n));
-    detail::node_body_kernel<<<static_cast<unsigned>((view.num_nodes() + 255) / 256), 256>>>(
-        view, body_changes_.data(), face_body_.data(), node_body_.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    node_body_generation_ = bvh_.generation();
-  }
+  void update_node_bodies();
 
   // Milliseconds between two recorded events (both complete).
   static double elapsed(cudaEvent_t from, cudaEvent_t to) {
@@ -320,18 +299,7 @@ class CcdPipeline {
   // Traversal from the front kept on the device (FrontTracker's policy, without a host copy), or
   // from the root; from a front without a host round trip (its counts are read at the step's
   // end). Returns whether it started from the root.
-  bool traverse_step() {
-    const Task task = traversal_task();
-    const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
-    generation_ = bvh_.generation();
-    if (restart) {
-      root_.upload(std::vector<NodePair>{NodePair{0, 0}});
-      traverse<Scheduler>(task, root_.data(), 1, traversal_, params_.front_tracking);
-    } else {
-      traverse_async<Scheduler>(task, seeds_.data(), front_size_, traversal_, true);
-    }
-    return restart;
-  }
+  bool traverse_step();
 
   // Whether the front has grown past the growth limit since the last restart (the next step
   // then starts from the root).
@@ -344,185 +312,28 @@ class CcdPipeline {
   // trade places; the one the seeds held takes the next front). A front that outgrew its buffer
   // is not kept: the seeds stay, a cut the next step starts from as well (a rerun of the
   // traversal for the front alone cost ~1 ms on horse-gallop, whose steps take ~0.45).
-  void keep_front(bool restart, StepStats& stats) {
-    stats.front_outgrown = !traversal_.front_complete();
-    if (params_.front_tracking && !stats.front_outgrown) {
-      front_size_ = traversal_.num_front();
-      std::swap(seeds_, traversal_.front_);
-      // Room for the next front to grow by a quarter (horse-gallop's grows by up to a fifth a
-      // step): the spare buffer's whole capacity where that suffices, else half as much again.
-      const std::size_t need = front_size_ + front_size_ / 4;
-      const std::size_t capacity = traversal_.front_.capacity_bytes() / sizeof(NodePair);
-      traversal_.front_.resize_discard(capacity >= need ? capacity : front_size_ + front_size_ / 2);
-      if (restart) size_at_restart_ = front_size_;
-      reset_next_ = front_past_growth_limit();
-    }
-    stats.restarted_from_root = restart;
-    stats.bvtt_nodes = traversal_.stats().items_processed;
-    stats.front_size = front_size_;
-    stats.triangle_pairs = traversal_.num_results();
-  }
+  void keep_front(bool restart, StepStats& stats);
 
-  // ---- A step streamed under PipelineParams::device_memory_budget ----
+  // ---- A step in parts (a device-memory budget, or PipelineParams::part_pairs) ----
+  // The stages' parts, defined in pipeline/detail/gpu_step_in_parts.cuh.
 
   static constexpr std::size_t kUnlimited = std::size_t(1) << 60;
 
-  // The stages in parts that fit the budget: traversal from the seeds a part at a time, each
-  // part's candidates through the feature pairs and the narrow phase in parts, the hits gathered.
-  void run_streamed_stages(StepStats& stats) {
-    using clock = std::chrono::steady_clock;
-    auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
-    auto t = clock::now();
-    refit_stage(stats, true);
-    LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
-    stats.refit_ms = ms_since(t);
-    const std::size_t budget = params_.device_memory_budget ? params_.device_memory_budget : kUnlimited;
-    const std::size_t resident = resident_bytes();
-    // A budget that leaves less than a few MiB beside the resident data cannot make progress (the
-    // narrow phase's and the scheduler's starting buffers alone take that).
-    const std::size_t least = resident + (std::size_t(4) << 20);
-    if (budget < least)
-      throw InputError("gpu::CcdPipeline", "device_memory_budget",
-                       std::to_string(budget) + " bytes is below what this mesh needs at least: " + std::to_string(least) +
-                           " (positions, BVH and topology take " + std::to_string(resident) + ")");
-    const std::size_t room = budget - resident;
-    gathered_outcome_ = Outcome{{nullptr, nullptr}, {0, 0}, T(1), 0, 0, 0, {}};
-    const CcdParams<T> ccd = ccd_params();
-    boxes_current_ = false;  // the first part to emit feature pairs computes the step's feature boxes
-    room_ = room;
-
-    const Task task = traversal_task();
-    const std::uint64_t generation = bvh_.generation();
-    recording_front_ = params_.front_tracking && front_refused_generation_ != generation;
-    const bool restart = !params_.front_tracking || generation != generation_ || front_size_ == 0 || reset_next_;
-    generation_ = generation;
-    const std::size_t front_room = static_cast<std::size_t>(StreamingPolicy::kFrontShare * static_cast<double>(room));
-    std::size_t next_front = 0;
-    // Keeps the part's front entries for the next step while they fit their share.
-    auto keep_front = [&] {
-      if (!recording_front_) return;
-      const std::size_t n = traversal_.num_front();
-      const std::size_t kept_seeds = restart ? 0 : seeds_.capacity_bytes();
-      const std::size_t wanted = (next_front + n) * sizeof(NodePair) * 5 / 4;
-      // The front is kept within its share and only where the budget has room for it now (it is
-      // an optimisation: the parts' narrow phase does not leave room for it).
-      const std::size_t grows = (next_front + n) * sizeof(NodePair) > next_front_.capacity_bytes() ? wanted : 0;
-      if (kept_seeds + wanted > front_room || device_bytes() + grows > budget) {
-        give_up_next_front();
-        return;
-      }
-      next_front_.resize_keep(next_front + n, (next_front + n) * 5 / 4);
-      if (n) LWSCCD_CUDA_CHECK(cudaMemcpyAsync(next_front_.data() + next_front, traversal_.front(), n * sizeof(NodePair),
-                                              cudaMemcpyDeviceToDevice));
-      next_front += n;
-    };
-    const NodePair* seeds = seeds_.data();
-    std::size_t num_seeds = front_size_;
-    if (restart) {
-      seeds_ = DeviceBuffer<NodePair>();  // an old front is of no use from the root: its room goes to the parts
-      // A cut below the root; what the expansion met on the way is a part of its own.
-      t = clock::now();
-      root_.upload(std::vector<NodePair>{NodePair{0, 0}});
-      traversal_.set_output_limit(traversal_output_limit());
-      num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, recording_front_);
-      if (!traversal_.complete())
-        throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
-                    " bytes cannot hold the first levels of the traversal; give it more");
-      cut_.resize_discard(std::max<std::size_t>(num_seeds, 1));
-      if (num_seeds)
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(cut_.data(), traversal_.expanded(), num_seeds * sizeof(NodePair), cudaMemcpyDeviceToDevice));
-      seeds = cut_.data();
-      stats.bvtt_nodes += traversal_.stats().items_processed;
-      stats.traverse_ms += ms_since(t);
-      keep_front();
-      // What the expansion met is tested after the parts, once the scheduler's own lists hold
-      // their room (the parts' narrow phase is sized around them).
-      met_.resize_discard(std::max<std::size_t>(traversal_.num_results(), 1));
-      met_size_ = traversal_.num_results();
-      stats.triangle_pairs += met_size_;
-      if (met_size_)
-        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(met_.data(), traversal_.results(), met_size_ * sizeof(TrianglePair),
-                                          cudaMemcpyDeviceToDevice));
-    }
-    // A part's seeds take room in the scheduler's own lists too (a few entries each).
-    const std::size_t max_part = std::max<std::size_t>(1, seed_list_bytes() / seed_bytes());
-    std::size_t part = std::min(seeds_per_part_ ? seeds_per_part_ : num_seeds, max_part);
-    if (params_.part_pairs) part = std::min(part, std::max<std::size_t>(1, params_.part_pairs));
-    for (std::size_t first = 0; first < num_seeds;) {
-      const std::size_t n = std::min(part, num_seeds - first);
-      t = clock::now();
-      traversal_.set_output_limit(traversal_output_limit());
-      traverse<Scheduler>(task, seeds + first, n, traversal_, recording_front_);
-      stats.traverse_ms += ms_since(t);
-      const std::size_t cap = params_.part_pairs;
-      if (traversal_.complete() && cap && traversal_.num_results() > cap && n > 1) {
-        part = n / 2;  // more candidates than a part may have: fewer seeds
-        ++stats.reruns;
-        continue;
-      }
-      if (!traversal_.complete()) {
-        if (n == 1)
-          throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
-                      " bytes cannot hold what one node pair of the traversal yields; give it more");
-        part = n / 2;
-        ++stats.reruns;
-        continue;
-      }
-      stats.bvtt_nodes += traversal_.stats().items_processed;
-      keep_front();
-      test_traversal_output(ccd, stats);
-      ++stats.traversal_parts;
-      first += n;
-      // Parts whose outputs took under a quarter of their room may double.
-      const std::size_t used = traversal_.num_results() * sizeof(TrianglePair) + traversal_.num_front() * sizeof(NodePair);
-      if (used * 4 < traversal_.output_limit() && (!cap || traversal_.num_results() * 4 < cap))
-        part = std::min({num_seeds, 2 * part, max_part});
-    }
-    traversal_.set_output_limit(0);
-    seeds_per_part_ = part;
-    if (met_size_) test_candidates(met_.data(), met_size_, false, ccd, stats);
-    met_size_ = 0;
-    met_ = DeviceBuffer<TrianglePair>();  // tested: its room goes back to the orphans' parts
-    // The orphans (pairs no candidate emits), in parts of their own.
-    test_candidates(nullptr, 0, true, ccd, stats);
-    // The front for the next step, when it was kept whole.
-    if (recording_front_) {
-      std::swap(seeds_, next_front_);
-      front_size_ = next_front;
-      if (restart) size_at_restart_ = front_size_;
-      reset_next_ = front_past_growth_limit();
-    } else {
-      front_size_ = 0;
-      seeds_ = DeviceBuffer<NodePair>();
-    }
-    next_front_ = DeviceBuffer<NodePair>();
-    stats.restarted_from_root = restart;
-    stats.front_size = front_size_;
-    // The gathered hits in (first, second) order, as an unstreamed step gives them.
-    t = clock::now();
-    if (params_.mode != CcdMode::earliest)
-      for (int k = 0; k < 2; ++k) gathered_sorter_.sort(gathered_[k], gathered_outcome_.num_hits[k], features_.num_features());
-    for (int k = 0; k < 2; ++k) gathered_outcome_.hits[k] = gathered_[k].data();
-    LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
-    stats.narrow_ms += ms_since(t);
-  }
-
-  // The current traversal output's candidates through the feature pairs and the narrow phase.
-  void test_traversal_output(const CcdParams<T>& ccd, StepStats& stats) {
-    stats.triangle_pairs += traversal_.num_results();
-    test_candidates(traversal_.results(), traversal_.num_results(), false, ccd, stats);
-  }
-
-  // Stops recording this step's front for the next one (which then starts from the root; this tree
-  // keeps no front) and frees what it held. False when none was being recorded.
-  bool give_up_next_front() {
-    if (!recording_front_) return false;
-    recording_front_ = false;
-    front_refused_generation_ = bvh_.generation();
-    next_front_ = DeviceBuffer<NodePair>();
-    traversal_.front_ = DeviceBuffer<NodePair>();  // regrown to one entry by a traversal without a front
-    return true;
-  }
+  void refit_part(StepInProgress& step);
+  void plan_parts(StepInProgress& step);
+  void start_seed_parts(StepInProgress& step);
+  bool next_traversal_part_in_parts(StepInProgress& step);
+  void traversal_part(StepInProgress& step);
+  void keep_part_front(StepInProgress& step);
+  void open_candidates(StepInProgress& step, typename StepInProgress::Source source, const TrianglePair* candidates,
+                       std::size_t n);
+  bool next_narrow_part_in_parts(StepInProgress& step);
+  void feature_pairs_part(StepInProgress& step);
+  void narrow_phase_part(StepInProgress& step);
+  void gather_hits();
+  void complete_step_in_parts(StepInProgress& step);
+  bool give_up_next_front();
+  std::size_t held_beside_parts() const;
 
   // The bytes one traversal part's outputs may grow to under the budget.
   std::size_t traversal_output_limit() const {
@@ -545,109 +356,6 @@ class CcdPipeline {
     const std::size_t others = held_beside_parts();
     return params_.device_memory_budget > others ? params_.device_memory_budget - others : 0;
   }
-  // What narrow_allowance() leaves out of the budget.
-  std::size_t held_beside_parts() const {
-    const std::size_t own = emitter_.list_bytes() + narrow_.device_bytes();
-    const std::size_t outputs = traversal_.results_.capacity_bytes() + traversal_.front_.capacity_bytes();
-    const std::size_t limit = traversal_output_limit();
-    std::size_t later = limit > outputs ? limit - outputs : 0;
-    // The scheduler's lists of a part's seeds (and of what they first expand to) may still grow.
-    const std::size_t seed_lists = traversal_.work_.capacity_bytes() + traversal_.next_.capacity_bytes();
-    if (seed_list_bytes() > seed_lists) later += seed_list_bytes() - seed_lists;
-    const std::size_t gathered = gathered_outcome_.num_hits[0] + gathered_outcome_.num_hits[1];
-    later += gathered * (2 * sizeof(FeatureHit<T>) + 24) * 5 / 4;  // keys, sorted copy, CUB's temporary
-    return device_bytes() - own + later;
-  }
-
-  // Candidates [0, n), or (orphans) the orphan pairs, in parts whose feature pairs and narrow
-  // phase fit narrow_allowance(). The first part of a step also computes the feature boxes.
-  void test_candidates(const TrianglePair* candidates, std::size_t n, bool orphans, const CcdParams<T>& ccd, StepStats& stats) {
-    using clock = std::chrono::steady_clock;
-    auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
-    using OrphanRange = typename FeatureEmitter<>::OrphanRange;
-    if (orphans) n = emitter_.num_orphans();
-    constexpr std::size_t bytes_per_pair = StreamingPolicy::bytes_per_feature_pair<T>();
-    // Items (candidates or orphans) per part: the estimate the last part of this kind left, at
-    // first a guess from their usual numbers of pairs; never above PipelineParams::part_pairs.
-    const std::size_t cap = params_.part_pairs ? params_.part_pairs : kUnlimited;
-    std::size_t& estimate = orphans ? orphans_per_part_ : candidates_per_part_;
-    auto guess = [&] {
-      const double per_item = StreamingPolicy::kBytesPerCandidate +
-                              (orphans ? 1.0 : StreamingPolicy::kPairsPerCandidateGuess) * static_cast<double>(bytes_per_pair);
-      return std::max<std::size_t>(
-          1, static_cast<std::size_t>(std::min(1e18, StreamingPolicy::kPartMargin * static_cast<double>(narrow_allowance()) / per_item)));
-    };
-    std::size_t part = std::min(estimate ? estimate : guess(), cap);
-    for (std::size_t first = 0; first < n || !boxes_current_;) {
-      const std::size_t count = std::min(part, n - first);
-      auto t = clock::now();
-      if (orphans)
-        emitter_.enqueue(step_->x0.data(), step_->x1.data(), static_cast<const TrianglePair*>(nullptr), 0, nullptr,
-                         OrphanRange{first, count}, boxes_current_);
-      else
-        emitter_.enqueue(step_->x0.data(), step_->x1.data(), candidates + first, count, nullptr, OrphanRange{}, boxes_current_);
-      boxes_current_ = true;  // the feature boxes are this step's from the first part on
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
-      const auto counted = emitter_.counted();
-      const std::size_t pairs = counted.first + counted.second;
-      std::size_t allowed = narrow_allowance();
-      const std::size_t need = pairs * bytes_per_pair + count * StreamingPolicy::kBytesPerCandidate;
-      // Before refusing, the front being recorded for the next step goes: it is an optimisation,
-      // and without this a step from a grown front could refuse a budget that earlier steps met.
-      if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed && give_up_next_front()) allowed = narrow_allowance();
-      if (allowed < StreamingPolicy::kLeastPartBytes && need > allowed)
-        throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(params_.device_memory_budget) +
-                    " bytes leaves " + std::to_string(allowed) + " for the feature pairs and the narrow phase (the mesh's data take " +
-                    std::to_string(resident_bytes()) + ", the traversal " + std::to_string(traversal_.device_bytes()) +
-                    "); give it at least " + std::to_string(held_beside_parts() + StreamingPolicy::kLeastPartBytes) + " bytes");
-      // The items a part of this density may have (with a margin: density varies along the list).
-      // Parts are sized from it both ways, so they neither overrun nor stay small.
-      const std::size_t fits =
-          need ? std::max<std::size_t>(1, static_cast<std::size_t>(StreamingPolicy::kPartMargin * static_cast<double>(count) *
-                                                                   static_cast<double>(allowed) / static_cast<double>(need)))
-               : part;
-      if (count > 1 && need > allowed) {
-        part = std::min(fits, count - 1);
-        ++stats.reruns;
-        stats.features_ms += ms_since(t);
-        continue;
-      }
-      if (count) part = std::min(fits, cap);
-      if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
-      stats.feature_pairs_vf += emitter_.num_vf();
-      stats.feature_pairs_ee += emitter_.num_ee();
-      stats.features_ms += ms_since(t);
-      first += count;
-      if (count == 0) break;  // nothing to test (the feature boxes only)
-      t = clock::now();
-      narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd);
-      gather_hits();
-      stats.narrow_ms += ms_since(t);
-      ++stats.narrow_parts;
-    }
-    if (n) estimate = part;
-  }
-
-  // Adds the narrow phase's last run to what the step's parts found.
-  void gather_hits() {
-    Outcome& o = gathered_outcome_;
-    const bool pairs = params_.mode != CcdMode::earliest;
-    const std::size_t found[2] = {narrow_.num_vf_hits(), narrow_.num_ee_hits()};
-    const FeatureHit<T>* hits[2] = {narrow_.vf_hits(), narrow_.ee_hits()};
-    for (int k = 0; k < 2 && pairs; ++k) {
-      if (!found[k]) continue;
-      gathered_[k].resize_keep(o.num_hits[k] + found[k], (o.num_hits[k] + found[k]) * 3 / 2);
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(gathered_[k].data() + o.num_hits[k], hits[k], found[k] * sizeof(FeatureHit<T>),
-                                        cudaMemcpyDeviceToDevice));
-      o.num_hits[k] += found[k];
-    }
-    o.earliest = std::min(o.earliest, narrow_.earliest_toi());
-    o.gave_up += narrow_.gave_up();
-    o.survivors += narrow_.survivors();
-    o.warp_searches += narrow_.warp_searches();
-    for (int k = 0; k < 2; ++k) add_counts(o.counts[k], narrow_.counts(k));
-  }
-
 
   std::shared_ptr<const TriangleMesh> mesh_;
   BodyLayout layout_;
@@ -688,3 +396,6 @@ class CcdPipeline {
 };
 
 }  // namespace lwsccd::gpu
+
+#include "lwsccd/pipeline/detail/gpu_whole_step.cuh"
+#include "lwsccd/pipeline/detail/gpu_step_in_parts.cuh"
