@@ -12,7 +12,7 @@
 //   many blocks are idle, a balancing kernel redistributes the queues evenly, looped from the
 //   host (dissertation Algorithms 3.1-3.4).
 // - LazyStealScheduler: persistent blocks with shared stacks and global deques, lazy stealing
-//   (Algorithms 3.7-3.13); see detail/lazy_steal.cuh for why it terminates and why ABA
+//   (Algorithms 3.7-3.13); see detail/lazy_steal_kernel.cuh for why it terminates and why ABA
 //   cannot occur.
 //
 // Every block works on a two-level stack: a shared-memory stack holds the hot top, its oldest

@@ -20,7 +20,7 @@ inline double parse_rational_part(const char* first, const char* last, bool& exa
   ok = !token.empty();
   for (std::size_t i = (token[0] == '-' || token[0] == '+') ? 1 : 0; ok && i < token.size(); ++i)
     ok = token[i] >= '0' && token[i] <= '9';
-  if (!ok || token.size() == 1 && (token[0] == '-' || token[0] == '+')) {
+  if (!ok || (token.size() == 1 && (token[0] == '-' || token[0] == '+'))) {
     ok = false;
     return 0;
   }
