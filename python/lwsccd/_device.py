@@ -1,0 +1,20 @@
+"""Which backends this build of the package has, and the GPU it sees."""
+
+from __future__ import annotations
+
+from . import _lwsccd
+
+
+def built_with_gpu() -> bool:
+    """True when this build of the package has the GPU backend compiled in."""
+    return bool(_lwsccd.built_with_gpu())
+
+
+def gpu_name() -> str:
+    """The first CUDA device's name; "" when there is none or the package has no GPU backend."""
+    return _lwsccd.gpu_name()
+
+
+def gpu_available() -> bool:
+    """True when the GPU backend is compiled in and a CUDA device is present."""
+    return built_with_gpu() and gpu_name() != ""
