@@ -239,3 +239,65 @@ TEST_CASE("cpu::expand: a cut of the traversal whose parts give the whole traver
     REQUIRE(front == whole.front.size());
   }
 }
+
+namespace {
+
+// A backend that records the calls run_stage_sequence makes: `traversal_parts` traversal parts,
+// each followed by `narrow_per_part` narrow-phase parts, then `leftover_parts` narrow-phase parts
+// that no traversal part holds.
+struct RecordingBackend {
+  int traversal_parts = 1, narrow_per_part = 1, leftover_parts = 0;
+  int traversals_done = 0, narrow_left = 0;
+  bool traversal_over = false;
+  std::string calls;
+
+  bool next_traversal_part(std::string&) {
+    calls += "?T ";
+    traversal_over = traversals_done == traversal_parts;
+    if (traversal_over) narrow_left = leftover_parts;
+    return !traversal_over;
+  }
+  bool next_narrow_part(std::string&) {
+    calls += "?N ";
+    if (narrow_left == 0) return false;
+    --narrow_left;
+    return true;
+  }
+  void stage_refit(std::string&) { calls += "refit "; }
+  void stage_traversal(std::string&) {
+    calls += "traversal ";
+    ++traversals_done;
+    narrow_left = narrow_per_part;
+  }
+  void stage_feature_pairs(std::string&) { calls += "features "; }
+  void stage_narrow_phase(std::string&) { calls += "narrow "; }
+  void stage_done(detail::PipelineStage stage, std::string&) { calls += "done" + std::to_string(static_cast<int>(stage)) + " "; }
+  void complete_step(std::string&) { calls += "complete"; }
+};
+
+}  // namespace
+
+TEST_CASE("run_stage_sequence: a whole step is one part of each kind; a step in parts interleaves them, leftovers last",
+          "[pipeline][parts]") {
+  std::string unused;
+  RecordingBackend whole;
+  detail::run_stage_sequence(whole, unused);
+  CHECK(whole.calls ==
+        "refit done0 ?T traversal done1 ?N features done2 narrow done3 ?N ?T ?N complete");
+
+  RecordingBackend parts;
+  parts.traversal_parts = 2;
+  parts.narrow_per_part = 2;
+  parts.leftover_parts = 1;
+  detail::run_stage_sequence(parts, unused);
+  const std::string narrow = "features done2 narrow done3 ";
+  const std::string part = "?T traversal done1 ?N " + narrow + "?N " + narrow + "?N ";
+  CHECK(parts.calls == "refit done0 " + part + part + "?T ?N " + narrow + "?N complete");
+
+  // A traversal part without candidates: no narrow-phase part, the next traversal part follows.
+  RecordingBackend empty;
+  empty.traversal_parts = 2;
+  empty.narrow_per_part = 0;
+  detail::run_stage_sequence(empty, unused);
+  CHECK(empty.calls == "refit done0 ?T traversal done1 ?N ?T traversal done1 ?N ?T ?N complete");
+}
