@@ -220,7 +220,9 @@ __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, con
 // later sibling most of the time: cloth-funnel's longest coplanar edge-edge search (186 tests)
 // evaluates 37 subtrees (CPU count).
 struct WarpInsideSubtree {
-  static constexpr int kDepth = 5;  // levels of a subtree; 2^5 - 1 = 31 intervals
+  static constexpr int kDepth = 5;                         // levels of a subtree
+  static constexpr int kIntervals = (1 << kDepth) - 1;     // its intervals, a lane each
+  static_assert(kIntervals < 32, "lwsccd: WarpInsideSubtree: a subtree's intervals must fit a warp's lanes (and its ballots' bits)");
   int lane = 0, max_level = 0;
   int root_level = -1;
   std::uint32_t root_index = 0;
@@ -238,7 +240,7 @@ struct WarpInsideSubtree {
       const std::uint32_t offset = static_cast<std::uint32_t>(lane + 1 - (1 << d));
       const int lane_level = level + d;
       InsideVerdict v = InsideVerdict::unknown;
-      if (lane < 31 && lane_level <= max_level) v = compute(lane_level, (index << d) | offset);
+      if (lane < kIntervals && lane_level <= max_level) v = compute(lane_level, (index << d) | offset);
       const unsigned bits = static_cast<unsigned>(v);
       low_bits = __ballot_sync(0xffffffffu, bits & 1u);
       high_bits = __ballot_sync(0xffffffffu, bits & 2u);
