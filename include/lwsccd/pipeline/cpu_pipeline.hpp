@@ -84,7 +84,7 @@ class CcdPipeline {
     std::size_t next_seed = 0, seeds_per_part = 0;
     std::vector<NodePair> front;  ///< in parts: the front the parts recorded, kept at the end
     // Narrow-phase parts: the current traversal part's candidates, the next one to test, this
-    // part's range and whether the orphans' pairs (any candidate's) go with it.
+    // part's range and whether the orphans' pairs (those no candidate emits) go with it.
     std::vector<TrianglePair> candidates;
     std::size_t next_candidate = 0, part_first = 0, part_count = 0;
     bool orphans_due = true, orphans_in_part = false;
