@@ -210,6 +210,12 @@ TEST_CASE("CPU pipeline in parts (part_pairs): a cut below the root, traversal a
       REQUIRE(p.stats.narrow_parts > w.stats.triangle_pairs / 500);
       REQUIRE(p.stats.traversal_parts > 1);
       CHECK(w.stats.narrow_parts == 0);
+      // Each stage's time is counted once: the parts' add up to no more than the step's.
+      for (const auto* s : {&w.stats, &p.stats}) {
+        CHECK(s->traverse_ms > 0);
+        CHECK(s->narrow_ms > 0);
+        CHECK(s->refit_ms + s->traverse_ms + s->features_ms + s->narrow_ms <= s->total_ms);
+      }
     }
   }
 }

@@ -208,9 +208,7 @@ class CcdPipeline {
   }
   // A stage's time, measured from the end of the one before (a step in parts adds up its parts').
   void stage_done(lwsccd::detail::PipelineStage stage, StepInProgress& step) {
-    StepStats& stats = step.result.stats;
-    double* times[lwsccd::detail::kPipelineStages] = {&stats.refit_ms, &stats.traverse_ms, &stats.features_ms, &stats.narrow_ms};
-    *times[static_cast<int>(stage)] += ms_since(step.stage_start);
+    lwsccd::detail::add_stage_time(step.result.stats, stage, ms_since(step.stage_start));
     step.stage_start = clock::now();
   }
   void complete_step(StepInProgress& step) {

@@ -262,9 +262,8 @@ class CcdPipeline {
       return;
     }
     using clock = std::chrono::steady_clock;
-    double* times[lwsccd::detail::kPipelineStages] = {&step.stats.refit_ms, &step.stats.traverse_ms, &step.stats.features_ms,
-                                                       &step.stats.narrow_ms};
-    *times[static_cast<int>(stage)] += std::chrono::duration<double, std::milli>(clock::now() - step.stage_start).count();
+    lwsccd::detail::add_stage_time(step.stats, stage,
+                                   std::chrono::duration<double, std::milli>(clock::now() - step.stage_start).count());
     step.stage_start = clock::now();
   }
   // A whole step's one wait: where a count outgrew its buffer, the buffer is grown and what read

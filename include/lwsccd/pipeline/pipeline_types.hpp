@@ -16,6 +16,7 @@
 #include "lwsccd/geometry/mesh.hpp"
 #include "lwsccd/narrow_phase/ccd_query.hpp"
 #include "lwsccd/narrow_phase/narrow_phase.hpp"
+#include "lwsccd/pipeline/stage_sequence.hpp"
 
 namespace lwsccd {
 
@@ -156,6 +157,15 @@ struct StepStats {
   /// next step starts from this step's start instead (as valid a cut), with no rerun of this one.
   bool front_outgrown = false;
 };
+
+namespace detail {
+/// Adds `ms` to the time `stats` keeps for `stage` (a step in parts adds up its parts'; both
+/// backends' stage_done).
+inline void add_stage_time(StepStats& stats, PipelineStage stage, double ms) {
+  double* times[kPipelineStages] = {&stats.refit_ms, &stats.traverse_ms, &stats.features_ms, &stats.narrow_ms};
+  *times[static_cast<int>(stage)] += ms;
+}
+}  // namespace detail
 
 template <class T>
 struct StepResult {
