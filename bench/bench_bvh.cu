@@ -106,13 +106,11 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-14s %10d %-22s %-15s %-6s %11.4f %10.4f - %9.4f %5d %10.1f\n", r.scene.c_str(), r.faces, r.bv.c_str(),
                   r.backend.c_str(), r.op.c_str(), r.median_ms, r.p10_ms, r.p90_ms, r.reps, r.device_bytes / 1048576.0);
-    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::size_t i) {
       const Row& r = rows[i];
-      std::fprintf(f,
-                     "{\"gpu\": \"%s\", \"scene\": \"%s\", \"faces\": %d, \"bv\": \"%s\", \"backend\": \"%s\", \"op\": \"%s\", "
-                     "\"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, \"reps\": %d, \"device_bytes\": %zu}",
-                     prop.name, r.scene.c_str(), r.faces, r.bv.c_str(), r.backend.c_str(), r.op.c_str(), r.median_ms,
-                     r.p10_ms, r.p90_ms, r.reps, r.device_bytes);
+      return lwsccd_bench::Json{{"gpu", prop.name}, {"scene", r.scene}, {"faces", r.faces}, {"bv", r.bv}, {"backend", r.backend},
+                                {"op", r.op}, {"median_ms", r.median_ms}, {"p10_ms", r.p10_ms}, {"p90_ms", r.p90_ms},
+                                {"reps", r.reps}, {"device_bytes", r.device_bytes}};
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-bvh: error: %s\n", e.what());

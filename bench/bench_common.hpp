@@ -4,10 +4,13 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 namespace lwsccd_bench {
 
@@ -76,20 +79,19 @@ inline BenchArgs parse_bench_args(int argc, char** argv, int default_reps, const
   return args;
 }
 
-/// Writes a JSON array to `path` (nothing when it is empty): print_row(file, i) prints object i.
-template <class PrintRow>
-void write_json_rows(const std::string& path, std::size_t n, PrintRow&& print_row) {
+using Json = nlohmann::ordered_json;
+
+/// Writes a JSON array to `path` (nothing when it is empty), one object per row: row(i) makes
+/// object i. Through a JSON library, so any name stays valid JSON and a NaN is written as null.
+template <class MakeRow>
+void write_json_rows(const std::string& path, std::size_t n, MakeRow&& row) {
   if (path.empty()) return;
-  std::FILE* f = std::fopen(path.c_str(), "w");
+  std::ofstream f(path);
   if (!f) throw std::runtime_error("cannot write " + path);
-  std::fprintf(f, "[\n");
-  for (std::size_t i = 0; i < n; ++i) {
-    std::fprintf(f, "  ");
-    print_row(f, i);
-    std::fprintf(f, "%s\n", i + 1 < n ? "," : "");
-  }
-  std::fprintf(f, "]\n");
-  std::fclose(f);
+  f << "[\n";
+  for (std::size_t i = 0; i < n; ++i) f << "  " << Json(row(i)).dump() << (i + 1 < n ? ",\n" : "\n");
+  f << "]\n";
+  if (!f) throw std::runtime_error("error writing " + path);
 }
 
 }  // namespace lwsccd_bench

@@ -93,14 +93,11 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-18s %-20s %-7s %11zu %10zu %8zu %11.3f %10.3f - %8.3f %16.9g\n", r.scene.c_str(), r.method.c_str(),
                   r.precision.c_str(), r.pairs, r.hits, r.gave_up, r.median_ms, r.p10_ms, r.p90_ms, r.earliest);
-    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::size_t i) {
       const Row& r = rows[i];
-      std::fprintf(f,
-                     "{\"gpu\": \"%s\", \"scene\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"pairs\": %zu, "
-                     "\"hits\": %zu, \"gave_up\": %zu, \"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, "
-                     "\"earliest_toi\": %.17g, \"reps\": %d}",
-                     prop.name, r.scene.c_str(), r.method.c_str(), r.precision.c_str(), r.pairs, r.hits, r.gave_up,
-                     r.median_ms, r.p10_ms, r.p90_ms, r.earliest, r.reps);
+      return lwsccd_bench::Json{{"gpu", prop.name}, {"scene", r.scene}, {"method", r.method}, {"precision", r.precision},
+                                {"pairs", r.pairs}, {"hits", r.hits}, {"gave_up", r.gave_up}, {"median_ms", r.median_ms},
+                                {"p10_ms", r.p10_ms}, {"p90_ms", r.p90_ms}, {"earliest_toi", r.earliest}, {"reps", r.reps}};
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-narrow: error: %s\n", e.what());

@@ -42,6 +42,7 @@ struct Row {
   lwsccd::CcdMode mode = lwsccd::CcdMode::contacts;
   int steps_measured = 0;
   double total = 0, refit = 0, traverse = 0, features = 0, narrow = 0;
+  double p10_total = 0, p90_total = 0;  // 10th and 90th percentiles of the measured steps' totals
   double mean_total = 0;  // mean over the measured steps
   std::size_t rebuilds = 0, restarts = 0;  // measured steps that rebuilt the BVH / traversed from the root
   std::vector<lwsccd::StepStats> steps;    // every measured step's stats, in order (what the mean averages)
@@ -97,6 +98,12 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       return lwsccd_bench::median(v);
     };
     r.total = med(&lwsccd::StepStats::total_ms);
+    {
+      std::vector<double> totals;
+      for (std::size_t i = from; i < to; ++i) totals.push_back(outcomes[i].stats.total_ms);
+      r.p10_total = lwsccd_bench::percentile(totals, 0.1);
+      r.p90_total = lwsccd_bench::percentile(totals, 0.9);
+    }
     for (std::size_t i = from; i < to; ++i) {
       const lwsccd::StepStats& st = outcomes[i].stats;
       r.mean_total += st.total_ms / double(to - from);
@@ -163,14 +170,31 @@ std::vector<std::size_t> parse_sizes(const std::string& text) {
 int main(int argc, char** argv) {
   const auto args = lwsccd_bench::parse_bench_args(
       argc, argv, 5, {"--sweep=", "--device=", "--sizes="},
-      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default|front] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
+      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default|front[,...]] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
       "                             [--data DIR] [--reps N] [--json FILE]");
   try {
+    // One sweep or several, comma-separated (one run, one JSON file: what run_benchmarks.sh uses).
     const std::string sweep = args.value("--sweep", "all");
-    if (sweep != "all" && sweep != "schedulers" && sweep != "methods" && sweep != "modes" && sweep != "scaling" &&
-        sweep != "default" && sweep != "front")
-      throw lwsccd::InputError("command line", "--sweep",
-                               "expected all, schedulers, methods, modes, scaling, default or front, got '" + sweep + "'");
+    std::vector<std::string> sweeps;
+    {
+      std::stringstream in(sweep);
+      std::string item;
+      while (std::getline(in, item, ',')) {
+        if (item != "all" && item != "schedulers" && item != "methods" && item != "modes" && item != "scaling" &&
+            item != "default" && item != "front")
+          throw lwsccd::InputError("command line", "--sweep",
+                                   "expected all, schedulers, methods, modes, scaling, default or front (or a comma-separated list), got '" +
+                                       item + "'");
+        sweeps.push_back(item);
+      }
+      if (sweeps.empty()) throw lwsccd::InputError("command line", "--sweep", "no sweep named");
+    }
+    // `all` means schedulers, methods, modes and scaling.
+    auto wants = [&](const std::string& name) {
+      for (const std::string& w : sweeps)
+        if (w == name || (w == "all" && name != "default" && name != "front")) return true;
+      return false;
+    };
     const std::string gpu = ccd_app::gpu_name();
     const std::string device = args.value("--device", gpu.empty() ? "cpu" : "gpu");
     if (device == "gpu" && gpu.empty()) {
@@ -210,7 +234,7 @@ int main(int argc, char** argv) {
     const bool have_data = std::ifstream(dir + "/scenes/cloth-ball/frames/cloth_ball92.ply").good();
     if (!have_data) std::printf("(no shared data at %s: built-in scenes only)\n", dir.c_str());
 
-    if (sweep == "all" || sweep == "schedulers") {
+    if (wants("schedulers")) {
       const std::vector<std::string> schedulers =
           device == "gpu" ? std::vector<std::string>{"static", "gproximity", "lazy"} : std::vector<std::string>{"lazy"};
       auto sweep_policies = [&](const std::function<Scenario()>& make) {
@@ -231,7 +255,7 @@ int main(int argc, char** argv) {
       std::shared_ptr<lwsccd::ClothBallSimulation> sim;
       sweep_policies([&] { return builtin_scenario(100000, sim); });
     }
-    if ((sweep == "all" || sweep == "methods") && have_data) {
+    if (wants("methods") && have_data) {
       for (const auto& name : truth_scenes)
         for (const char* method : {"certified", "filtered-inclusion", "inclusion", "cubic"})
           for (const char* precision : {"double", "float"}) {
@@ -241,7 +265,7 @@ int main(int argc, char** argv) {
             measure(data_scenario(name), "methods", p, device, args.reps, rows);
           }
     }
-    if (sweep == "all" || sweep == "modes") {
+    if (wants("modes")) {
       auto sweep_modes = [&](const std::function<Scenario()>& make) {
         for (const char* precision : {"double", "float"}) {
           ccd_app::PolicyChoice p;
@@ -257,7 +281,7 @@ int main(int argc, char** argv) {
       std::shared_ptr<lwsccd::ClothBallSimulation> sim;
       sweep_modes([&] { return builtin_scenario(100000, sim); });
     }
-    if (sweep == "default") {
+    if (wants("default")) {
       if (have_data) {
         for (const auto& name : truth_scenes)
           measure(data_scenario(name), "default", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true);
@@ -266,7 +290,7 @@ int main(int argc, char** argv) {
       std::shared_ptr<lwsccd::ClothBallSimulation> sim;
       measure(builtin_scenario(100000, sim), "default", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts, true);
     }
-    if (sweep == "front") {
+    if (wants("front")) {
       for (const double limit : {1.25, 1.5, 2.0, 3.0, 1e9}) {
         lwsccd::PipelineParams params;
         params.front_growth_limit = limit;
@@ -278,43 +302,67 @@ int main(int argc, char** argv) {
                 lwsccd::CcdMode::contacts, true, params);
       }
     }
-    if (sweep == "all" || sweep == "scaling") {
+    if (wants("scaling")) {
       for (const std::size_t n : sizes) {
         std::shared_ptr<lwsccd::ClothBallSimulation> sim;
         measure(builtin_scenario(n, sim), "scaling", ccd_app::PolicyChoice{}, device, args.reps, rows);
       }
     }
 
-    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::size_t i) {
       const Row& r = rows[i];
-      std::fprintf(f,
-                   "{\"device\": \"%s\", \"sweep\": \"%s\", \"scene\": \"%s\", \"triangles\": %d, \"bv\": \"%s\", "
-                   "\"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", \"mode\": \"%s\", \"step\": \"%s\", \"steps_measured\": %d, "
-                   "\"total_ms\": %.4f, \"mean_total_ms\": %.4f, \"refit_ms\": %.4f, \"traverse_ms\": %.4f, \"features_ms\": %.4f, \"narrow_ms\": %.4f, "
-                   "\"bvtt_nodes\": %zu, \"front\": %zu, \"triangle_pairs\": %zu, \"feature_pairs\": %zu, \"contacts\": %zu, "
-                   "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
-                   "\"peak_device_bytes\": %zu, \"reruns\": %zu",
-                   device == "gpu" ? gpu.c_str() : "CPU", r.sweep.c_str(), r.scene.c_str(), r.triangles, r.policies.bv.c_str(),
-                   device == "gpu" ? r.policies.scheduler.c_str() : "cpu-work-stealing", r.policies.method.c_str(),
-                   r.policies.precision.c_str(), mode_name(r.mode), r.step.c_str(), r.steps_measured, r.total, r.mean_total, r.refit, r.traverse, r.features,
-                   r.narrow, r.last.bvtt_nodes, r.last.front_size, r.last.triangle_pairs,
-                   r.last.feature_pairs_vf + r.last.feature_pairs_ee, r.last.hits_vf + r.last.hits_ee, r.last.gave_up,
-                   r.last.narrow_survivors, r.last.narrow_warp_searches, r.earliest_toi, r.last.peak_device_bytes, r.last.reruns);
-      if (r.has_truth) std::fprintf(f, ", \"false_negatives\": %zu, \"false_positives\": %zu", r.truth.false_negatives,
-                                  r.truth.false_positives);
+      lwsccd_bench::Json j{{"device", device == "gpu" ? gpu : std::string("CPU")},
+                           {"sweep", r.sweep},
+                           {"scene", r.scene},
+                           {"triangles", r.triangles},
+                           {"bv", r.policies.bv},
+                           {"scheduler", device == "gpu" ? r.policies.scheduler : std::string("cpu-work-stealing")},
+                           {"method", r.policies.method},
+                           {"precision", r.policies.precision},
+                           {"mode", mode_name(r.mode)},
+                           {"step", r.step},
+                           {"steps_measured", r.steps_measured},
+                           {"total_ms", r.total},
+                           {"p10_total_ms", r.p10_total},
+                           {"p90_total_ms", r.p90_total},
+                           {"mean_total_ms", r.mean_total},
+                           {"refit_ms", r.refit},
+                           {"traverse_ms", r.traverse},
+                           {"features_ms", r.features},
+                           {"narrow_ms", r.narrow},
+                           {"bvtt_nodes", r.last.bvtt_nodes},
+                           {"front", r.last.front_size},
+                           {"triangle_pairs", r.last.triangle_pairs},
+                           {"feature_pairs", r.last.feature_pairs_vf + r.last.feature_pairs_ee},
+                           {"contacts", r.last.hits_vf + r.last.hits_ee},
+                           {"gave_up", r.last.gave_up},
+                           {"narrow_survivors", r.last.narrow_survivors},
+                           {"narrow_warp_searches", r.last.narrow_warp_searches},
+                           {"earliest_toi", r.earliest_toi},
+                           {"peak_device_bytes", r.last.peak_device_bytes},
+                           {"reruns", r.last.reruns}};
+      if (r.has_truth) {
+        j["false_negatives"] = r.truth.false_negatives;
+        j["false_positives"] = r.truth.false_positives;
+      }
       const lwsccd::NarrowPhaseCounts& v = r.last.narrow_vf;
       const lwsccd::NarrowPhaseCounts& e = r.last.narrow_ee;
-      std::fprintf(f, ", \"certified_hits\": %zu, \"certified_misses\": %zu, \"fallbacks\": %zu, \"screened\": %zu",
-                   v.certified_hits + e.certified_hits, v.certified_misses + e.certified_misses, v.fallbacks + e.fallbacks,
-                   v.screened + e.screened);
-      std::fprintf(f, ", \"rebuilds\": %zu, \"restarts_from_root\": %zu, \"front_growth_limit\": %g", r.rebuilds, r.restarts,
-                   r.front_growth_limit);
+      j["certified_hits"] = v.certified_hits + e.certified_hits;
+      j["certified_misses"] = v.certified_misses + e.certified_misses;
+      j["fallbacks"] = v.fallbacks + e.fallbacks;
+      j["screened"] = v.screened + e.screened;
+      // Where the pairs were decided: single precision, double, the fallback search.
+      j["decided_fp32"] = v.single_misses + e.single_misses;
+      j["decided_fp64"] = v.pairs + e.pairs - v.single_misses - e.single_misses - v.fallbacks - e.fallbacks;
+      j["rebuilds"] = r.rebuilds;
+      j["restarts_from_root"] = r.restarts;
+      j["front_growth_limit"] = r.front_growth_limit;
       // Every measured step, in order: its total and stages (ms), whether it traversed from the
       // root, its front and BVTT nodes (what a mean over steps hides).
       auto list = [&](const char* name, auto value) {
-        std::fprintf(f, ", \"%s\": [", name);
-        for (std::size_t k = 0; k < r.steps.size(); ++k) std::fprintf(f, "%s%.10g", k ? ", " : "", double(value(r.steps[k])));
-        std::fprintf(f, "]");
+        lwsccd_bench::Json a = lwsccd_bench::Json::array();
+        for (const lwsccd::StepStats& st : r.steps) a.push_back(value(st));
+        j[name] = std::move(a);
       };
       using S = lwsccd::StepStats;
       list("step_total_ms", [](const S& st) { return st.total_ms; });
@@ -328,7 +376,7 @@ int main(int argc, char** argv) {
       list("step_front_outgrown", [](const S& st) { return st.front_outgrown ? 1 : 0; });
       list("step_front", [](const S& st) { return st.front_size; });
       list("step_bvtt_nodes", [](const S& st) { return st.bvtt_nodes; });
-      std::fprintf(f, "}");
+      return j;
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-pipeline: error: %s\n", e.what());

@@ -232,7 +232,7 @@ int main(int argc, char** argv) {
       for (const int budget : {32, 64, 128, 0})
         rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>(budget ? "lazy, walks of " + std::to_string(budget) : "lazy, whole rays",
                                                            kind, with_inverse, budget, rays, best, seeds, reference, args.reps));
-      // RayWalkLazySteal without sharing on demand (its default until session nineteen).
+      // RayWalkLazySteal without sharing on demand.
       using WalkNeverHungry = gpu::LazyStealScheduler<128, 4096, 8192, 512, 2048, 6, 8, 256, 16, true, true, 512, 0>;
       rows.push_back(walk_row<WalkNeverHungry, 14>("lazy, walks of 64, share off", kind, with_inverse, 64, rays, best, seeds,
                                                    reference, args.reps));
@@ -281,12 +281,11 @@ int main(int argc, char** argv) {
     for (const Row& r : rows)
       std::printf("%-30s %-36s %10zu %10.3f %12.1f %11zu %11zu %6.3f %s\n", r.rays.c_str(), r.method.c_str(), r.count, r.median_ms,
                   r.count / r.median_ms / 1e3, r.items, r.flat_items, r.busy_share, r.same ? "yes" : "NO");
-    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
-      std::fprintf(f, "{\"gpu\": \"%s\", \"rays\": \"%s\", \"method\": \"%s\", \"count\": %zu, \"median_ms\": %.6f, "
-                        "\"mrays_per_s\": %.3f, \"same_hits\": %s, \"items\": %zu, \"flat_start_items\": %zu, \"busy_share\": %.4f}",
-                     prop.name, rows[i].rays.c_str(), rows[i].method.c_str(), rows[i].count, rows[i].median_ms,
-                     rows[i].count / rows[i].median_ms / 1e3, rows[i].same ? "true" : "false", rows[i].items, rows[i].flat_items,
-                     rows[i].busy_share);
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::size_t i) {
+      const Row& r = rows[i];
+      return lwsccd_bench::Json{{"gpu", prop.name}, {"rays", r.rays}, {"method", r.method}, {"count", r.count},
+                                {"median_ms", r.median_ms}, {"mrays_per_s", r.count / r.median_ms / 1e3}, {"same_hits", r.same},
+                                {"items", r.items}, {"flat_start_items", r.flat_items}, {"busy_share", r.busy_share}};
     });
     for (const Row& r : rows)
       if (!r.same) return 2;

@@ -130,7 +130,7 @@ void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& s
                   pairs / seq.num_steps(), front});
 }
 
-// The default lazy scheduler with another kFlatStartPerBlock (0: no flat start, as before 2026-11-24).
+// The default lazy scheduler with another kFlatStartPerBlock (0: no flat start).
 template <int kPerBlock>
 using FlatFrom = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, kPerBlock>;
 template <int kAbove>
@@ -141,7 +141,7 @@ using Hungry = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16
 template <class BV>
 void lazy_variants(const char* bv_name, const std::string& name, const Step& step, int reps, std::vector<Row>& rows) {
   if (std::string(bv_name) != "AABB float") return;
-  // The defaults before 2026-11-23 (128 threads, 2 blocks per SM, batches of 256), and two neighbours.
+  // Smaller blocks (128 threads, 2 blocks per SM, batches of 256), and two neighbours of the default shape.
   scene_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<256, 2048, 8192, 256, 512, 4, 8>, BV>("lazy-256t-4sm", bv_name, name, step, reps, rows);
   scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 0>, BV>("lazy-seeds0", bv_name, name, step, reps, rows);
@@ -171,21 +171,21 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
     scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
     scene_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, name, step, reps, rows);
     lazy_variants<BV>(bv_name, name, step, reps, rows);
-    scene_rows<Hungry<0>, BV>("lazy-share-off", bv_name, name, step, reps, rows);  // the default until session nineteen
+    scene_rows<Hungry<0>, BV>("lazy-share-off", bv_name, name, step, reps, rows);  // no sharing on demand
     independent_rows<BV>(bv_name, name, step, reps, rows);
   }
-  // The steals before 2026-11-24 (the fullest victim, waiting for its lock, no flat start, no sharing on demand; the
-  // variants of each change alone are in docs/TRAVERSAL.md), and the kernel left to the
-  // compiler's register choice (OBB: 113, so one block per SM) instead of compiled to fit the
-  // default's two.
-  using Before = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false, true, 0, 0>;
+  // The plain lazy scheduler (a thief takes from the fullest victim and waits for its lock; no
+  // flat start, no sharing on demand: the variants of each refinement alone are above), and the
+  // kernel left to the compiler's register choice (OBB: 113, so one block per SM) instead of
+  // compiled to fit the default's two.
+  using Plain = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false, true, 0, 0>;
   using NoFit = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>;
   for (const auto& [name, step] : scenes) {
-    scene_rows<Before, BV>("lazy-before", bv_name, name, step, reps, rows);
+    scene_rows<Plain, BV>("lazy-plain", bv_name, name, step, reps, rows);
     scene_rows<NoFit, BV>("lazy-nofit", bv_name, name, step, reps, rows);
   }
   sequence_rows<NoFit, BV>("lazy-nofit", bv_name, horse, rows);
-  sequence_rows<Before, BV>("lazy-before", bv_name, horse, rows);
+  sequence_rows<Plain, BV>("lazy-plain", bv_name, horse, rows);
   sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
   sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
   sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);
@@ -281,14 +281,12 @@ int main(int argc, char** argv) {
       std::printf("%-32s %-11s %-11s %-7s %10.3f %10.3f - %8.3f %11zu %10zu %10zu %6.2f %8llu %8llu\n", r.scene.c_str(),
                   r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms, r.p90_ms, r.nodes, r.pairs,
                   r.front, r.busy_share, r.steals, r.failed_steals);
-    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::FILE* f, std::size_t i) {
+    lwsccd_bench::write_json_rows(args.json, rows.size(), [&](std::size_t i) {
       const Row& r = rows[i];
-      std::fprintf(f,
-                     "{\"gpu\": \"%s\", \"scene\": \"%s\", \"scheduler\": \"%s\", \"bv\": \"%s\", \"start\": \"%s\", "
-                     "\"median_ms\": %.6f, \"p10_ms\": %.6f, \"p90_ms\": %.6f, \"bvtt_nodes\": %zu, \"pairs\": %zu, "
-                     "\"front\": %zu, \"busy_share\": %.4f, \"steals\": %llu, \"failed_steals\": %llu}",
-                     prop.name, r.scene.c_str(), r.scheduler.c_str(), r.bv.c_str(), r.start.c_str(), r.median_ms, r.p10_ms,
-                     r.p90_ms, r.nodes, r.pairs, r.front, r.busy_share, r.steals, r.failed_steals);
+      return lwsccd_bench::Json{{"gpu", prop.name}, {"scene", r.scene}, {"scheduler", r.scheduler}, {"bv", r.bv},
+                                {"start", r.start}, {"median_ms", r.median_ms}, {"p10_ms", r.p10_ms}, {"p90_ms", r.p90_ms},
+                                {"bvtt_nodes", r.nodes}, {"pairs", r.pairs}, {"front", r.front}, {"busy_share", r.busy_share},
+                                {"steals", r.steals}, {"failed_steals", r.failed_steals}};
     });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "lwsccd-bench-traverse: error: %s\n", e.what());

@@ -48,13 +48,13 @@ inline StepSource open_source(const Options& o, Inputs& in) {
   } else if (o.inputs.size() == 2) {
     in.two_frames = std::make_unique<lwsccd::Step>(lwsccd::load_step(o.inputs[0], o.inputs[1]));
     src.mesh = in.two_frames->mesh;
-    src.num_steps = 1;
+    src.num_steps = o.steps ? o.steps : 1;  // K > 1: the same step again (a steady state)
     src.description = "two frames: " + o.inputs[0] + " -> " + o.inputs[1];
     src.step = [&in](std::size_t) { return *in.two_frames; };
   } else if (fs::is_directory(fs::path(o.inputs[0]) / "frames")) {
     in.scene = std::make_unique<lwsccd::Scene>(lwsccd::load_scene(o.inputs[0]));
     src.mesh = in.scene->step.mesh;
-    src.num_steps = 1;
+    src.num_steps = o.steps ? o.steps : 1;  // K > 1: the same step again (a steady state)
     src.truth = in.scene->has_ground_truth ? &in.scene->truth : nullptr;
     src.description = "scene " + in.scene->name + " (" + in.scene->step.name + ")" +
                       (src.truth ? ", with ground truth" : ", no ground truth");

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "ccd_app.hpp"
 #include "ccd_inputs.hpp"
 #include "ccd_options.hpp"
@@ -21,6 +23,21 @@ struct StepReport {
   bool checked = false;
   std::size_t check_differences = 0;
 };
+
+/// Where a step's feature pairs were decided: the single-precision screen, the double-precision
+/// certified path (its screen and refinement), the fallback search.
+struct Decided {
+  std::size_t single = 0, double_ = 0, fallback = 0;
+};
+inline Decided decided_by(const lwsccd::StepStats& s) {
+  Decided d;
+  for (const lwsccd::NarrowPhaseCounts* c : {&s.narrow_vf, &s.narrow_ee}) {
+    d.single += c->single_misses;
+    d.fallback += c->fallbacks;
+    d.double_ += c->pairs - c->single_misses - c->fallbacks;
+  }
+  return d;
+}
 
 inline const char* mode_name(lwsccd::CcdMode m) {
   return m == lwsccd::CcdMode::earliest ? "earliest" : m == lwsccd::CcdMode::set ? "set" : "contacts";
@@ -42,11 +59,14 @@ inline void print_table(const StepSource& src, const std::string& backend, const
                 s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.bvtt_nodes, s.front_size,
                 s.triangle_pairs, s.feature_pairs_vf, s.feature_pairs_ee, s.hits_vf, s.hits_ee,
                 r.outcome.contacts.earliest_toi);
-    if (o.policies.method == "certified")
+    if (o.policies.method == "certified") {
       std::printf("  narrow phase: screened %zu + %zu, certified hits %zu + %zu, certified misses %zu + %zu, "
                   "fallbacks %zu + %zu (VF + EE)\n",
                   s.narrow_vf.screened, s.narrow_ee.screened, s.narrow_vf.certified_hits, s.narrow_ee.certified_hits,
                   s.narrow_vf.certified_misses, s.narrow_ee.certified_misses, s.narrow_vf.fallbacks, s.narrow_ee.fallbacks);
+      const Decided d = decided_by(s);
+      std::printf("  pairs decided in FP32 %zu, in FP64 %zu, by the fallback %zu\n", d.single, d.double_, d.fallback);
+    }
     if (s.narrow_survivors)
       std::printf("  narrow phase: %zu pairs past the first pass, %zu of them searched by a warp\n", s.narrow_survivors,
                   s.narrow_warp_searches);
@@ -69,35 +89,57 @@ inline void print_table(const StepSource& src, const std::string& backend, const
   }
 }
 
+// JSON through a library, so that any input name (quotes, backslashes) and any number (NaN, which
+// JSON cannot hold, is written as null) still make a valid document.
 inline void print_json(const StepSource& src, const std::string& backend, const Options& o, const std::vector<StepReport>& reports) {
-  std::printf("{\n  \"input\": \"%s\", \"vertices\": %d, \"triangles\": %d,\n", src.description.c_str(),
-              src.mesh->num_vertices(), src.mesh->num_faces());
-  std::printf("  \"backend\": \"%s\", \"bv\": \"%s\", \"scheduler\": \"%s\", \"method\": \"%s\", \"precision\": \"%s\", "
-              "\"mode\": \"%s\", \"front_tracking\": %s,\n  \"steps\": [\n",
-              backend.c_str(), o.policies.bv.c_str(), backend == "CPU" ? "work-stealing" : o.policies.scheduler.c_str(),
-              o.policies.method.c_str(), o.policies.precision.c_str(), mode_name(o.params.mode),
-              o.params.front_tracking ? "true" : "false");
-  for (std::size_t i = 0; i < reports.size(); ++i) {
-    const StepReport& r = reports[i];
+  nlohmann::ordered_json doc;
+  doc["input"] = src.description;
+  doc["vertices"] = src.mesh->num_vertices();
+  doc["triangles"] = src.mesh->num_faces();
+  doc["backend"] = backend;
+  doc["bv"] = o.policies.bv;
+  doc["scheduler"] = backend == "CPU" ? std::string("work-stealing") : o.policies.scheduler;
+  doc["method"] = o.policies.method;
+  doc["precision"] = o.policies.precision;
+  doc["mode"] = mode_name(o.params.mode);
+  doc["front_tracking"] = o.params.front_tracking;
+  doc["steps"] = nlohmann::ordered_json::array();
+  for (const StepReport& r : reports) {
     const lwsccd::StepStats& s = r.outcome.stats;
-    std::printf("    {\"name\": \"%s\", \"ms\": {\"total\": %.4f, \"refit\": %.4f, \"traverse\": %.4f, \"features\": %.4f, "
-                "\"narrow\": %.4f}, \"rebuilt\": %s, \"restarted_from_root\": %s, \"bvtt_nodes\": %zu, \"front\": %zu, "
-                "\"triangle_pairs\": %zu, \"vf_pairs\": %zu, \"ee_pairs\": %zu, \"vf_hits\": %zu, \"ee_hits\": %zu, "
-                "\"gave_up\": %zu, \"narrow_survivors\": %zu, \"narrow_warp_searches\": %zu, \"earliest_toi\": %.17g, "
-                "\"peak_device_bytes\": %zu, \"traversal_parts\": %zu, \"narrow_parts\": %zu, \"certified\": {\"vf\": [%zu, %zu, %zu, %zu], \"ee\": [%zu, %zu, %zu, %zu]}",
-                r.name.c_str(), s.total_ms, s.refit_ms, s.traverse_ms, s.features_ms, s.narrow_ms, s.rebuilt ? "true" : "false",
-                s.restarted_from_root ? "true" : "false", s.bvtt_nodes, s.front_size, s.triangle_pairs, s.feature_pairs_vf,
-                s.feature_pairs_ee, s.hits_vf, s.hits_ee, s.gave_up, s.narrow_survivors, s.narrow_warp_searches,
-                r.outcome.contacts.earliest_toi, s.peak_device_bytes, s.traversal_parts, s.narrow_parts, s.narrow_vf.certified_hits, s.narrow_vf.certified_misses,
-                s.narrow_vf.fallbacks, s.narrow_vf.screened, s.narrow_ee.certified_hits, s.narrow_ee.certified_misses,
-                s.narrow_ee.fallbacks, s.narrow_ee.screened);
+    nlohmann::ordered_json step;
+    step["name"] = r.name;
+    step["ms"] = {{"total", s.total_ms}, {"refit", s.refit_ms}, {"traverse", s.traverse_ms}, {"features", s.features_ms},
+                  {"narrow", s.narrow_ms}};
+    step["rebuilt"] = s.rebuilt;
+    step["restarted_from_root"] = s.restarted_from_root;
+    step["bvtt_nodes"] = s.bvtt_nodes;
+    step["front"] = s.front_size;
+    step["triangle_pairs"] = s.triangle_pairs;
+    step["vf_pairs"] = s.feature_pairs_vf;
+    step["ee_pairs"] = s.feature_pairs_ee;
+    step["vf_hits"] = s.hits_vf;
+    step["ee_hits"] = s.hits_ee;
+    step["gave_up"] = s.gave_up;
+    step["narrow_survivors"] = s.narrow_survivors;
+    step["narrow_warp_searches"] = s.narrow_warp_searches;
+    step["earliest_toi"] = r.outcome.contacts.earliest_toi;
+    step["peak_device_bytes"] = s.peak_device_bytes;
+    step["traversal_parts"] = s.traversal_parts;
+    step["narrow_parts"] = s.narrow_parts;
+    // Per feature kind: certified hits, certified misses, fallbacks, screened.
+    auto certified = [](const lwsccd::NarrowPhaseCounts& c) {
+      return nlohmann::ordered_json::array({c.certified_hits, c.certified_misses, c.fallbacks, c.screened});
+    };
+    step["certified"] = {{"vf", certified(s.narrow_vf)}, {"ee", certified(s.narrow_ee)}};
+    const Decided d = decided_by(s);
+    step["decided"] = {{"fp32", d.single}, {"fp64", d.double_}, {"fallback", d.fallback}};
     if (r.has_truth)
-      std::printf(", \"truth\": {\"true_contacts\": %zu, \"false_negatives\": %zu, \"false_positives\": %zu}", r.truth.true_contacts,
-                  r.truth.false_negatives, r.truth.false_positives);
-    if (r.checked) std::printf(", \"check_differences\": %zu", r.check_differences);
-    std::printf("}%s\n", i + 1 < reports.size() ? "," : "");
+      step["truth"] = {{"true_contacts", r.truth.true_contacts}, {"false_negatives", r.truth.false_negatives},
+                       {"false_positives", r.truth.false_positives}};
+    if (r.checked) step["check_differences"] = r.check_differences;
+    doc["steps"].push_back(std::move(step));
   }
-  std::printf("  ]\n}\n");
+  std::printf("%s\n", doc.dump(2).c_str());
 }
 
 }  // namespace ccd_app

@@ -150,6 +150,17 @@ struct ShrunkPolicy : CertifiedPolicy {
   static constexpr double kInsideBound = kInside / 100.0;
 };
 
+// The sound policy with the single-precision screen's input bound scaled by the given percentage.
+template <int kInput>
+struct ShrunkInputPolicy : CertifiedPolicy {
+  static constexpr double kSingleInputBound = kInput / 100.0;
+};
+
+// The double screen alone (no single-precision screen in front of it).
+struct DoubleScreenPolicy : CertifiedPolicy {
+  static constexpr bool kSingleFirst = false;
+};
+
 // The halving search alone, without the certain descent.
 struct NoDescentPolicy : CertifiedPolicy {
   static constexpr bool kCertainDescent = false;

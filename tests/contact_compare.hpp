@@ -27,13 +27,14 @@ void require_same_contacts(const lwsccd::NarrowPhaseResult<T>& gpu, const lwsccd
   REQUIRE(gpu.gave_up == cpu.gave_up);
 }
 
-/// The certified path's counts (certified hits and misses, fallbacks, screened pairs) of two backends.
+/// The certified path's counts (certified hits and misses, fallbacks, screened pairs, FP32 misses) of two backends.
 inline void require_same_counts(const lwsccd::NarrowPhaseCounts& a, const lwsccd::NarrowPhaseCounts& b) {
   REQUIRE(a.pairs == b.pairs);
   REQUIRE(a.certified_hits == b.certified_hits);
   REQUIRE(a.certified_misses == b.certified_misses);
   REQUIRE(a.fallbacks == b.fallbacks);
   REQUIRE(a.screened == b.screened);
+  REQUIRE(a.single_misses == b.single_misses);
 }
 
 }  // namespace lwsccd_test

@@ -194,6 +194,170 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
   CHECK(violations_mutated > 0);
 }
 
+TEST_CASE("single precision: the input bound covers rounding to float; without it a contact is lost (mutation check)",
+          "[narrow][certified][single]") {
+  // relative_single against the exact relative query (long double holds x - o exactly for these
+  // doubles): every coordinate within single_input_perturbation() m_k, with room for the double
+  // path's own perturbation u_T |x|; the queries far from the origin and of every scale.
+  std::mt19937_64 rng(43);
+  std::uniform_real_distribution<double> unit(-1, 1);
+  const long double p = detail::single_input_perturbation<CertifiedPolicy>();
+  std::size_t outside = 0, samples = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const double scale = std::ldexp(1.0, int(rng() % 40) - 20), offset = std::ldexp(unit(rng), int(rng() % 30) - 10);
+    VertexFaceQuery<double> q;
+    Vec3<double>* pts = &q.p0;
+    for (int i = 0; i < 8; ++i) pts[i] = {offset + unit(rng) * scale, -offset + unit(rng) * scale, unit(rng) * scale};
+    const auto s = detail::relative_single(q);
+    const Vec3<float>* f = s.q.points();
+    for (int i = 0; i < 8; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const long double exact = static_cast<long double>(pts[i][k]) - static_cast<long double>(pts[0][k]);
+        const long double error = std::fabs(static_cast<long double>(f[i][k]) - exact);
+        outside += error + detail::unit_roundoff<double>() * std::fabs(static_cast<long double>(pts[i][k])) > p * s.m[k];
+        ++samples;
+      }
+  }
+  std::printf("  rounding to float: %zu of %zu coordinates outside the bound\n", outside, samples);
+  CHECK(outside == 0);
+
+  // A vertex rising onto a tilted triangle far from the origin, touching it exactly at t = 1.
+  // Rounded to float, the triangle's raised corner rounds up and the vertex's end down, so the
+  // float query ends below the plane: without the input bound (kSingleInputBound 0) the single
+  // screen takes the float query's sign for the input's and answers a miss.
+  std::size_t lost_sound = 0, lost_mutated = 0, cases = 0;
+  for (int e = 8; e <= 14; ++e)
+    for (int corner = 1; corner <= 4; ++corner) {
+      const double o = std::ldexp(1.0, e), half_ulp = std::ldexp(1.0, e - 24);
+      const double h = half_ulp + std::ldexp(half_ulp, -18);  // just over half an ulp of o in float: rounds up
+      const double x = corner / 4.0;                           // the vertex's end: on the plane z = o + h x / 4
+      const VertexFaceQuery<double> q{{o + x, o + 1, o - 1}, {o, o, o}, {o + 4, o, o + h}, {o, o + 4, o},
+                                      {o + x, o + 1, o + h * x / 4}, {o, o, o}, {o + 4, o, o + h}, {o, o + 4, o}};
+      ++cases;
+      lost_sound += detail::certified_screen_single<CertifiedPolicy>(q, CcdParams<double>{}) ||
+                    detail::CertifiedFilter<CertifiedPolicy>::decides_single(q, CcdParams<double>{});
+      lost_mutated += detail::certified_screen_single<ShrunkInputPolicy<0>>(q, CcdParams<double>{}) ||
+                      detail::CertifiedFilter<ShrunkInputPolicy<0>>::decides_single(q, CcdParams<double>{});
+    }
+  std::printf("  contacts at t = 1 that rounding to float separates: %zu; single-precision misses %zu (sound), %zu (input "
+              "bound removed)\n", cases, lost_sound, lost_mutated);
+  CHECK(lost_sound == 0);
+  CHECK(lost_mutated > 0);
+}
+
+TEST_CASE("single-precision screen: never a miss of a true contact, misses for pairs far apart (mutation check)",
+          "[narrow][certified][single]") {
+  // The generated hard cases (exact TOIs; scaled by 2^-60..2^60, translated by 2^20, in double
+  // and float): neither the single screen nor the single filter ever rejects a contact. Without
+  // the inside test's bound the single filter takes contacts on an edge for misses.
+  std::mt19937 rng(20261125);
+  std::size_t contacts = 0, rejected = 0, filtered = 0, filtered_mutated = 0;
+  auto check = [&](const auto& q, const auto& params) {
+    rejected += detail::certified_screen_single<CertifiedPolicy>(q, params);
+    filtered += detail::CertifiedFilter<CertifiedPolicy>::decides_single(q, params);
+    filtered_mutated += detail::CertifiedFilter<ShrunkPolicy<100, 100, 0>>::decides_single(q, params);
+  };
+  for (const Case& base : hard_cases(rng, 12))
+    for (int scale : {0, 60, -60})
+      for (bool translate : {false, true}) {
+        const Case c = transformed(base, int(rng() % 6), int(rng() % 8), scale, translate);
+        ++contacts;
+        if (c.vertex_face) {
+          check(as_query<double, VertexFaceQuery<double>>(c), CcdParams<double>{});
+          check(as_query<float, VertexFaceQuery<float>>(c), CcdParams<float>{});
+        } else {
+          check(as_query<double, EdgeEdgeQuery<double>>(c), CcdParams<double>{});
+          check(as_query<float, EdgeEdgeQuery<float>>(c), CcdParams<float>{});
+        }
+      }
+  std::printf("  hard cases: %zu contacts; single screen misses %zu, single filter misses %zu (sound), %zu (inside bound "
+              "removed)\n", contacts, rejected, filtered, filtered_mutated);
+  CHECK(contacts > 500);
+  CHECK(rejected == 0);
+  CHECK(filtered == 0);
+  CHECK(filtered_mutated > 0);
+
+  // Coplanar motion in a tilted plane (as the double screen's mutation check): a true contact
+  // whose cubic is rounding noise. Sound: never rejected; without the coefficient bound the
+  // single screen takes the noise for a sign.
+  auto rotate = [](const Vec3<long double>& v) {
+    const Vec3<long double> r{(3 * v.x - 4 * v.y) / 5, (4 * v.x + 3 * v.y) / 5, v.z};
+    return Vec3<long double>{r.x, (5 * r.y - 12 * r.z) / 13, (12 * r.y + 5 * r.z) / 13};
+  };
+  std::size_t tilted = 0, rejected_sound = 0, rejected_mutated = 0;
+  for (int n = 0; n < 400; ++n) {
+    const long double y = eighth(rng, 1, 16), s0 = eighth(rng, 8, 64), s1 = eighth(rng, 1, 16);
+    const Vec3<long double> pts[8] = {{-s0, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}, {s1, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}};
+    VertexFaceQuery<double> q;
+    Vec3<double>* out = &q.p0;
+    for (int i = 0; i < 8; ++i) out[i] = (rotate(pts[i]) + Vec3<long double>{1000, -2000, 3000}).cast<double>();
+    ++tilted;
+    rejected_sound += detail::certified_screen_single<CertifiedPolicy>(q, CcdParams<double>{});
+    rejected_mutated += detail::certified_screen_single<ShrunkPolicy<0, 100, 100>>(q, CcdParams<double>{});
+  }
+  std::printf("  tilted coplanar contacts: %zu; single-precision misses %zu (sound), %zu (coefficient bound removed)\n",
+              tilted, rejected_sound, rejected_mutated);
+  CHECK(rejected_sound == 0);
+  CHECK(rejected_mutated > 0);
+
+  // Pairs apart (a vertex moving above a triangle's plane, over it or beside it, far from the
+  // origin): the single screen decides them by the cubic's sign, as the double screen does.
+  std::size_t apart = 0, single = 0, double_only = 0;
+  for (int n = 0; n < 200; ++n) {
+    const double far = std::ldexp(1.0, int(rng() % 40)), x = 0.5 + double(rng() % 64) / 8;
+    const VertexFaceQuery<double> q{{far + x, far + x, 1}, {far, far, 0}, {far + 4, far, 0}, {far, far + 4, 0},
+                                    {far + x, far + x, 3}, {far, far, 0}, {far + 4, far, 0}, {far, far + 4, 0}};
+    ++apart;
+    single += detail::certified_screen_single<CertifiedPolicy>(q, CcdParams<double>{});
+    double_only += detail::certified_screen_double<CertifiedPolicy>(q, CcdParams<double>{});
+  }
+  CHECK(single == apart);
+  CHECK(double_only == apart);
+}
+
+TEST_CASE("single precision: FP32 first never contradicts the double path", "[narrow][certified][single]") {
+  // Random near-contact pairs (small motions of jittered features, near and far from the origin),
+  // classified with the single screen in front and without it. A single-precision miss is a proof,
+  // so the double path never finds such a pair a hit; every other answer is the same. (The single
+  // screen, on coordinates relative to the pair, may decide a pair far from the origin that the
+  // double screen leaves undecided: then undecided becomes a miss.)
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> jitter(-1, 1);
+  std::size_t pairs = 0, differ = 0, single = 0, contradicted = 0, decided_more = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const double s = std::ldexp(1.0, int(rng() % 20) - 10), o = std::ldexp(1.0, int(rng() % 30));
+    auto point = [&](double x, double y, double z) {
+      return Vec3<double>{o + s * (x + 0.1 * jitter(rng)), -o + s * (y + 0.1 * jitter(rng)), s * (z + 0.1 * jitter(rng))};
+    };
+    const VertexFaceQuery<double> vf{point(0.3, 0.3, 0.2), point(0, 0, 0), point(1, 0, 0), point(0, 1, 0),
+                                     point(0.3 + jitter(rng), 0.3 + jitter(rng), -0.2 * jitter(rng)), point(0, 0, 0),
+                                     point(1, 0, 0), point(0, 1, 0)};
+    const EdgeEdgeQuery<double> ee{point(-1, 0, 0.2), point(1, 0, 0.2), point(0, -1, 0), point(0, 1, 0),
+                                   point(-1, jitter(rng), -0.2 * jitter(rng)), point(1, jitter(rng), -0.2 * jitter(rng)),
+                                   point(0, -1, 0), point(0, 1, 0)};
+    const auto a = detail::certified_classify<CertifiedPolicy>(vf, CcdParams<double>{});
+    const auto b = detail::certified_classify<DoubleScreenPolicy>(vf, CcdParams<double>{});
+    const auto c = detail::certified_classify<CertifiedPolicy>(ee, CcdParams<double>{});
+    const auto d = detail::certified_classify<DoubleScreenPolicy>(ee, CcdParams<double>{});
+    const bool vf_single = detail::certified_screen_single<CertifiedPolicy>(vf, CcdParams<double>{}) ||
+                           detail::CertifiedFilter<CertifiedPolicy>::decides_single(vf, CcdParams<double>{});
+    const bool ee_single = detail::certified_screen_single<CertifiedPolicy>(ee, CcdParams<double>{}) ||
+                           detail::CertifiedFilter<CertifiedPolicy>::decides_single(ee, CcdParams<double>{});
+    contradicted += (vf_single && b.certainty == Certainty::hit) + (ee_single && d.certainty == Certainty::hit);
+    const bool vf_same = a.certainty == b.certainty && a.lo == b.lo && a.hi == b.hi;
+    const bool ee_same = c.certainty == d.certainty && c.lo == d.lo && c.hi == d.hi;
+    decided_more += (!vf_same && vf_single && b.certainty == Certainty::undecided) + (!ee_same && ee_single && d.certainty == Certainty::undecided);
+    differ += (!vf_same && !(vf_single && b.certainty == Certainty::undecided)) + (!ee_same && !(ee_single && d.certainty == Certainty::undecided));
+    single += vf_single + ee_single;
+    pairs += 2;
+  }
+  std::printf("  near-contact pairs: %zu, %zu decided in single precision (%zu the double path left undecided)\n", pairs,
+              single, decided_more);
+  CHECK(single > pairs / 10);
+  CHECK(contradicted == 0);
+  CHECK(differ == 0);
+}
+
 TEST_CASE("certified path: the certain descent agrees with the halving search and contains the TOI", "[narrow][certified]") {
   // Vertices through a moving triangle and edges through moving edges at random (dyadic) times
   // and places, inside and just beside: the descent decides most contacts, and must give the

@@ -174,11 +174,14 @@ template <class T, class Q>
 void certify_one(const Q& q, int truth, CertifiedTally& c) {
   const CcdParams<T> params;
   const CertifiedAnswer<T> a = CertifiedCcd::classify(q, params);
-  // The GPU's first refinement step decides only what the whole search answers the same way.
+  // The GPU's first refinement step decides only what the whole search answers the same way (on
+  // the pairs both the screen and the single-precision filter leave, as a batch runs it).
   using Filter = lwsccd::detail::CertifiedFilter<CertifiedPolicy>;
   lwsccd::detail::Noted<T> noted;
   const bool decided = Filter::decides(q, params, noted);
-  if (decided && !CertifiedCcd::screen(q, params)) {
+  const bool single = CertifiedCcd::filter_single(q, params);
+  if (single) CHECK(a.certainty == Certainty::miss);
+  if (decided && !CertifiedCcd::screen(q, params) && !single) {
     const CertifiedAnswer<T> settled = noted.any ? CertifiedCcd::undecided_from(q, params, noted.lower) : CertifiedAnswer<T>{Certainty::miss};
     CHECK(a.certainty == settled.certainty);
     CHECK(a.lo == settled.lo);

@@ -415,8 +415,8 @@ void require_streaming_changes_nothing(const std::shared_ptr<const TriangleMesh>
   std::vector<StepResult<double>> expected;
   std::size_t resident = 0, held = 0;
   // A budget is kept by the pipeline's own count of what it holds (device_bytes): that count
-  // must be every byte it holds (until 2026-11-24 a streamed step's list of the pairs met below
-  // the root was left out, 4.8-15 KB here, and a step's peak passed a budget by 332 bytes once).
+  // must be every byte it holds (a streamed step's list of the pairs met below the root, 4.8-15 KB
+  // here, was once left out of it, and a step's peak passed a budget by 332 bytes).
   const std::size_t held_elsewhere = gpu::memory_stats().in_use;
   {
     gpu::CcdPipeline<Aabbf, Scheduler> whole(mesh, layout, params);
@@ -496,9 +496,9 @@ TEST_CASE("GPU pipeline under a device-memory budget streams its steps in parts 
 // At this size the schedulers' own lists, which no split reduces, are most of what a step holds
 // beyond the scene's data (H100: the lazy one's 13-14 MB of 30; the static one's 21 MB), hence no
 // static scheduler here. At three quarters, mode set's second step (the first from a front) was
-// refused until 2026-11-24, 0.3% short (the front being recorded for the next step now goes before
-// the pipeline refuses), and one H100 run's peak passed the budget by 332 bytes: the pairs met
-// below the root were not in the pipeline's count of its bytes (now they are, and checked above).
+// once refused, 0.3% short (the front recorded for the next step goes before the pipeline
+// refuses), and a step's peak passed the budget by 332 bytes when the pairs met below the root
+// were missing from the pipeline's count of its bytes (they are counted, and checked above).
 // Under racecheck: 344 s at 0.85, 321 s at 0.75 (0 hazards).
 TEST_CASE("GPU pipeline under a device-memory budget answers as without one on a small scene (sanitizer-sized)",
           "[gpu][pipeline][streaming]") {

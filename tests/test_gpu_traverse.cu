@@ -27,7 +27,7 @@ using TinyLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64>;
 using FlatLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
 using TinyFlatLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
 // Sharing on demand (kShareWhenHungry; the defaults share above half of kPushThreshold): eagerly
-// in the default's shape and with tiny deques that overflow, and never (0, the default until session nineteen).
+// in the default's shape and with tiny deques that overflow, and never (0: sharing off).
 using NeverHungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 0>;
 using TinyNeverHungryLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 512, 0>;
 using HungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 128>;
@@ -448,7 +448,7 @@ TEST_CASE("GPU lazy stealing: a recorded timeline changes no result and agrees w
 
 // The lazy kernel's blocks are persistent: a block that could not be resident beside the others
 // (registers, shared memory) would start only once they had finished - as half of them did for
-// OBB tasks (113 registers, one 512-thread block per SM of two launched) before 2026-11-24. The
+// OBB tasks (113 registers, one 512-thread block per SM of two launched) without that rule. The
 // launch must hold only co-resident blocks: every block starts before any block is done.
 TEMPLATE_TEST_CASE("GPU lazy stealing launches only blocks that are resident at once", "[gpu][traverse]", Aabbf, Obbf) {
   const DeviceFoldedCloth<TestType> cloth(40, 3);

@@ -93,26 +93,6 @@ void print_table(const std::vector<Row>& rows) {
   }
 }
 
-std::string json_escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\', out += c;
-    else if (static_cast<unsigned char>(c) < 0x20) {
-      char b[8];
-      std::snprintf(b, sizeof b, "\\u%04x", c);
-      out += b;
-    } else out += c;
-  }
-  return out;
-}
-
-std::string json_number(double x, const char* fmt = "%.6g") {
-  if (!std::isfinite(x)) return "null";
-  char b[40];
-  std::snprintf(b, sizeof b, fmt, x);
-  return b;
-}
-
 std::string cpu_model() {
   std::ifstream f("/proc/cpuinfo");
   std::string line;
@@ -143,36 +123,32 @@ void write_json(const std::string& path, const std::vector<Row>& rows, const Opt
 #else
   const bool assertions = true;
 #endif
-  f << "[\n";
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    const Row& r = rows[i];
+  // Through a JSON library: any path stays valid JSON, and a number JSON cannot hold (NaN) is null.
+  using Json = nlohmann::ordered_json;
+  auto number = [](double x) { return std::isfinite(x) ? Json(x) : Json(nullptr); };
+  auto rate = [&](std::size_t part, std::size_t whole) {
+    return whole ? number(static_cast<double>(part) / static_cast<double>(whole)) : Json(nullptr);
+  };
+  Json all = Json::array();
+  for (const Row& r : rows) {
     const Stats s = stats_of(r.m.us);
     const bool toi = r.scene && r.reports_toi && r.kind != "group" && r.kind != "everything";
-    f << "  {\"input\": \"" << json_escape(r.input) << "\", \"kind\": \"" << r.kind << "\", \"path\": \""
-      << json_escape(r.path) << "\", \"method\": \"" << r.method << "\", \"conservative\": "
-      << (r.conservative ? "true" : "false") << ", \"precision\": \"" << r.precision << "\",\n   \"queries\": "
-      << r.m.queries << ", \"vf_queries\": " << r.m.vf_queries << ", \"ee_queries\": " << r.m.ee_queries
-      << ", \"true\": " << r.m.truth_true << ", \"false\": " << r.m.truth_false << ", \"unknown_truth\": " << r.m.unknown
-      << ", \"hits\": " << r.m.hits << ", \"false_negatives\": " << r.m.fn << ", \"false_positives\": " << r.m.fp
-      << ", \"gave_up\": " << r.m.gave_up << ",\n   \"false_negative_rate\": "
-      << (r.m.truth_true ? json_number(static_cast<double>(r.m.fn) / static_cast<double>(r.m.truth_true)) : "null")
-      << ", \"false_positive_rate\": "
-      << (r.m.truth_false ? json_number(static_cast<double>(r.m.fp) / static_cast<double>(r.m.truth_false)) : "null")
-      << ",\n   \"median_us\": " << json_number(s.median) << ", \"p99_us\": " << json_number(s.p99)
-      << ", \"max_us\": " << json_number(s.max) << ", \"mean_us\": " << json_number(s.mean)
-      << ", \"queries_per_second\": "
-      << json_number(r.seconds > 0 ? static_cast<double>(r.m.queries) / r.seconds : std::nan(""))
-      << ", \"earliest_toi\": "
-      << (toi && r.m.earliest_toi <= 1.0 ? json_number(r.m.earliest_toi, "%.17g") : std::string("null"))
-      << ",\n   \"float_changed_queries\": " << r.float_changed << ", \"double_inexact_coordinates\": "
-      << r.double_inexact << ", \"min_separation\": " << json_number(o.min_separation, "%.17g")
-      << ", \"tolerance\": " << json_number(o.tolerance, "%.17g") << ", \"max_iterations\": " << o.max_iterations
-      << ", \"limit\": " << o.limit << ", \"clock_overhead_us\": " << json_number(overhead_us)
-      << ",\n   \"cpu\": \"" << json_escape(cpu) << "\", \"compiler\": \""
-      << json_escape(__VERSION__) << "\", \"optimized\": " << (optimized ? "true" : "false")
-      << ", \"assertions\": " << (assertions ? "true" : "false") << "}" << (i + 1 < rows.size() ? "," : "") << "\n";
+    all.push_back(Json{{"input", r.input}, {"kind", r.kind}, {"path", r.path}, {"method", r.method},
+                       {"conservative", r.conservative}, {"precision", r.precision}, {"queries", r.m.queries},
+                       {"vf_queries", r.m.vf_queries}, {"ee_queries", r.m.ee_queries}, {"true", r.m.truth_true},
+                       {"false", r.m.truth_false}, {"unknown_truth", r.m.unknown}, {"hits", r.m.hits},
+                       {"false_negatives", r.m.fn}, {"false_positives", r.m.fp}, {"gave_up", r.m.gave_up},
+                       {"false_negative_rate", rate(r.m.fn, r.m.truth_true)},
+                       {"false_positive_rate", rate(r.m.fp, r.m.truth_false)}, {"median_us", number(s.median)},
+                       {"p99_us", number(s.p99)}, {"max_us", number(s.max)}, {"mean_us", number(s.mean)},
+                       {"queries_per_second", r.seconds > 0 ? number(static_cast<double>(r.m.queries) / r.seconds) : Json(nullptr)},
+                       {"earliest_toi", toi && r.m.earliest_toi <= 1.0 ? number(r.m.earliest_toi) : Json(nullptr)},
+                       {"float_changed_queries", r.float_changed}, {"double_inexact_coordinates", r.double_inexact},
+                       {"min_separation", o.min_separation}, {"tolerance", o.tolerance},
+                       {"max_iterations", o.max_iterations}, {"limit", o.limit}, {"clock_overhead_us", number(overhead_us)},
+                       {"cpu", cpu}, {"compiler", __VERSION__}, {"optimized", optimized}, {"assertions", assertions}});
   }
-  f << "]\n";
+  f << all.dump(1) << "\n";
   if (!f) throw InputError(path, "", "write failed");
 }
 

@@ -64,6 +64,7 @@ nb::dict counts_dict(const lwsccd::NarrowPhaseCounts& c) {
   d["certified_misses"] = c.certified_misses;
   d["fallbacks"] = c.fallbacks;
   d["screened"] = c.screened;
+  d["single_misses"] = c.single_misses;
   return d;
 }
 

@@ -90,16 +90,18 @@ namespace detail {
 /// their error: rounding in T, and a relative perturbation `perturbation` (default u_T) of every
 /// input coordinate (the certified path computes a float query in double with u_float here).
 /// `rounding_only`, when given, receives the bound without the perturbation (the error of the
-/// coefficients for the query exactly as given).
+/// coefficients for the query exactly as given). `magnitude`, when given, replaces the query's
+/// coordinate magnitude in the perturbation (any per-axis bound at least as large).
 template <class Q, class T>
-LWSCCD_HD T coplanarity_bernstein(const Q& q, T b[4], T perturbation = unit_roundoff<T>(), T* rounding_only = nullptr) {
+LWSCCD_HD T coplanarity_bernstein(const Q& q, T b[4], T perturbation = unit_roundoff<T>(), T* rounding_only = nullptr,
+                                  const Vec3<T>* magnitude = nullptr) {
   const Coplanarity<T> c = coplanarity_of(q);
   T k[4], mag[4], mag_perturbed[4];
   bernstein_controls(c, k);
   bernstein_majorants(abs_plus(c, Vec3<T>{0, 0, 0}), mag);
   // A difference of two coordinates moves by at most 2 u m under the input perturbation.
   const T u = unit_roundoff<T>();
-  const Vec3<T> e = vscale(coordinate_magnitude(q), T(2) * perturbation);
+  const Vec3<T> e = vscale(magnitude ? *magnitude : coordinate_magnitude(q), T(2) * perturbation);
   bernstein_majorants(abs_plus(c, e), mag_perturbed);
   T bound = T(0), rounding = T(0);
   for (int i = 0; i < 4; ++i) {

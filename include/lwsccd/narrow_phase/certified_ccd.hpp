@@ -51,6 +51,14 @@ struct CertifiedPolicy {
   static constexpr double kCoefficientBound = 1.0;  ///< the cubic's Bernstein coefficients on [0, 1]
   static constexpr double kSplitBound = 1.0;        ///< rounding added by each de Casteljau halving
   static constexpr double kInsideBound = 1.0;       ///< the inside test's sign tests over an interval
+  /// FP32 first: the screen and the refinement's first levels run in single precision on the pair
+  /// relative to a local origin (detail::certified_screen_single, CertifiedFilter::decides_single), and in
+  /// double only on what they leave undecided. Their misses are certain for the input as given
+  /// (double or float); false: the double path alone.
+  static constexpr bool kSingleFirst = true;
+  /// Multiplier of the single-precision screen's input bound, which covers rounding the relative
+  /// coordinates to float (1 = as derived; only the mutation tests change it).
+  static constexpr double kSingleInputBound = 1.0;
   /// Mode earliest: the certified pass (and its fallback) first look only at the window
   /// [0, 2^-kEarliestFirst), then at windows kEarliestStep binary orders wider, up to the whole
   /// step, and stop at the first window that holds a contact. A step's earliest contact is
@@ -92,6 +100,7 @@ struct CertifiedAnswer {
 #include "lwsccd/narrow_phase/detail/certified_bernstein.hpp"
 #include "lwsccd/narrow_phase/detail/certified_motion.hpp"
 #include "lwsccd/narrow_phase/detail/certified_screen.hpp"
+#include "lwsccd/narrow_phase/detail/certified_single.hpp"
 #include "lwsccd/narrow_phase/detail/certified_refine.hpp"
 #include "lwsccd/narrow_phase/detail/certified_filter.hpp"
 
@@ -116,6 +125,25 @@ struct CertifiedCcdT {
   template <class Q, class T>
   LWSCCD_HD static bool screen(const Q& q, const CcdParams<T>& params) {
     return detail::certified_screen<Policy>(q, params);
+  }
+  /// screen's two parts, for batches that count them: screen = screen_single, then screen_double
+  /// unless screen_single set `mixed`. screen_single is the single-precision screen (false when
+  /// Policy::kSingleFirst is off).
+  template <class Q, class T>
+  LWSCCD_HD static bool screen_single(const Q& q, const CcdParams<T>& params, bool& mixed) {
+    mixed = false;
+    return Policy::kSingleFirst && detail::certified_screen_single<Policy>(q, params, &mixed);
+  }
+  template <class Q, class T>
+  LWSCCD_HD static bool screen_double(const Q& q, const CcdParams<T>& params) {
+    return detail::certified_screen_double<Policy>(q, params);
+  }
+  /// The single-precision filter (detail::CertifiedFilter::decides_single): true for a certain
+  /// miss, proved in float by the refinement's first levels. Batches run it on the pairs the
+  /// screen passes, before the double refinement (classify = screen, filter_single, then refine).
+  template <class Q, class T>
+  LWSCCD_HD static bool filter_single(const Q& q, const CcdParams<T>& params) {
+    return detail::CertifiedFilter<Policy>::decides_single(q, params);
   }
   /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
   template <bool kSettle = true, class Q, class T>
@@ -183,6 +211,11 @@ template <class Fallback, class Policy>
 struct certified_of<CertifiedCcdT<Fallback, Policy>> : std::true_type {
   using fallback = Fallback;
 };
+/// Whether a method decides in single precision first (a certified method whose policy says so).
+template <class Method, bool = certified_of<Method>::value>
+struct single_first_of : std::false_type {};
+template <class Method>
+struct single_first_of<Method, true> : std::bool_constant<Method::policy_type::kSingleFirst> {};
 /// The method a batch runs on the pairs its first pass leaves: the fallback of a certified
 /// method, any other method itself.
 template <class Method>

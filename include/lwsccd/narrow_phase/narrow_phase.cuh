@@ -168,6 +168,8 @@ class NarrowPhase {
   using FullTest = typename lwsccd::detail::full_test_of<Method>::type;
   static constexpr bool kCertified = lwsccd::detail::certified_of<Method>::value;
   static constexpr bool kTwoPass = kCertified || lwsccd::detail::has_quick_reject<Method>::value;
+  /// CertifiedCcd decides in single precision first: its filter runs in float before the double one.
+  static constexpr bool kSingleFirst = lwsccd::detail::single_first_of<Method>::value;
 
   // Results of the last collected run:
   std::size_t num_vf_hits() const { return lists_[0].count; }
@@ -195,7 +197,8 @@ class NarrowPhase {
     for (const auto& l : lists_)
       bytes += l.hits.capacity_bytes() + l.sorter.device_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
                l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes() + l.intervals.capacity_bytes() +
-               l.listed.capacity_bytes() + l.expanded.capacity_bytes() + l.deep.capacity_bytes();
+               l.listed.capacity_bytes() + l.expanded.capacity_bytes() + l.deep.capacity_bytes() +
+               l.double_kept.capacity_bytes() + l.single_intervals.capacity_bytes() + l.single_failed.capacity_bytes();
     return bytes;
   }
 
@@ -211,10 +214,14 @@ class NarrowPhase {
     DeviceBuffer<unsigned long long> expanded;   ///< the filter's second round: intervals to split further (room: interval_room)
     DeviceBuffer<unsigned long long> deep;       ///< the second round's intervals to test for inside
     DeviceBuffer<unsigned> listed;               ///< the filter: a bit per pair, set once it is deferred
+    DeviceBuffer<Pair> double_kept;              ///< FP32 first: screened pairs single precision leaves to the double filter
+    DeviceBuffer<unsigned long long> single_intervals;  ///< the single-precision filter's intervals (detail::filter_item)
+    DeviceBuffer<unsigned> single_failed;        ///< a bit per pair, set once it goes to the double filter
     DeviceBuffer<unsigned long long> counters;   ///< detail::NarrowCounter words
     PinnedBuffer<unsigned long long> host_counters;
     std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors, undecided, deferred and open
     std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
+    std::size_t single_interval_room = 0;          ///< room of the single-precision filter's intervals
     NarrowPhaseCounts counts;
     std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0;
     cudaStream_t stream = nullptr;

@@ -33,6 +33,9 @@ struct FeatureHit {
 struct NarrowPhaseCounts {
   std::size_t pairs = 0, certified_hits = 0, certified_misses = 0, fallbacks = 0;
   std::size_t screened = 0;  ///< CertifiedCcd: pairs its screen passed on to the refinement
+  /// CertifiedCcd: pairs decided in single precision (certain misses of its FP32 screen or filter;
+  /// part of certified_misses). The rest of the certain answers took double; `fallbacks` the search.
+  std::size_t single_misses = 0;
 };
 
 /// Adds b's numbers to a's.
@@ -42,6 +45,7 @@ inline void add_counts(NarrowPhaseCounts& a, const NarrowPhaseCounts& b) {
   a.certified_misses += b.certified_misses;
   a.fallbacks += b.fallbacks;
   a.screened += b.screened;
+  a.single_misses += b.single_misses;
 }
 
 template <class T>
@@ -137,11 +141,22 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
       const auto q = gather(i);
       if constexpr (lwsccd::detail::certified_of<Method>::value) {
         if (undecided) {  // first pass: the screen, then the refinement of what it passes
-          if (Method::screen(q, params)) {
+          bool mixed = false;
+          if (Method::screen_single(q, params, mixed)) {  // FP32 first, FP64 for what it leaves
+            ++out.counts.certified_misses;
+            ++out.counts.single_misses;
+            continue;
+          }
+          if (!mixed && Method::screen_double(q, params)) {
             ++out.counts.certified_misses;
             continue;
           }
           ++out.counts.screened;
+          if (Method::filter_single(q, params)) {
+            ++out.counts.certified_misses;
+            ++out.counts.single_misses;
+            continue;
+          }
           const CertifiedAnswer<T> a = Method::refine(q, params);
           if (a.certainty == Certainty::hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, a.lo}), ++out.counts.certified_hits;
           else if (a.certainty == Certainty::miss) ++out.counts.certified_misses;
@@ -170,6 +185,7 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
     counts.certified_misses += part.counts.certified_misses;
     counts.fallbacks += part.counts.fallbacks;
     counts.screened += part.counts.screened;
+    counts.single_misses += part.counts.single_misses;
     gave_up += part.gave_up;
   }
 }

@@ -57,7 +57,7 @@ inline void PipelineParams::validate() const {
 
 /// The CPU backend's front growth limit: a CPU pays as much for an item of a front as for one of a
 /// traversal from the root, so a grown front soon costs more than a restart (horse-gallop on 2
-/// cores, mean step: limit 1.5 -> 84 ms, 3 -> 104; docs/BENCHMARKS.md, fourteenth session).
+/// cores, mean step: limit 1.5 -> 84 ms, 3 -> 104; docs/PIPELINE.md).
 inline constexpr double kCpuFrontGrowthLimit = 1.5;
 /// The GPU backend's: a front goes through one flat launch, a thread per item, several times
 /// cheaper per item than the lazy traversal from the root (H100, horse-gallop: 1.4 M front items

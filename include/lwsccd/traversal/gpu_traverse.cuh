@@ -87,26 +87,26 @@ struct LazyStealScheduler {
   /// the default keeps a fixed 256 ns.
   static constexpr int kMaxBackoffNs = MaxBackoffNs;
   /// A thief tries its victim's lock this many times (64 ns apart) before it looks again (0: it
-  /// waits for the lock, as before 2026-11-24). With kRandomVictim, 16 tries removed the
+  /// waits for the lock). With kRandomVictim, 16 tries removed the
   /// end-of-traversal convoy and made every traversal of the benchmark as fast or faster on an
   /// H100 (fronts 1.2-1.8x); alone it made OBB fronts slower (docs/TRAVERSAL.md).
   static constexpr int kStealLockAttempts = StealLockAttempts;
   /// A thief picks its victim at random among the deques within a factor of two of the fullest
-  /// (false, as before 2026-11-24: the fullest, ties to the nearest after it), so that thieves
+  /// (false: the fullest, ties to the nearest after it), so that thieves
   /// that all saw the same fullest deque do not all contend for its lock.
   static constexpr bool kRandomVictim = RandomVictim;
   /// Whether the kernel is compiled to fit kBlocksPerSm blocks per SM (__launch_bounds__ with that
   /// minimum: registers capped, spilled if need be; false: the compiler's choice). Either way the
   /// launch has only as many blocks as can be resident at once (at most kBlocksPerSm per SM, by
   /// cudaOccupancyMaxActiveBlocksPerMultiprocessor): a persistent block waiting for a slot would
-  /// start only when the others were done. Before 2026-11-24 neither held, and the kernels that
-  /// took more than 64 registers (OBB: 113, rays: 88-94) ran half their blocks after the others.
+  /// start only when the others were done: without either, the kernels that take more than 64
+  /// registers (OBB: 113, rays: 88-94) ran half their blocks after the others.
   /// Fitting (OBB: 64 registers, 104 bytes spilled) was faster than one block per SM on every
   /// OBB traversal and ray set on an H100 (docs/TRAVERSAL.md); AABB takes 64 either way.
   static constexpr bool kFitBlocksPerSm = FitBlocksPerSm;
   /// A start of at least this many items per launched block (a front kept from the last step)
   /// is processed first by one flat launch, a thread per item, and the blocks share only the
-  /// children it leaves (0: never, as before 2026-11-24). From a front most items end at once
+  /// children it leaves (0: never). From a front most items end at once
   /// (leaf pairs, or boxes that no longer overlap: horse-gallop processes ~1.06 items per front
   /// item), so the persistent blocks' rounds of kPopSize items were the cost. On an H100 (AABB
   /// fronts): cloth-ball 0.56 -> 0.21 ms, cloth-funnel 0.058 -> 0.030 (512 per block; 2,048

@@ -11,6 +11,7 @@
 #include "lwsccd/core/detail/fp.hpp"
 #include "lwsccd/core/detail/rounding.hpp"
 #include "lwsccd/narrow_phase/detail/certified_refine.hpp"
+#include "lwsccd/narrow_phase/detail/certified_single.hpp"
 
 namespace lwsccd::detail {
 
@@ -181,6 +182,57 @@ struct CertifiedFilter {
     return n;
   }
 
+  /// The single-precision filter (FP32 first): the first round in float, as a proof of a miss on
+  /// its own. The pair relative to its first point, rounded to float (relative_single, bound B9);
+  /// the cubic's pieces down to kLevel pruned as `intervals` prunes them, with only the perturbed
+  /// bound (the float query is not the query as given: nothing is claimed of it as given, so no
+  /// lower bound is noted); every interval left must be certainly outside by the inside test in
+  /// float. intervals_single lists the intervals (-1: single precision cannot decide the pair;
+  /// 0: a miss), outside_single tests one; decides_single is both on one thread (the CPU batch
+  /// and the tests; a GPU batch runs the tests a thread each). True: a certain miss of the input as
+  /// given (and within the double path's perturbation); false: the double path decides.
+  template <class Q, class T>
+  LWSCCD_HD static int intervals_single(const Q& q_in, const CcdParams<T>& params, std::uint32_t& mask) {
+    mask = 0;
+    if (!Policy::kSingleFirst || params.min_separation > T(0)) return -1;
+    // Leaves within the filter's levels (certified_max_level <= kLevel, i.e. a tolerance of at
+    // least 2^-(kLevel - 1)): the double path's. Compared in float, without double arithmetic
+    // (a tolerance that rounds up to the limit is only declined, which is always sound).
+    if (static_cast<float>(params.tolerance) >= exact_pow2_neg<float>(kLevel - 1)) return -1;
+    const auto s = relative_single(q_in);
+    const float perturbation = single_input_perturbation<Policy>();
+    const float mag = fmul(4.0f, max_component(s.m));  // bounds every difference and its motion
+    BernsteinPiece<float> root;
+    if (!cubic_on_step<Policy>(s.q, mag, perturbation, root, &s.m)) return -1;
+    root.exact = root.bound;  // perturbed only (halvings add the same to both)
+    if (same_sign_beyond(root.c, root.bound)) return 0;
+    if (!finite_value(underflow_slack(mag, 4))) return -1;
+    Noted<T> noted;
+    if (!visit<0>(root, 0u, params, mask, noted)) return -1;
+    int n = 0;
+    for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
+    return n;
+  }
+  template <class Q>
+  LWSCCD_HD static bool outside_single(const Q& q_in, unsigned node) {
+    const auto s = relative_single(q_in);
+    const float perturbation = single_input_perturbation<Policy>();
+    const float slack = underflow_slack(fmul(4.0f, max_component(s.m)), 4);
+    int level = 0;
+    while ((node >> (level + 1)) != 0u) ++level;
+    const float half = exact_pow2_neg<float>(level + 1);
+    const float mid = fadd(static_cast<float>(node - (1u << level)) * exact_pow2_neg<float>(level), half);
+    return inside_over<Policy>(s.q, mid, half, s.m, perturbation, slack) == InsideVerdict::outside;
+  }
+  template <class Q, class T>
+  LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params) {
+    std::uint32_t mask = 0;
+    if (intervals_single(q, params, mask) < 0) return false;
+    for (unsigned node = 0; node < 32; ++node)
+      if (((mask >> node) & 1u) && !outside_single(q, node)) return false;
+    return true;
+  }
+
   /// Both rounds on one thread, as a GPU batch runs them apart (the tests' reference): true when
   /// the filter decides the query (then certified_refine answers a miss, or undecided from
   /// noted.lower when noted.any); false when the whole search must run.
@@ -202,10 +254,12 @@ struct CertifiedFilter {
   }
 };
 
-/// The whole certified classification of one query: the screen, then the refinement.
+/// The whole certified classification of one query: the screen, the single-precision filter,
+/// then the refinement.
 template <class Policy, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q, const CcdParams<T>& params) {
   if (certified_screen<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
+  if (CertifiedFilter<Policy>::decides_single(q, params)) return {Certainty::miss, T(0), T(1)};
   return certified_refine<Policy>(q, params);
 }
 

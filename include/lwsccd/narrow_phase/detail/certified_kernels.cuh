@@ -32,7 +32,18 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
   const std::size_t n = in.count.get();
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = in.pairs[i];
-    if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) continue;
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
+    if constexpr (lwsccd::detail::certified_of<Method>::value) {
+      // FP32 first (counted), FP64 for what it leaves (unless FP64 cannot reject it either).
+      bool mixed = false;
+      if (Method::screen_single(q, params, mixed)) {
+        append_index(counters + kSingleMisses);
+        continue;
+      }
+      if (!mixed && Method::screen_double(q, params)) continue;
+    } else if (first_step_rejects<Method>(q, params)) {
+      continue;
+    }
     const unsigned long long at = append_index(counters + kSurvivors);
     if (at < room) {  // (std::pair's assignment is host-only before C++20)
       kept[at].first = p.first;
@@ -67,9 +78,13 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = kept[i];
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
+    if (Method::filter_single(q, params)) {  // FP32 first (counted), as the CPU batch
+      append_index(counters + kSingleMisses);
+      continue;
+    }
     bool later = false;
-    const CertifiedAnswer<T> a =
-        Method::template refine_until<kDeferLevel, false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, &later);
+    const CertifiedAnswer<T> a = Method::template refine_until<kDeferLevel, false>(q, params, &later);
     if (later) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
     else settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
   }
@@ -109,18 +124,86 @@ __device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long lo
   const unsigned bit = 1u << (i & 31u);
   if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
 }
+// FP32 first, before the filter: a thread per screened pair lists the single-precision filter's
+// intervals (CertifiedFilter::intervals_single) in `intervals` for single_inside_kernel; a pair
+// it decides at once is counted, one it cannot decide is appended to `double_kept` for the
+// double filter. A pair whose intervals do not fit is decided on its thread (decides_single:
+// the same answer), and the room grows for the next run.
 template <class Method, bool kVertexFace, class T, class P>
-__global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
-                              std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                              unsigned long long* intervals, std::size_t interval_room, FeatureHit<T>* undecided,
-                              unsigned* deferred) {
+__global__ void single_filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
+                                     const unsigned long long* control, unsigned long long* counters,
+                                     unsigned long long* intervals, std::size_t interval_room,
+                                     std::pair<index_t, index_t>* double_kept) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
+    std::uint32_t found = 0;
+    const int count = Filter::intervals_single(q, params, found);
+    bool single = count == 0;
+    if (count > 0) {
+      bool fits = true;
+      const unsigned long long base = append_run(counters + kSingleIntervals, static_cast<unsigned>(count), interval_room, fits);
+      for (int k = 0; k < count; ++k, found &= found - 1u)
+        if (base + k < interval_room)
+          intervals[base + k] = fits ? filter_item(i, false, static_cast<unsigned>(__ffs(found) - 1)) : kNoInterval;
+      if (fits) {
+        append_index(counters + kSingleListed);
+        continue;
+      }
+      single = Filter::decides_single(q, params);
+    }
+    if (single) {
+      append_index(counters + kSingleMisses);
+    } else {
+      const unsigned long long at = append_index(counters + kDoubleKept);
+      double_kept[at].first = kept[i].first;
+      double_kept[at].second = kept[i].second;
+    }
+  }
+}
+
+// A thread per listed single-precision interval: the inside test in float; a pair with an
+// interval not certainly outside goes to the double filter, once (its bit in `failed`).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void single_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, const unsigned long long* control,
+                                     unsigned long long* counters, const unsigned long long* intervals,
+                                     std::size_t interval_room, unsigned* failed, std::pair<index_t, index_t>* double_kept) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n =
+      counters[kSingleIntervals] < interval_room ? static_cast<std::size_t>(counters[kSingleIntervals]) : interval_room;
+  LWSCCD_GRID_STRIDE(j, n) {
+    const unsigned long long item = intervals[j];
+    if (item == kNoInterval) continue;
+    const unsigned i = item_pair_index(item);
+    if (Filter::outside_single(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), item_node(item))) continue;
+    const unsigned bit = 1u << (i & 31u);
+    if (atomicOr(failed + (i >> 5), bit) & bit) continue;
+    append_index(counters + kSingleFailed);
+    const unsigned long long at = append_index(counters + kDoubleKept);
+    double_kept[at].first = kept[i].first;
+    double_kept[at].second = kept[i].second;
+  }
+}
+
+// The double filter: a thread per pair of `kept` (its length in counters[kept_counter]).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
+                              int kept_counter, std::size_t room, CcdParams<T> params, const unsigned long long* control,
+                              unsigned long long* counters, unsigned long long* intervals, std::size_t interval_room,
+                              FeatureHit<T>* undecided, unsigned* deferred) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kept_counter] < room ? static_cast<std::size_t>(counters[kept_counter]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
     std::uint32_t found = 0;
     lwsccd::detail::Noted<T> noted;
-    const int count = Filter::intervals(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), params, found, noted);
+    const int count = Filter::intervals(q, params, found, noted);
     // A lower bound noted: with no interval left the search's answer is undecided from it (the
     // fallback's, once settle_undecided_kernel has looked); with some, the whole search decides (rare).
     bool whole = count < 0 || (count > 0 && noted.any);

@@ -1,5 +1,6 @@
 // lwsccd — the certified screen: the cheap Bernstein bound of the coplanarity cubic, swept and
-// window boxes, and certified_screen (a pair it rejects cannot touch in the step).
+// window boxes, and the screen in the path's own precision (a pair it rejects cannot touch in the
+// step); certified_single.hpp puts the single-precision screen in front of it.
 // Part of certified_ccd.hpp: include <lwsccd/narrow_phase/certified_ccd.hpp>, not this file.
 #pragma once
 
@@ -109,24 +110,22 @@ struct certified_compute<float> {
   using type = double;
 };
 
-/// The certified path's cheap first step: true when the query is certainly a miss by its swept
-/// boxes or by the cubic's coefficients under the screening bound (with params.time_limit < 1:
-/// no contact before it, the cubic restricted to [0, time_limit)). Most pairs of a real step end
-/// here; a batch runs it on every pair and certified_refine on the others.
-template <class Policy, class Q, class T>
-LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
-  using W = typename certified_compute<T>::type;
-  if (params.min_separation > T(0)) return false;  // the cubic only speaks of contact
-  const auto q = q_in.template cast<W>();
-  const W perturbation = unit_roundoff<T>();
-  const Vec3<W> m = coordinate_magnitude(q);
+/// The screen's tests on a query already in its working precision W, with m a per-axis bound on
+/// its coordinates: true when no query whose coordinates are within `perturbation` m_k of its own
+/// touches (before params.time_limit). `mixed`, when given, is set when the whole step is asked
+/// for and the cubic's Bernstein coefficients on [0, 1] certainly have both signs: then no
+/// screen in any precision rejects the pair by the cubic (the exact coefficients have both signs,
+/// and a computed one is within its rounding bound of the exact one).
+template <class Policy, class W, class Q, class T>
+LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m, bool* mixed = nullptr) {
   // Swept boxes apart: no arithmetic but the pad, so it goes first.
   if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
   // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
-  // [0, w] that covers it, which are far smaller than the whole step's when w is short.
+  // [0, w] that covers it, which are far smaller than the whole step's when w is short. (w is a
+  // power of two, so its comparisons with the time limit are exact in T.)
   if (params.time_limit <= T(0.5)) {
     W w = W(0.5);
-    for (int level = 1; level < 30 && w / 2 >= W(params.time_limit); ++level) w /= 2;
+    for (int level = 1; level < 30 && T(w / 2) >= params.time_limit; ++level) w /= 2;
     const W tiny = W(4) * std::numeric_limits<W>::denorm_min();
     const Vec3<W> pad = vscale(m, W(20) * perturbation);
     if (window_boxes_apart(q, w, Vec3<W>{fadd(pad.x, tiny), fadd(pad.y, tiny), fadd(pad.z, tiny)})) return true;
@@ -137,13 +136,20 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   const bool finite = finite_value(screen) && finite_value(b[0]) && finite_value(b[1]) && finite_value(b[2]) && finite_value(b[3]);
   if (!finite) return false;
   if (same_sign_beyond(b, screen)) return true;
-  if (!(params.time_limit < T(1))) return false;
+  if (!(params.time_limit < T(1))) {
+    if (mixed) {
+      const bool positive = b[0] > screen || b[1] > screen || b[2] > screen || b[3] > screen;
+      const bool negative = b[0] < -screen || b[1] < -screen || b[2] < -screen || b[3] < -screen;
+      *mixed = positive && negative;
+    }
+    return false;
+  }
   // Only [0, time_limit) is asked for (mode earliest's windows): the cubic on the smallest dyadic
   // [0, 2^-k] that covers it, by k left halvings, each adding its rounding to the bound as in the
   // refinement (a halving is a convex combination, so the bound on [0, 1] still bounds the error).
   BernsteinPiece<W> piece{{b[0], b[1], b[2], b[3]}, screen, screen};
   // A wider piece that keeps its sign already covers the window: stop there (most pairs do early).
-  for (int level = 0; level < 30 && exact_pow2_neg<W>(level + 1) >= W(params.time_limit); ++level) {
+  for (int level = 0; level < 30 && T(exact_pow2_neg<W>(level + 1)) >= params.time_limit; ++level) {
     if (level > 0 && same_sign_beyond(piece.c, piece.bound)) return true;
     BernsteinPiece<W> left, right;
     bernstein_halves<Policy>(piece, left, right);
@@ -152,14 +158,28 @@ LWSCCD_HD bool certified_screen(const Q& q_in, const CcdParams<T>& params) {
   return same_sign_beyond(piece.c, piece.bound);
 }
 
+/// The certified path's cheap first step in the precision the path computes in (double for
+/// double and float inputs): true when the query is certainly a miss by its swept boxes or by the
+/// cubic's coefficients under the screening bound (with params.time_limit < 1: no contact before
+/// it, the cubic restricted to [0, time_limit)). certified_screen puts the single-precision
+/// screen in front of it.
+template <class Policy, class Q, class T>
+LWSCCD_HD bool certified_screen_double(const Q& q_in, const CcdParams<T>& params) {
+  using W = typename certified_compute<T>::type;
+  if (params.min_separation > T(0)) return false;  // the cubic only speaks of contact
+  const auto q = q_in.template cast<W>();
+  return screen_with<Policy>(q, params, W(unit_roundoff<T>()), coordinate_magnitude(q));
+}
+
 /// The cubic's Bernstein piece on [0, 1] with its perturbed and as-given bounds (the coefficient
 /// bound of ccd_filters.hpp, plus underflow's share for differences up to `mag`); false when a
 /// value is not finite (overflow: the caller leaves the query undecided).
 template <class Policy, class Q, class W>
-LWSCCD_HD LWSCCD_HOST_INLINE bool cubic_on_step(const Q& q, W mag, W perturbation, BernsteinPiece<W>& root) {
+LWSCCD_HD LWSCCD_HOST_INLINE bool cubic_on_step(const Q& q, W mag, W perturbation, BernsteinPiece<W>& root,
+                                                const Vec3<W>* magnitude = nullptr) {
   const W k = W(Policy::kCoefficientBound), slack = underflow_slack(mag, 3);
   W rounding_bound = W(0);
-  const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound);
+  const W coefficient_bound = coplanarity_bernstein(q, root.c, perturbation, &rounding_bound, magnitude);
   root.bound = fadd(fmul(k, coefficient_bound), slack);
   root.exact = fadd(fmul(k, rounding_bound), slack);
   bool finite = finite_value(root.bound);

@@ -168,7 +168,7 @@ LWSCCD_HD int separating_directions(const EdgeEdgeQuery<T>& q, T t, T u, T v, Ve
 // varies most. F over a box lies in the convex hull of its corner values (it is linear in each
 // of t, u, v), so n . F lies between the corners' extremes, each known to within sum_k |n_k| (eps_k + 4 u |f_k|) (the
 // corners' bound plus the dot product's rounding, bounded twice over; with |n_k| <= 1 = max,
-// no product of the bound underflows below eps's denormal term). docs/NARROW_PHASE.md, section 1.
+// no product of the bound underflows below eps's denormal term). docs/NARROW_PHASE.md, section 2.3.
 template <class T>
 struct AlongDirection {
   bool excluded = false;

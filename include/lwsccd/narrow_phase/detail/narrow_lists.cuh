@@ -66,6 +66,11 @@ enum NarrowCounter : int {
   kExpanded,        // the filter's second round: intervals whose test was unknown, to split further
   kDeepIntervals,   // the second round's intervals listed for the inside test (more than the room: deferred)
   kSettled,         // CertifiedCcd: undecided queries settled as contacts within the tolerance (not the fallback's)
+  kSingleMisses,    // CertifiedCcd: pairs single precision decided at once (the screen, a filter without intervals)
+  kSingleIntervals, // the single-precision filter's intervals listed for the inside test (more than the room: on one thread)
+  kSingleListed,    // pairs whose intervals it listed
+  kSingleFailed,    // of those, pairs with an interval not certainly outside in float (to the double filter)
+  kDoubleKept,      // pairs the double filter takes (kept by the screen, not decided in single precision)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.

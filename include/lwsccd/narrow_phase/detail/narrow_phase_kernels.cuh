@@ -81,6 +81,13 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
         l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
         l.intervals.resize_discard(l.interval_room);
         l.listed.resize_discard((l.work_room + 31) / 32);
+        if (kSingleFirst) {
+          l.single_interval_room =
+              std::max(l.single_interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
+          l.single_intervals.resize_discard(l.single_interval_room);
+          l.single_failed.resize_discard((l.work_room + 31) / 32);
+          l.double_kept.resize_discard(l.work_room);
+        }
         if (second_round(params.mode)) {
           l.expanded.resize_discard(l.interval_room);
           l.deep_room = std::max(l.deep_room, std::max<std::size_t>(l.work_room / 100 * Policy::kDeepRoomPercent, 1));
@@ -146,26 +153,45 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     const std::size_t room = std::min(l.work_room, in.count.room);
     // Mode set tries hits on the way down (from level 0), which the filter leaves to the whole
     // search: there the levels-to-kRefineDeferLevel kernel decides more at once.
+    // The pairs the double refinement takes: the survivors, or (FP32 first) those the
+    // single-precision filter leaves.
+    const Pair* kept = l.survivors.data();
+    int kept_counter = detail::kSurvivors;
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
+      if constexpr (kSingleFirst) {
+        detail::single_filter_kernel<Method, kVertexFace, T, P>
+            <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
+                l.single_intervals.data(), l.single_interval_room, l.double_kept.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+        LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
+        detail::single_inside_kernel<Method, kVertexFace, T, P>
+            <<<grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, l.survivors.data(), control_.data(), l.counters.data(), l.single_intervals.data(),
+                l.single_interval_room, l.single_failed.data(), l.double_kept.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+        kept = l.double_kept.data();
+        kept_counter = detail::kDoubleKept;
+      }
       detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-          mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
+          mesh, x0, x1, kept, kept_counter, l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
           l.interval_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
       const bool deeper = second_round(params.mode);
       detail::filter_inside_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
-          mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
+          mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
           l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
       LWSCCD_CUDA_CHECK_LAUNCH();
       if (deeper) {
         detail::filter_expand_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
-            mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
+            mesh, x0, x1, kept, params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
             l.deep_room, l.listed.data(), l.deferred.data());
         LWSCCD_CUDA_CHECK_LAUNCH();
         detail::filter_inside_kernel<Method, kVertexFace, T, P>
             <<<grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), detail::kDeepIntervals,
+                mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kDeepIntervals,
                 l.deep.data(), l.deep_room, l.listed.data(), l.deferred.data(), nullptr);
         LWSCCD_CUDA_CHECK_LAUNCH();
       }
@@ -180,14 +206,14 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // list's), else a thread each; each kernel returns at once where the other one's case holds.
     const auto warp_below = static_cast<std::size_t>(Policy::kRefineWarpBelow);
     detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+        mesh, x0, x1, kept, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
         l.hit_room, l.undecided.data(), warp_below);
     LWSCCD_CUDA_CHECK_LAUNCH();
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
       detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
           <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, l.survivors.data(), l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+              mesh, x0, x1, kept, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
               l.hit_room, l.undecided.data(), warp_below);
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
@@ -255,6 +281,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     // for the next run, no rerun.
     if (c[detail::kIntervals] > l.interval_room) l.interval_room = detail::grown_room(c[detail::kIntervals]);
     if (c[detail::kDeepIntervals] > l.deep_room) l.deep_room = detail::grown_room(c[detail::kDeepIntervals]);
+    if (c[detail::kSingleIntervals] > l.single_interval_room) l.single_interval_room = detail::grown_room(c[detail::kSingleIntervals]);
   }
   if (!complete) {
     ++reruns_;
@@ -272,6 +299,10 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.counts = {};
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
+    // Single precision's misses: at once (screen, filter without intervals), and every pair whose
+    // listed intervals were all outside in float.
+    l.counts.single_misses =
+        kCertified ? static_cast<std::size_t>(c[detail::kSingleMisses] + c[detail::kSingleListed] - c[detail::kSingleFailed]) : 0;
     l.counts.certified_hits = static_cast<std::size_t>(c[detail::kCertifiedHits]);
     // As the CPU backend counts (NarrowPhaseCounts): a method without the certified path answers
     // every pair by its own test, its quick rejections included, so every pair is a fallback.

@@ -1,0 +1,91 @@
+// lwsccd — the certified path in single precision (FP32 first): the pair's points relative to a
+// local origin, rounded to float, and the screen on them with bounds that cover that rounding as
+// well as the float arithmetic; the double screen runs only on what it leaves (the
+// single-precision filter: CertifiedFilter::decides_single, certified_filter.hpp).
+// Part of certified_ccd.hpp: include <lwsccd/narrow_phase/certified_ccd.hpp>, not this file.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <type_traits>
+
+#include "lwsccd/core/detail/fp.hpp"
+#include "lwsccd/core/detail/rounding.hpp"
+#include "lwsccd/narrow_phase/detail/certified_screen.hpp"
+
+namespace lwsccd::detail {
+
+/// A query in single precision for the FP32-first passes: its points relative to its first point
+/// at t = 0, and `m`, a per-axis bound such that every coordinate of the exact relative query
+/// (and of any query within the certified path's perturbation of the input) lies within
+/// single_input_perturbation() m_k of the float one.
+template <class Q>
+struct SingleQuery {
+  Q q;
+  Vec3<float> m;
+};
+
+/// Each coordinate is rounded to float first (no double arithmetic: on most GPUs double runs at
+/// 1/64 of float), then the first point subtracted in float. With x, o a coordinate and the
+/// origin's, x_f = x (1 + d_1), o_f = o (1 + d_2), f = (x_f - o_f)(1 + d_3), |d_i| <= u_f:
+///   |f - (x - o)| <= u_f (|x| + |o| + |x_f - o_f|) <= u_f / (1 - u_f) (2 a + r)
+/// with a = the largest |x_f| on the axis (the float input's magnitude) and r = the largest |f|
+/// (the relative query's). The certified path's own perturbation, u_T times the input's
+/// magnitude, adds at most u_f a / (1 - u_f). So m = r + 3 a covers both with the perturbation
+/// below (docs/NARROW_PHASE.md, B9). Contact is invariant under translation, so the exact answers
+/// of the relative query and of the input are the same; float inputs lose nothing in the cast.
+template <class Q>
+LWSCCD_HD LWSCCD_HOST_INLINE auto relative_single(const Q& q_in) {
+  const auto a = q_in.template cast<float>();
+  using QF = std::decay_t<decltype(a)>;
+  const Vec3<float>* x = a.points();
+  const Vec3<float> o = x[0];
+  QF r = a;
+  Vec3<float>* out = const_cast<Vec3<float>*>(r.points());
+  for (int i = 0; i < 8; ++i) out[i] = vsub(x[i], o);
+  const Vec3<float> input = coordinate_magnitude(a), relative = coordinate_magnitude(r);
+  return SingleQuery<QF>{r, vadd(relative, vscale(input, 3.0f))};
+}
+
+/// The relative perturbation that covers relative_single's rounding: every exact relative
+/// coordinate lies within this times m_k of its float. u_f (1 + 2^-18) covers the 1 / (1 - u_f)
+/// and the rounding of m's own sum and product (each a factor 1 + u_f) with room.
+/// Policy::kSingleInputBound scales it (1 = as derived; the mutation tests show that less is
+/// unsound).
+template <class Policy>
+LWSCCD_HD LWSCCD_HOST_INLINE float single_input_perturbation() {
+  const float u = unit_roundoff<float>();
+  return fmul(fadd(u, u * exact_pow2_neg<float>(18)), static_cast<float>(Policy::kSingleInputBound));
+}
+
+/// The single-precision screen: true when the pair certainly never touches in the step (or
+/// before params.time_limit), decided in float alone, with the double path's guarantee (for the
+/// input as given and within its perturbation). The swept boxes and the cubic's Bernstein signs,
+/// as the double screen tests them, on the relative float query with a perturbation covering its
+/// rounding: a sign beyond the bound holds for every query within that perturbation, the exact
+/// relative query among them. What it leaves goes to the double screen.
+/// `mixed`, when given, is set when the double screen cannot reject the pair either (screen_with):
+/// the cubic's signs on the whole step are certainly mixed.
+template <class Policy, class Q, class T>
+LWSCCD_HD bool certified_screen_single(const Q& q_in, const CcdParams<T>& params, bool* mixed = nullptr) {
+  if (mixed) *mixed = false;
+  if (params.min_separation > T(0)) return false;  // the cubic only speaks of contact
+  const auto s = relative_single(q_in);
+  return screen_with<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m, mixed);
+}
+
+/// The certified path's cheap first step: true when the query is certainly a miss (before
+/// params.time_limit). In single precision first (Policy::kSingleFirst), then in the path's own
+/// precision for what that leaves, unless single precision found the cubic's signs certainly
+/// mixed (the double screen's cubic test cannot reject such a pair; its box test is left to the
+/// refinement, which decides the pair whatever the screen says). Most pairs of a real step end
+/// here; a batch runs it on every pair and certified_refine on the others.
+template <class Policy, class Q, class T>
+LWSCCD_HD bool certified_screen(const Q& q, const CcdParams<T>& params) {
+  bool mixed = false;
+  if (Policy::kSingleFirst && certified_screen_single<Policy>(q, params, &mixed)) return true;
+  return !mixed && certified_screen_double<Policy>(q, params);
+}
+
+}  // namespace lwsccd::detail
