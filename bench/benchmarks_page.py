@@ -55,6 +55,13 @@ def ms(x, digits=None):
     return f"{x:.3f}"
 
 
+def us(x):
+    """A time in microseconds with two or three significant digits."""
+    if x is None:
+        return "-"
+    return f"{x:,.0f}" if x >= 100 else f"{x:.2g}"
+
+
 def count(n):
     return "-" if n is None else f"{int(n):,}"
 
@@ -273,7 +280,7 @@ def accuracy_section(rows, accuracy, kind, out_dir, gpu):
                     continue
                 fn = r["false_negatives"]
                 line += [f"{'**%d**' % fn if fn else 0} / {r['false_positives']}",
-                         f"{r['median_us']:.2g} / {r['max_us']:,.4g}"]
+                         f"{us(r['median_us'])} / {us(r['max_us'])}"]
             body.append(line)
         header = ["method, precision"]
         for i in inputs:
