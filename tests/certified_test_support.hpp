@@ -71,6 +71,21 @@ inline std::vector<Case> hard_cases(std::mt19937& rng, int per_kind) {
   return out;
 }
 
+// A vertex sliding into a triangle in a tilted plane (rotations by 3-4-5 and 5-12-13 triangles),
+// moved by `offset`: the exact configuration touches, its rounding leaves the cubic as noise.
+inline VertexFaceQuery<double> tilted_coplanar_contact(std::mt19937& rng, const Vec3<long double>& offset = {0, 0, 0}) {
+  auto rotate = [](const Vec3<long double>& v) {
+    const Vec3<long double> r{(3 * v.x - 4 * v.y) / 5, (4 * v.x + 3 * v.y) / 5, v.z};
+    return Vec3<long double>{r.x, (5 * r.y - 12 * r.z) / 13, (12 * r.y + 5 * r.z) / 13};
+  };
+  const long double y = eighth(rng, 1, 16), s0 = eighth(rng, 8, 64), s1 = eighth(rng, 1, 16);
+  const Vec3<long double> pts[8] = {{-s0, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}, {s1, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}};
+  VertexFaceQuery<double> q;
+  Vec3<double>* out = &q.p0;
+  for (int i = 0; i < 8; ++i) out[i] = (rotate(pts[i]) + offset).cast<double>();
+  return q;
+}
+
 // Exact transforms of a case: axis permutation and signs, scaling by 2^k, translation by 2^20.
 inline Case transformed(const Case& c, int permutation, int signs, int scale, bool translate) {
   Case t = c;

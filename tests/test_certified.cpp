@@ -133,17 +133,9 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
   // triangles) touches, its rounding leaves the cubic as noise. Without the coefficient bound the
   // noise is taken for a sign: certified misses of true contacts.
   std::mt19937 rng(7);
-  auto rotate = [](const Vec3<long double>& v) {
-    const Vec3<long double> r{(3 * v.x - 4 * v.y) / 5, (4 * v.x + 3 * v.y) / 5, v.z};
-    return Vec3<long double>{r.x, (5 * r.y - 12 * r.z) / 13, (12 * r.y + 5 * r.z) / 13};
-  };
   std::size_t misses_sound = 0, misses_mutated = 0, tilted = 0;
   for (int n = 0; n < 400; ++n) {
-    const long double y = eighth(rng, 1, 16), s0 = eighth(rng, 8, 64), s1 = eighth(rng, 1, 16);
-    const Vec3<long double> pts[8] = {{-s0, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}, {s1, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}};
-    VertexFaceQuery<double> q;
-    Vec3<double>* out = &q.p0;
-    for (int i = 0; i < 8; ++i) out[i] = rotate(pts[i]).cast<double>();
+    const VertexFaceQuery<double> q = tilted_coplanar_contact(rng);
     ++tilted;
     misses_sound += detail::certified_classify<CertifiedPolicy>(q, CcdParams<double>{}).certainty == Certainty::miss;
     misses_mutated += detail::certified_classify<ShrunkPolicy<0, 100, 100>>(q, CcdParams<double>{}).certainty == Certainty::miss;
@@ -280,17 +272,9 @@ TEST_CASE("single-precision screen: never a miss of a true contact, misses for p
   // Coplanar motion in a tilted plane (as the double screen's mutation check): a true contact
   // whose cubic is rounding noise. Sound: never rejected; without the coefficient bound the
   // single screen takes the noise for a sign.
-  auto rotate = [](const Vec3<long double>& v) {
-    const Vec3<long double> r{(3 * v.x - 4 * v.y) / 5, (4 * v.x + 3 * v.y) / 5, v.z};
-    return Vec3<long double>{r.x, (5 * r.y - 12 * r.z) / 13, (12 * r.y + 5 * r.z) / 13};
-  };
   std::size_t tilted = 0, rejected_sound = 0, rejected_mutated = 0;
   for (int n = 0; n < 400; ++n) {
-    const long double y = eighth(rng, 1, 16), s0 = eighth(rng, 8, 64), s1 = eighth(rng, 1, 16);
-    const Vec3<long double> pts[8] = {{-s0, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}, {s1, y, 0}, {0, 0, 0}, {8, 0, 0}, {0, 8, 0}};
-    VertexFaceQuery<double> q;
-    Vec3<double>* out = &q.p0;
-    for (int i = 0; i < 8; ++i) out[i] = (rotate(pts[i]) + Vec3<long double>{1000, -2000, 3000}).cast<double>();
+    const VertexFaceQuery<double> q = tilted_coplanar_contact(rng, {1000, -2000, 3000});
     ++tilted;
     rejected_sound += detail::certified_screen_single<CertifiedPolicy>(q, CcdParams<double>{});
     rejected_mutated += detail::certified_screen_single<ShrunkPolicy<0, 100, 100>>(q, CcdParams<double>{});
