@@ -90,10 +90,13 @@ def builtin_label(scene, triangles):
     return f"built-in {triangles}"
 
 
-def save(fig, path):
+def save_chart(fig, out_dir, name, kind, alt):
+    """Writes the chart as <name>_<kind>.png in out_dir; returns the page's lines that show it."""
+    chart = f"{name}_{kind}.png"
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(os.path.join(out_dir, chart), dpi=110)
     plt.close(fig)
+    return ["", f"![{alt}](results/{chart})"]
 
 
 # --- machine -------------------------------------------------------------------------------------
@@ -180,9 +183,7 @@ def whole_step_section(rows, kind, out_dir, gpu):
     ax.set_title(f"Stages per step: first (hatched), steady host to host, steady device-resident (dotted)\n{gpu}",
                  fontsize=9)
     ax.legend(fontsize=8)
-    chart = f"pipeline_stages_{kind}.png"
-    save(fig, os.path.join(out_dir, chart))
-    lines += ["", f"![stages per step](results/{chart})"]
+    lines += save_chart(fig, out_dir, "pipeline_stages", kind, "stages per step")
     # What it teaches, from the rows.
     cb = scenes.get("cloth-ball", {})
     if "steady" in cb and "first" in cb:
@@ -220,13 +221,18 @@ def cpu_section(rows, machine):
 METHOD_ORDER = ["certified", "filtered-inclusion", "inclusion", "cubic", "filter-only"]
 
 
+def method_precisions(rows):
+    """The rows' (method, precision) pairs in METHOD_ORDER, double before float."""
+    return sorted({(r["method"], r["precision"]) for r in rows},
+                  key=lambda mp: (METHOD_ORDER.index(mp[0]) if mp[0] in METHOD_ORDER else 9, mp[1] != "double"))
+
+
 def accuracy_section(rows, accuracy, kind, out_dir, gpu):
     lines = []
     rows = [r for r in rows if r["sweep"] == "methods" and r["step"] == "steady"]
     if rows:
         scenes = sorted({r["scene"] for r in rows}, key=scene_key)
-        combos = sorted({(r["method"], r["precision"]) for r in rows},
-                        key=lambda mp: (METHOD_ORDER.index(mp[0]) if mp[0] in METHOD_ORDER else 9, mp[1] != "double"))
+        combos = method_precisions(rows)
         cell = {(r["scene"], r["method"], r["precision"]): r for r in rows}
         body = []
         for m, p in combos:
@@ -261,14 +267,11 @@ def accuracy_section(rows, accuracy, kind, out_dir, gpu):
         ax.set_ylabel("false negatives + false positives")
         ax.set_title(f"Speed against accuracy on the scenes with ground truth\n{gpu}", fontsize=9)
         ax.legend(fontsize=7, ncol=2)
-        chart = f"accuracy_{kind}.png"
-        save(fig, os.path.join(out_dir, chart))
-        lines += ["", f"![speed against accuracy](results/{chart})"]
+        lines += save_chart(fig, out_dir, "accuracy", kind, "speed against accuracy")
     if accuracy:
         groups = [r for r in accuracy if r["kind"] == "group"]
         inputs = sorted({r["input"] for r in groups})
-        combos = sorted({(r["method"], r["precision"]) for r in groups},
-                        key=lambda mp: (METHOD_ORDER.index(mp[0]) if mp[0] in METHOD_ORDER else 9, mp[1] != "double"))
+        combos = method_precisions(groups)
         cell = {(r["input"], r["method"], r["precision"]): r for r in groups}
         body = []
         for m, p in combos:
@@ -356,9 +359,7 @@ def schedulers_section(rows, kind, out_dir, gpu):
     ax.set_ylabel("ms (log)")
     ax.set_title(f"Traversal from the root and from the front (hatched)\n{gpu}", fontsize=9)
     ax.legend(fontsize=7, ncol=2)
-    chart = f"traverse_{kind}.png"
-    save(fig, os.path.join(out_dir, chart))
-    lines += ["", f"![schedulers](results/{chart})"]
+    lines += save_chart(fig, out_dir, "traverse", kind, "schedulers")
     return lines
 
 
@@ -391,9 +392,7 @@ def scaling_section(rows, kind, out_dir, gpu):
     ax.set_ylabel("ms per steady step (log)")
     ax.set_title(f"Scaling with the number of triangles\n{gpu}", fontsize=9)
     ax.legend(fontsize=8)
-    chart = f"scaling_{kind}.png"
-    save(fig, os.path.join(out_dir, chart))
-    lines += ["", f"![scaling](results/{chart})"]
+    lines += save_chart(fig, out_dir, "scaling", kind, "scaling")
     return lines
 
 
@@ -442,9 +441,7 @@ def rays_section(rows, kind, out_dir, gpu):
     ax.invert_yaxis()
     ax.set_xlabel("Mrays/s")
     ax.set_title(f"Rays per second: {' | '.join(f'C{i}: {s}' for i, s in enumerate(sets))}\n{gpu}", fontsize=8)
-    chart = f"rays_{kind}.png"
-    save(fig, os.path.join(out_dir, chart))
-    lines += ["", f"![rays](results/{chart})"]
+    lines += save_chart(fig, out_dir, "rays", kind, "rays")
     return lines
 
 

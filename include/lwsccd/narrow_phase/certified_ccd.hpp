@@ -126,17 +126,10 @@ struct CertifiedCcdT {
   LWSCCD_HD static bool screen(const Q& q, const CcdParams<T>& params) {
     return detail::certified_screen<Policy>(q, params);
   }
-  /// screen's two parts, for batches that count them: screen = screen_single, then screen_double
-  /// unless screen_single set `mixed`. screen_single is the single-precision screen (false when
-  /// Policy::kSingleFirst is off).
+  /// screen, saying in which precision a miss was decided (for batches that count them).
   template <class Q, class T>
-  LWSCCD_HD static bool screen_single(const Q& q, const CcdParams<T>& params, bool& mixed) {
-    mixed = false;
-    return Policy::kSingleFirst && detail::certified_screen_single<Policy>(q, params, &mixed);
-  }
-  template <class Q, class T>
-  LWSCCD_HD static bool screen_double(const Q& q, const CcdParams<T>& params) {
-    return detail::certified_screen_double<Policy>(q, params);
+  LWSCCD_HD static detail::ScreenVerdict screen_verdict(const Q& q, const CcdParams<T>& params) {
+    return detail::certified_screen_verdict<Policy>(q, params);
   }
   /// The single-precision filter (detail::CertifiedFilter::decides_single): true for a certain
   /// miss, proved in float by the refinement's first levels. Batches run it on the pairs the

@@ -141,14 +141,10 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
       const auto q = gather(i);
       if constexpr (lwsccd::detail::certified_of<Method>::value) {
         if (undecided) {  // first pass: the screen, then the refinement of what it passes
-          bool mixed = false;
-          if (Method::screen_single(q, params, mixed)) {  // FP32 first, FP64 for what it leaves
+          const lwsccd::detail::ScreenVerdict screened = Method::screen_verdict(q, params);
+          if (screened != lwsccd::detail::ScreenVerdict::passed) {
             ++out.counts.certified_misses;
-            ++out.counts.single_misses;
-            continue;
-          }
-          if (!mixed && Method::screen_double(q, params)) {
-            ++out.counts.certified_misses;
+            out.counts.single_misses += screened == lwsccd::detail::ScreenVerdict::single_miss;
             continue;
           }
           ++out.counts.screened;

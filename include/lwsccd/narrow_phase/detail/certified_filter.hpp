@@ -192,14 +192,33 @@ struct CertifiedFilter {
   /// and the tests; a GPU batch runs the tests a thread each). True: a certain miss of the input as
   /// given (and within the double path's perturbation); false: the double path decides.
   template <class Q, class T>
-  LWSCCD_HD static int intervals_single(const Q& q_in, const CcdParams<T>& params, std::uint32_t& mask) {
+  LWSCCD_HD static int intervals_single(const Q& q, const CcdParams<T>& params, std::uint32_t& mask) {
     mask = 0;
     if (!Policy::kSingleFirst || params.min_separation > T(0)) return -1;
     // Leaves within the filter's levels (certified_max_level <= kLevel, i.e. a tolerance of at
     // least 2^-(kLevel - 1)): the double path's. Compared in float, without double arithmetic
     // (a tolerance that rounds up to the limit is only declined, which is always sound).
     if (static_cast<float>(params.tolerance) >= exact_pow2_neg<float>(kLevel - 1)) return -1;
-    const auto s = relative_single(q_in);
+    return intervals_of(relative_single(q), params, mask);
+  }
+  template <class Q>
+  LWSCCD_HD static bool outside_single(const Q& q, unsigned node) {
+    return outside_of(relative_single(q), node);
+  }
+  template <class Q, class T>
+  LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params) {
+    std::uint32_t mask = 0;
+    if (intervals_single(q, params, mask) < 0) return false;
+    if (mask == 0) return true;
+    const auto s = relative_single(q);  // (once for all its intervals)
+    for (unsigned node = 0; node < 32; ++node)
+      if (((mask >> node) & 1u) && !outside_of(s, node)) return false;
+    return true;
+  }
+
+ private:
+  template <class QF, class T>
+  LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask) {
     const float perturbation = single_input_perturbation<Policy>();
     const float mag = fmul(4.0f, max_component(s.m));  // bounds every difference and its motion
     BernsteinPiece<float> root;
@@ -213,9 +232,8 @@ struct CertifiedFilter {
     for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
     return n;
   }
-  template <class Q>
-  LWSCCD_HD static bool outside_single(const Q& q_in, unsigned node) {
-    const auto s = relative_single(q_in);
+  template <class QF>
+  LWSCCD_HD static bool outside_of(const SingleQuery<QF>& s, unsigned node) {
     const float perturbation = single_input_perturbation<Policy>();
     const float slack = underflow_slack(fmul(4.0f, max_component(s.m)), 4);
     int level = 0;
@@ -224,15 +242,8 @@ struct CertifiedFilter {
     const float mid = fadd(static_cast<float>(node - (1u << level)) * exact_pow2_neg<float>(level), half);
     return inside_over<Policy>(s.q, mid, half, s.m, perturbation, slack) == InsideVerdict::outside;
   }
-  template <class Q, class T>
-  LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params) {
-    std::uint32_t mask = 0;
-    if (intervals_single(q, params, mask) < 0) return false;
-    for (unsigned node = 0; node < 32; ++node)
-      if (((mask >> node) & 1u) && !outside_single(q, node)) return false;
-    return true;
-  }
 
+ public:
   /// Both rounds on one thread, as a GPU batch runs them apart (the tests' reference): true when
   /// the filter decides the query (then certified_refine answers a miss, or undecided from
   /// noted.lower when noted.any); false when the whole search must run.

@@ -34,13 +34,10 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
     const std::pair<index_t, index_t> p = in.pairs[i];
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
     if constexpr (lwsccd::detail::certified_of<Method>::value) {
-      // FP32 first (counted), FP64 for what it leaves (unless FP64 cannot reject it either).
-      bool mixed = false;
-      if (Method::screen_single(q, params, mixed)) {
-        append_index(counters + kSingleMisses);
-        continue;
-      }
-      if (!mixed && Method::screen_double(q, params)) continue;
+      // FP32 first (its misses counted), FP64 for what it leaves.
+      const lwsccd::detail::ScreenVerdict screened = Method::screen_verdict(q, params);
+      if (screened == lwsccd::detail::ScreenVerdict::single_miss) append_index(counters + kSingleMisses);
+      if (screened != lwsccd::detail::ScreenVerdict::passed) continue;
     } else if (first_step_rejects<Method>(q, params)) {
       continue;
     }
@@ -124,6 +121,13 @@ __device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long lo
   const unsigned bit = 1u << (i & 31u);
   if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
 }
+// Appends a pair to a list whose room holds every pair it can get (the double filter's).
+__device__ inline void append_pair(unsigned long long* counter, std::pair<index_t, index_t>* list, const std::pair<index_t, index_t>& p) {
+  const unsigned long long at = append_index(counter);
+  list[at].first = p.first;  // (std::pair's assignment is host-only before C++20)
+  list[at].second = p.second;
+}
+
 // FP32 first, before the filter: a thread per screened pair lists the single-precision filter's
 // intervals (CertifiedFilter::intervals_single) in `intervals` for single_inside_kernel; a pair
 // it decides at once is counted, one it cannot decide is appended to `double_kept` for the
@@ -155,13 +159,8 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
       }
       single = Filter::decides_single(q, params);
     }
-    if (single) {
-      append_index(counters + kSingleMisses);
-    } else {
-      const unsigned long long at = append_index(counters + kDoubleKept);
-      double_kept[at].first = kept[i].first;
-      double_kept[at].second = kept[i].second;
-    }
+    if (single) append_index(counters + kSingleMisses);
+    else append_pair(counters + kDoubleKept, double_kept, kept[i]);
   }
 }
 
@@ -184,9 +183,7 @@ __global__ void single_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
     const unsigned bit = 1u << (i & 31u);
     if (atomicOr(failed + (i >> 5), bit) & bit) continue;
     append_index(counters + kSingleFailed);
-    const unsigned long long at = append_index(counters + kDoubleKept);
-    double_kept[at].first = kept[i].first;
-    double_kept[at].second = kept[i].second;
+    append_pair(counters + kDoubleKept, double_kept, kept[i]);
   }
 }
 

@@ -75,17 +75,27 @@ LWSCCD_HD bool certified_screen_single(const Q& q_in, const CcdParams<T>& params
   return screen_with<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m, mixed);
 }
 
-/// The certified path's cheap first step: true when the query is certainly a miss (before
-/// params.time_limit). In single precision first (Policy::kSingleFirst), then in the path's own
-/// precision for what that leaves, unless single precision found the cubic's signs certainly
-/// mixed (the double screen's cubic test cannot reject such a pair; its box test is left to the
-/// refinement, which decides the pair whatever the screen says). Most pairs of a real step end
-/// here; a batch runs it on every pair and certified_refine on the others.
+/// How the screen ended for a pair: a miss decided in single precision, one decided in double,
+/// or passed on to the refinement.
+enum class ScreenVerdict : std::uint8_t { single_miss, double_miss, passed };
+
+/// The certified path's cheap first step. In single precision first (Policy::kSingleFirst), then
+/// in the path's own precision for what that leaves, unless single precision found the cubic's
+/// signs certainly mixed (the double screen's cubic test cannot reject such a pair; its box test
+/// is left to the refinement, which decides the pair whatever the screen says). Most pairs of a
+/// real step end here; a batch runs it on every pair and certified_refine on the others.
+template <class Policy, class Q, class T>
+LWSCCD_HD ScreenVerdict certified_screen_verdict(const Q& q, const CcdParams<T>& params) {
+  bool mixed = false;
+  if (Policy::kSingleFirst && certified_screen_single<Policy>(q, params, &mixed)) return ScreenVerdict::single_miss;
+  if (!mixed && certified_screen_double<Policy>(q, params)) return ScreenVerdict::double_miss;
+  return ScreenVerdict::passed;
+}
+
+/// True when the query is certainly a miss (before params.time_limit) by the screen.
 template <class Policy, class Q, class T>
 LWSCCD_HD bool certified_screen(const Q& q, const CcdParams<T>& params) {
-  bool mixed = false;
-  if (Policy::kSingleFirst && certified_screen_single<Policy>(q, params, &mixed)) return true;
-  return !mixed && certified_screen_double<Policy>(q, params);
+  return certified_screen_verdict<Policy>(q, params) != ScreenVerdict::passed;
 }
 
 }  // namespace lwsccd::detail
