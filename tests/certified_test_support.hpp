@@ -176,6 +176,11 @@ struct DoubleScreenPolicy : CertifiedPolicy {
   static constexpr bool kSingleFirst = false;
 };
 
+// The single-precision filter's first round alone.
+struct SingleFirstRoundPolicy : CertifiedPolicy {
+  static constexpr bool kSingleSecondRound = false;
+};
+
 // The halving search alone, without the certain descent.
 struct NoDescentPolicy : CertifiedPolicy {
   static constexpr bool kCertainDescent = false;

@@ -48,3 +48,31 @@ TEST_CASE("AnyPipeline: unknown names and device positions on the CPU are clear 
   CHECK_THROWS_WITH(any->step_from_device(m.x0.data(), m.x1.data()), Catch::Contains("host positions"));
   CHECK_THROWS_AS(any->step_on_device(m.x0.data(), m.x1.data()), InputError);
 }
+
+TEST_CASE("AnyPipeline: float positions are certified as given (the pipeline on their exact double values)",
+          "[any_pipeline][float_input]") {
+  // Float input is widened exactly, so its answers are those of the double pipeline on the float
+  // values, pair for pair and count for count; rounding moved some points, so the contacts of the
+  // float positions are a different (not necessarily equal) set from the double positions'.
+  const auto m = lwsccd_test::folded_cloth(14, 3);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  std::vector<Vec3f> f0, f1;
+  std::vector<Vec3d> w0, w1;
+  for (std::size_t v = 0; v < m.x0.size(); ++v) {
+    f0.push_back(m.x0[v].cast<float>());
+    f1.push_back(m.x1[v].cast<float>());
+    w0.push_back(f0.back().cast<double>());
+    w1.push_back(f1.back().cast<double>());
+  }
+  CHECK(w0 != m.x0);  // rounding changed the input
+  auto any = cpu::make_any_pipeline(mesh, BodyLayout{}, PipelineParams{}, PolicyChoice{});
+  cpu::CcdPipeline<> direct(mesh);
+  const StepOutcome got = any->step(f0, f1);
+  const auto expected = direct.step(w0, w1);
+  lwsccd_test::require_same_contacts(got.contacts, expected.contacts);
+  lwsccd_test::require_same_counts(got.contacts.vf_counts, expected.contacts.vf_counts);
+  lwsccd_test::require_same_counts(got.contacts.ee_counts, expected.contacts.ee_counts);
+  CHECK(got.contacts.vf.size() + got.contacts.ee.size() > 0);
+  CHECK_THROWS_AS(any->step(std::vector<Vec3f>(f0.begin(), f0.end() - 1), f1), InputError);
+  CHECK_THROWS_WITH(any->step_from_device(f0.data(), f1.data()), Catch::Contains("host positions"));
+}

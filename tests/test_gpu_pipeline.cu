@@ -331,6 +331,45 @@ TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from devi
   CHECK_THROWS_AS(fresh.step_on_device(scene.step.x0.data(), x1.data()), InputError);
 }
 
+TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pipeline on their exact double values",
+          "[gpu][pipeline][float_input]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(20000);
+  std::vector<Vec3f> f0, f1;
+  std::vector<Vec3d> w0, w1;
+  for (std::size_t v = 0; v < scene.step.x0.size(); ++v) {
+    f0.push_back(scene.step.x0[v].cast<float>());
+    f1.push_back(scene.step.x1[v].cast<float>());
+    w0.push_back(f0.back().cast<double>());
+    w1.push_back(f1.back().cast<double>());
+  }
+  cpu::CcdPipeline<> cpu_pipeline(scene.step.mesh, scene.layout);
+  const auto c = cpu_pipeline.step(w0, w1);
+  CHECK(c.stats.hits_vf + c.stats.hits_ee > 0);
+  gpu::CcdPipeline<> host_input(scene.step.mesh, scene.layout);
+  const auto g = host_input.step(f0, f1);
+  require_same_contacts(g, c);
+  lwsccd_test::require_same_counts(g.contacts.vf_counts, c.contacts.vf_counts);
+  lwsccd_test::require_same_counts(g.contacts.ee_counts, c.contacts.ee_counts);
+  // Float positions in device memory, in a fresh pipeline, then the same one again (its front).
+  gpu::DeviceBuffer<Vec3f> d0, d1;
+  d0.upload(f0);
+  d1.upload(f1);
+  gpu::CcdPipeline<> device_input(scene.step.mesh, scene.layout);
+  for (int repeat = 0; repeat < 2; ++repeat) {
+    const auto d = device_input.step_from_device(d0.data(), d1.data());
+    require_same_contacts(d, c);
+    lwsccd_test::require_same_counts(d.contacts.ee_counts, c.contacts.ee_counts);
+  }
+  const DeviceStepResult<double> on_device = device_input.step_on_device(d0.data(), d1.data());
+  CHECK(on_device.contacts.num_vf == c.contacts.vf.size());
+  CHECK(on_device.contacts.num_ee == c.contacts.ee.size());
+  CHECK(on_device.contacts.earliest_toi == c.contacts.earliest_toi);
+  CHECK_THROWS_AS(device_input.step_from_device(f0.data(), d1.data()), InputError);
+  // Host float input after double input in the same pipeline: the positions are replaced whole.
+  require_same_contacts(host_input.step(scene.step.x0, scene.step.x1), cpu_pipeline.step(scene.step.x0, scene.step.x1));
+  require_same_contacts(host_input.step(f0, f1), c);
+}
+
 TEST_CASE("GPU pipeline over horse-gallop: front tracking equals fresh traversals and the CPU pipeline at every step",
           "[gpu][pipeline][data]") {
   if (!lwsccd_test::have_data()) {

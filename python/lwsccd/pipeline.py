@@ -124,9 +124,12 @@ class Pipeline:
         """One step: every pair that comes into contact while the vertices move from x0 to x1.
 
         Args:
-            x0, x1: (num_vertices, 3) positions at the step's start and end: NumPy arrays (any
-                real dtype, converted to float64), or CUDA arrays (float64, C-contiguous) that
-                expose ``__cuda_array_interface__`` or DLPack, read in place (GPU backend).
+            x0, x1: (num_vertices, 3) positions at the step's start and end: NumPy arrays
+                (float32 taken as it is; any other real dtype converted to float64), or CUDA
+                arrays (float64 or float32, C-contiguous) that expose
+                ``__cuda_array_interface__`` or DLPack, read in place (GPU backend). Float32
+                positions are widened exactly, so the answers are certified for the float32
+                values as given. x0 and x1 must have the same dtype.
             on_device: GPU backend: leave the contacts in device memory and return a
                 :class:`DeviceStepResult` instead of a :class:`StepResult`.
 
@@ -137,16 +140,21 @@ class Pipeline:
         a0, a1 = _cuda_address(x0, "x0", n), _cuda_address(x1, "x1", n)
         if (a0 is None) != (a1 is None):
             raise ValueError("lwsccd: x0 and x1 must both be host arrays or both CUDA arrays")
+        if a0 is not None and a0[1] != a1[1]:
+            raise TypeError("lwsccd: x0 and x1 must have the same dtype (both float64 or both float32)")
         if on_device:
             if a0 is None:
                 raise ValueError("lwsccd: on_device=True needs x0 and x1 in device memory (CUDA arrays)")
-            d = self._core.step_on_device(a0, a1)
+            d = self._core.step_on_device(a0[0], a1[0], a0[1])
             return DeviceStepResult(d["vf_pairs"], d["vf_toi"], d["ee_pairs"], d["ee_toi"],
                                     float(d["earliest_toi"]), int(d["gave_up"]), d["stats"])
         if a0 is not None:
-            d = self._core.step_from_device(a0, a1)
+            d = self._core.step_from_device(a0[0], a1[0], a0[1])
         else:
-            d = self._core.step(_host_positions(x0, "x0", n), _host_positions(x1, "x1", n))
+            h0, h1 = _host_positions(x0, "x0", n), _host_positions(x1, "x1", n)
+            if h0.dtype != h1.dtype:
+                raise TypeError(f"lwsccd: x0 and x1 must have the same dtype, got {h0.dtype} and {h1.dtype}")
+            d = (self._core.step_f32 if h0.dtype == np.float32 else self._core.step)(h0, h1)
         return StepResult(
             d["vf"].view(VERTEX_FACE_DTYPE),  # 24-byte records written by the extension
             d["ee"].view(EDGE_EDGE_DTYPE),
@@ -179,7 +187,7 @@ class Pipeline:
         if not isinstance(result, StepResult):
             raise TypeError("lwsccd.Pipeline.render: result must be a StepResult (of step(x0, x1) on the host)")
         width, height = (int(v) for v in size)
-        self._core.render(os.fspath(path), h0, h1,
+        self._core.render(os.fspath(path), h0.astype(np.float64, copy=False), h1.astype(np.float64, copy=False),
                           np.ascontiguousarray(result.vertex_face, dtype=VERTEX_FACE_DTYPE).view(np.uint8),
                           np.ascontiguousarray(result.edge_edge, dtype=EDGE_EDGE_DTYPE).view(np.uint8),
                           float(result.earliest_toi), width, height)

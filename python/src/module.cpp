@@ -27,6 +27,7 @@ using namespace nb::literals;
 namespace {
 
 using HostPositions = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+using HostPositionsF = nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 using HostFaces = nb::ndarray<const std::int64_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 
 // A NumPy array that owns a copy of `values` (shape given; the product must equal values.size()).
@@ -37,9 +38,11 @@ nb::ndarray<nb::numpy, T> numpy_array(std::vector<T>&& values, std::initializer_
   return nb::ndarray<nb::numpy, T>(owned->data(), shape, owner);
 }
 
-std::vector<lwsccd::Vec3d> to_points(const HostPositions& a) {
-  std::vector<lwsccd::Vec3d> points(a.shape(0));
-  if (!points.empty()) std::memcpy(points.data(), a.data(), points.size() * sizeof(lwsccd::Vec3d));
+// The points of an (n, 3) array, as they are (double or float: the pipeline widens float exactly).
+template <class S>
+std::vector<lwsccd::Vec3<S>> to_points(const nb::ndarray<const S, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>& a) {
+  std::vector<lwsccd::Vec3<S>> points(a.shape(0));
+  if (!points.empty()) std::memcpy(points.data(), a.data(), points.size() * sizeof(lwsccd::Vec3<S>));
   return points;
 }
 
@@ -210,10 +213,13 @@ class Pipeline {
     else throw lwsccd::InputError("lwsccd.Pipeline", "device", "unknown '" + device + "' (accepted: auto, gpu, cpu)");
   }
 
-  nb::dict step(const HostPositions& x0, const HostPositions& x1) {
+  // Host positions in float64 or float32 (step_f32: uploaded as float, widened exactly).
+  template <class S>
+  nb::dict step(const nb::ndarray<const S, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>& x0,
+                const nb::ndarray<const S, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>& x1) {
     check_count(x0.shape(0), "x0");
     check_count(x1.shape(0), "x1");
-    std::vector<lwsccd::Vec3d> p0 = to_points(x0), p1 = to_points(x1);
+    std::vector<lwsccd::Vec3<S>> p0 = to_points(x0), p1 = to_points(x1);
     lwsccd::StepOutcome outcome;
     {
       nb::gil_scoped_release unlocked;
@@ -223,22 +229,25 @@ class Pipeline {
   }
 
   // Positions in device memory, by address (the Python side took them from
-  // __cuda_array_interface__ or DLPack and checked shape, dtype and layout).
-  nb::dict step_from_device(std::uintptr_t x0, std::uintptr_t x1) {
+  // __cuda_array_interface__ or DLPack and checked shape, dtype and layout); `float32` says
+  // their type.
+  nb::dict step_from_device(std::uintptr_t x0, std::uintptr_t x1, bool float32) {
     lwsccd::StepOutcome outcome;
     {
       nb::gil_scoped_release unlocked;
-      outcome = pipeline_->step_from_device(reinterpret_cast<const lwsccd::Vec3d*>(x0), reinterpret_cast<const lwsccd::Vec3d*>(x1));
+      outcome = float32 ? pipeline_->step_from_device(reinterpret_cast<const lwsccd::Vec3f*>(x0), reinterpret_cast<const lwsccd::Vec3f*>(x1))
+                        : pipeline_->step_from_device(reinterpret_cast<const lwsccd::Vec3d*>(x0), reinterpret_cast<const lwsccd::Vec3d*>(x1));
     }
     return outcome_dict(*mesh_, std::move(outcome));
   }
 
   // As step_from_device, with the contacts copied into new device arrays (DLPack-capable).
-  nb::dict step_on_device(std::uintptr_t x0, std::uintptr_t x1) {
+  nb::dict step_on_device(std::uintptr_t x0, std::uintptr_t x1, bool float32) {
     lwsccd::AnyDeviceContacts contacts;
     {
       nb::gil_scoped_release unlocked;
-      contacts = pipeline_->step_on_device(reinterpret_cast<const lwsccd::Vec3d*>(x0), reinterpret_cast<const lwsccd::Vec3d*>(x1));
+      contacts = float32 ? pipeline_->step_on_device(reinterpret_cast<const lwsccd::Vec3f*>(x0), reinterpret_cast<const lwsccd::Vec3f*>(x1))
+                         : pipeline_->step_on_device(reinterpret_cast<const lwsccd::Vec3d*>(x0), reinterpret_cast<const lwsccd::Vec3d*>(x1));
     }
     nb::dict d = device_contacts(*mesh_, contacts);
     d["earliest_toi"] = contacts.earliest_toi;
@@ -333,9 +342,10 @@ NB_MODULE(_lwsccd, m) {
            "num_vertices"_a, "faces"_a, "face_body"_a, "body_self_collides"_a, "bv"_a, "scheduler"_a, "method"_a,
            "precision"_a, "mode"_a, "min_separation"_a, "tolerance"_a, "max_iterations"_a, "front_tracking"_a,
            "rebuild_factor"_a, "front_growth_limit"_a, "device_memory_budget"_a, "part_pairs"_a, "device"_a)
-      .def("step", &Pipeline::step, "x0"_a, "x1"_a)
-      .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a)
-      .def("step_on_device", &Pipeline::step_on_device, "x0"_a, "x1"_a)
+      .def("step", &Pipeline::step<double>, "x0"_a, "x1"_a)
+      .def("step_f32", &Pipeline::step<float>, "x0"_a, "x1"_a)
+      .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a, "float32"_a)
+      .def("step_on_device", &Pipeline::step_on_device, "x0"_a, "x1"_a, "float32"_a)
       .def("render", &Pipeline::render, "path"_a, "x0"_a, "x1"_a, "vf"_a, "ee"_a, "earliest_toi"_a, "width"_a, "height"_a)
       .def_prop_ro("backend", &Pipeline::backend)
       .def_prop_ro("num_vertices", [](const Pipeline& p) { return p.mesh().num_vertices(); })
@@ -348,8 +358,12 @@ NB_MODULE(_lwsccd, m) {
 
   m.def("gpu_name", &lwsccd_python::gpu_name);
   m.def("synchronize_stream", &lwsccd_python::synchronize_stream, "stream"_a);
-  // The device address of a DLPack CUDA array of (n, 3) float64, C-contiguous (nanobind checks).
+  // The device address of a DLPack CUDA array of (n, 3) float64 or float32, C-contiguous
+  // (nanobind checks; float64 tried first).
   m.def("dlpack_address", [](nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cuda> a) {
+    return reinterpret_cast<std::uintptr_t>(a.data());
+  }, "array"_a);
+  m.def("dlpack_address", [](nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cuda> a) {
     return reinterpret_cast<std::uintptr_t>(a.data());
   }, "array"_a);
   m.def("built_with_gpu", [] { return lwsccd_python::kBuiltWithGpu; });

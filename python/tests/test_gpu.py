@@ -1,5 +1,6 @@
 """The GPU backend from Python (skipped without one): GPU == CPU pair for pair, TOIs bit for bit;
-positions from CUDA arrays (PyTorch, CuPy: __cuda_array_interface__ and DLPack) read in place;
+positions from CUDA arrays (PyTorch, CuPy: __cuda_array_interface__ and DLPack; float64 and float32)
+read in place;
 contacts left on the device equal the host ones."""
 import numpy as np
 import pytest
@@ -100,5 +101,31 @@ def test_dlpack_only_input(scene):
 
     x0, x1 = steps[0]
     same(gpu.step(DlpackOnly(torch.from_numpy(x0).cuda()), DlpackOnly(torch.from_numpy(x1).cuda())), cpu.step(x0, x1))
-    with pytest.raises(TypeError, match="float64"):
-        gpu.step(torch.from_numpy(x0).float().cuda(), torch.from_numpy(x1).float().cuda())
+    f0, f1 = x0.astype(np.float32), x1.astype(np.float32)
+    same(gpu.step(DlpackOnly(torch.from_numpy(f0).cuda()), DlpackOnly(torch.from_numpy(f1).cuda())),
+         cpu.step(f0.astype(np.float64), f1.astype(np.float64)))
+    with pytest.raises(TypeError, match="float64 or float32"):
+        gpu.step(torch.from_numpy(x0).half().cuda(), torch.from_numpy(x1).half().cuda())
+
+
+@pytest.mark.parametrize("name,to_device,module", device_array_modules() or [pytest.param(None, None, None, marks=pytest.mark.skip(
+    reason="SKIPPED: neither PyTorch with CUDA nor CuPy is installed"))])
+def test_float32_positions_on_the_device(scene, name, to_device, module):
+    # PyTorch's default dtype: read in place, widened exactly on the device; the answers are the
+    # CPU backend's on the float32 values (as float64), pair for pair.
+    sim, steps = scene
+    gpu, cpu = pipelines(sim)
+    contacts = 0
+    for x0, x1 in steps:
+        f0, f1 = x0.astype(np.float32), x1.astype(np.float32)
+        expected = cpu.step(f0.astype(np.float64), f1.astype(np.float64))
+        same(gpu.step(to_device(f0), to_device(f1)), expected)
+        same(gpu.step(f0, f1), expected)  # float32 NumPy: uploaded as float32
+        r = gpu.step(to_device(f0), to_device(f1), on_device=True)
+        assert r.earliest_toi == expected.earliest_toi
+        assert r.stats["hits_vf"] + r.stats["hits_ee"] == expected.num_contacts
+        contacts += expected.num_contacts
+    assert contacts > 0
+    x0, x1 = steps[0]
+    with pytest.raises(TypeError, match="same dtype"):
+        gpu.step(to_device(x0), to_device(x1.astype(np.float32)))

@@ -43,6 +43,24 @@ def test_contacts_are_sorted_structured_and_consistent(cloth_steps):
     assert total > 0, "the built-in scene collides"
 
 
+def test_float32_positions_are_taken_as_given(cloth_steps):
+    # Float32 arrays are not converted on the way in: the pipeline widens them exactly, so the
+    # answers are those for the float32 values, as float64 gives them.
+    sim, steps = cloth_steps
+    f32, f64 = cpu_pipeline(sim), cpu_pipeline(sim)
+    contacts = 0
+    for x0, x1 in steps:
+        a0, a1 = x0.astype(np.float32), x1.astype(np.float32)
+        r, expected = f32.step(a0, a1), f64.step(a0.astype(np.float64), a1.astype(np.float64))
+        assert np.array_equal(r.vertex_face, expected.vertex_face) and np.array_equal(r.edge_edge, expected.edge_edge)
+        assert r.earliest_toi == expected.earliest_toi
+        contacts += r.num_contacts
+    assert contacts > 0
+    x0, x1 = steps[0]
+    with pytest.raises(TypeError, match="same dtype"):
+        f32.step(x0, x1.astype(np.float32))
+
+
 def test_rigid_ball_has_no_self_pairs(cloth_steps):
     sim, steps = cloth_steps
     ccd = cpu_pipeline(sim)

@@ -8,34 +8,46 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <type_traits>
+#include <vector>
 
 #include "lwsccd/bvh/bvh.hpp"
 #include "lwsccd/core/device_buffer.cuh"
 
 namespace lwsccd::gpu {
 
-/// A step's topology and positions in device memory (P = float or double).
+/// A step's topology and positions in device memory (P = float or double). Positions are taken
+/// in either type (Q) and converted to P: float to double exactly (so a step is certified for
+/// float input as given), double to float rounded to nearest.
 template <class P>
 struct DeviceStep {
+  static_assert(std::is_same<P, float>::value || std::is_same<P, double>::value,
+                "lwsccd: gpu::DeviceStep holds float or double positions");
   index_t num_vertices = 0;
   DeviceBuffer<Face> faces;
   DeviceBuffer<Vec3<P>> x0, x1;
 
   DeviceStep() = default;
   /// Uploads (and converts to P) a host step; positions are validated on the host first.
-  DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1,
+  template <class Q>
+  DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1,
              cudaStream_t stream = nullptr);
   /// Topology only; positions follow through set_positions or set_positions_from_device.
   explicit DeviceStep(const TriangleMesh& mesh, cudaStream_t stream = nullptr);
-  /// Replaces the positions (same topology), e.g. for the next step of a sequence.
-  void set_positions(const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1, cudaStream_t stream = nullptr);
-  /// Replaces the positions from device memory (num_vertices points each; copied, so the
-  /// caller's arrays may change afterwards). Throws InputError unless both point to device
-  /// (or managed) memory. Non-finite values are reported by the next BVH build or refit.
-  void set_positions_from_device(const Vec3<P>* d0, const Vec3<P>* d1, cudaStream_t stream = nullptr);
+  /// Replaces the positions (same topology), e.g. for the next step of a sequence. Float input
+  /// to double positions crosses as float (half the bytes) and is widened on the device.
+  template <class Q>
+  void set_positions(const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1, cudaStream_t stream = nullptr);
+  /// Replaces the positions from device memory (num_vertices points each; copied, or converted
+  /// by a kernel, so the caller's arrays may change afterwards). Throws InputError unless both
+  /// point to device (or managed) memory. Non-finite values are reported by the next BVH build or
+  /// refit.
+  template <class Q>
+  void set_positions_from_device(const Vec3<Q>* d0, const Vec3<Q>* d1, cudaStream_t stream = nullptr);
 
  private:
-  std::vector<Vec3<P>> staging_;
+  std::vector<Vec3<P>> staging_;   // double input rounded to float on the host (half the bytes to copy)
+  DeviceBuffer<Vec3<float>> wide_;  // float input for double positions, widened on the device
 };
 
 template <class BV>

@@ -56,6 +56,10 @@ struct CertifiedPolicy {
   /// double only on what they leave undecided. Their misses are certain for the input as given
   /// (double or float); false: the double path alone.
   static constexpr bool kSingleFirst = true;
+  /// The single-precision filter's second round: an interval whose inside test in float is
+  /// unknown is split kInsideEvery levels further and its pieces tested in float before the pair
+  /// goes to double (CertifiedFilter::expand_single).
+  static constexpr bool kSingleSecondRound = true;
   /// Multiplier of the single-precision screen's input bound, which covers rounding the relative
   /// coordinates to float (1 = as derived; only the mutation tests change it).
   static constexpr double kSingleInputBound = 1.0;
@@ -126,17 +130,22 @@ struct CertifiedCcdT {
   LWSCCD_HD static bool screen(const Q& q, const CcdParams<T>& params) {
     return detail::certified_screen<Policy>(q, params);
   }
-  /// screen, saying in which precision a miss was decided (for batches that count them).
+  /// A batch's steps, in this order (classify runs them on one query): screen_verdict on every
+  /// pair (single precision alone when Policy::kSingleFirst, saying in which precision a miss was
+  /// decided); filter_single on what it passes (detail::CertifiedFilter::decides_single: true for
+  /// a certain miss proved in float by the refinement's first levels); screen_after_single, the
+  /// double screen, on what that leaves; then refine.
   template <class Q, class T>
   LWSCCD_HD static detail::ScreenVerdict screen_verdict(const Q& q, const CcdParams<T>& params) {
-    return detail::certified_screen_verdict<Policy>(q, params);
+    return detail::certified_first_screen<Policy>(q, params);
   }
-  /// The single-precision filter (detail::CertifiedFilter::decides_single): true for a certain
-  /// miss, proved in float by the refinement's first levels. Batches run it on the pairs the
-  /// screen passes, before the double refinement (classify = screen, filter_single, then refine).
   template <class Q, class T>
   LWSCCD_HD static bool filter_single(const Q& q, const CcdParams<T>& params) {
     return detail::CertifiedFilter<Policy>::decides_single(q, params);
+  }
+  template <class Q, class T>
+  LWSCCD_HD static bool screen_after_single(const Q& q, const CcdParams<T>& params) {
+    return detail::certified_screen_after_single<Policy>(q, params);
   }
   /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
   template <bool kSettle = true, class Q, class T>

@@ -198,7 +198,8 @@ class NarrowPhase {
       bytes += l.hits.capacity_bytes() + l.sorter.device_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
                l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes() + l.intervals.capacity_bytes() +
                l.listed.capacity_bytes() + l.expanded.capacity_bytes() + l.deep.capacity_bytes() +
-               l.double_kept.capacity_bytes() + l.single_intervals.capacity_bytes() + l.single_failed.capacity_bytes();
+               l.double_kept.capacity_bytes() + l.single_intervals.capacity_bytes() + l.single_failed.capacity_bytes() +
+               l.single_expanded.capacity_bytes() + l.single_deep.capacity_bytes();
     return bytes;
   }
 
@@ -217,11 +218,13 @@ class NarrowPhase {
     DeviceBuffer<Pair> double_kept;              ///< FP32 first: screened pairs single precision leaves to the double filter
     DeviceBuffer<unsigned long long> single_intervals;  ///< the single-precision filter's intervals (detail::filter_item)
     DeviceBuffer<unsigned> single_failed;        ///< a bit per pair, set once it goes to the double filter
+    DeviceBuffer<unsigned long long> single_expanded;  ///< its second round: intervals to split further (room: single_interval_room)
+    DeviceBuffer<unsigned long long> single_deep;      ///< the second round's intervals to test for inside
     DeviceBuffer<unsigned long long> counters;   ///< detail::NarrowCounter words
     PinnedBuffer<unsigned long long> host_counters;
     std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors, undecided, deferred and open
     std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
-    std::size_t single_interval_room = 0;          ///< room of the single-precision filter's intervals
+    std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
     std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0;
     cudaStream_t stream = nullptr;
@@ -232,6 +235,12 @@ class NarrowPhase {
   void join_lists(cudaStream_t stream);
   /// Whether the filter's second round runs (NarrowPhasePolicy::kFilterSecondRound).
   static constexpr bool second_round(CcdMode mode) { return Policy::kRefineFilter && Policy::kFilterSecondRound && mode == CcdMode::contacts; }
+  // The single-precision filter's second round (CertifiedPolicy::kSingleSecondRound) runs wherever
+  // its first does, as on the CPU (CertifiedFilter::decides_single).
+  static constexpr bool single_second_round(CcdMode mode) {
+    if constexpr (kSingleFirst) return Policy::kRefineFilter && mode != CcdMode::set && Method::policy_type::kSingleSecondRound;
+    else return false;
+  }
   template <class P, bool kVertexFace>
   void enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
                           const CcdParams<T>& params, List& list);

@@ -153,6 +153,10 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
             ++out.counts.single_misses;
             continue;
           }
+          if (Method::screen_after_single(q, params)) {
+            ++out.counts.certified_misses;
+            continue;
+          }
           const CertifiedAnswer<T> a = Method::refine(q, params);
           if (a.certainty == Certainty::hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, a.lo}), ++out.counts.certified_hits;
           else if (a.certainty == Certainty::miss) ++out.counts.certified_misses;

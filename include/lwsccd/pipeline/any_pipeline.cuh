@@ -20,12 +20,18 @@ class AnyPipelineAdapter final : public PipelineAdapter<Pipeline> {
   template <class... Args>
   explicit AnyPipelineAdapter(Args&&... args) : PipelineAdapter<Pipeline>("gpu", std::forward<Args>(args)...) {}
 
-  StepOutcome step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) override {
-    auto r = this->pipeline_.step_from_device(device_x0, device_x1);
-    return {r.stats, lwsccd::detail::to_double(std::move(r.contacts))};
-  }
+  StepOutcome step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) override { return from_device(device_x0, device_x1); }
+  StepOutcome step_from_device(const Vec3f* device_x0, const Vec3f* device_x1) override { return from_device(device_x0, device_x1); }
+  AnyDeviceContacts step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) override { return on_device(device_x0, device_x1); }
+  AnyDeviceContacts step_on_device(const Vec3f* device_x0, const Vec3f* device_x1) override { return on_device(device_x0, device_x1); }
 
-  AnyDeviceContacts step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) override {
+ private:
+  template <class Q>
+  StepOutcome from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
+    return this->outcome(this->pipeline_.step_from_device(device_x0, device_x1));
+  }
+  template <class Q>
+  AnyDeviceContacts on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
     const auto r = this->pipeline_.step_on_device(device_x0, device_x1);
     using Hit = std::remove_cv_t<std::remove_pointer_t<decltype(r.contacts.vf)>>;
     AnyDeviceContacts out;

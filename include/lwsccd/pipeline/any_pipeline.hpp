@@ -71,21 +71,30 @@ struct AnyDeviceContacts {
 class AnyPipeline {
  public:
   virtual ~AnyPipeline() = default;
-  /// One step from host positions (each mesh().num_vertices() points).
+  /// One step from host positions (each mesh().num_vertices() points), double or float: float
+  /// positions are widened exactly, so the answers are certified for them as given.
   virtual StepOutcome step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) = 0;
-  /// GPU backend: one step from positions in device memory. The CPU backend throws InputError.
-  virtual StepOutcome step_from_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) {
-    throw InputError("AnyPipeline::step_from_device", "", "the " + backend() + " backend takes host positions (this needs the GPU backend)");
-  }
+  virtual StepOutcome step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) = 0;
+  /// GPU backend: one step from positions in device memory (double or float). The CPU backend
+  /// throws InputError.
+  virtual StepOutcome step_from_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) { return no_device_positions(); }
+  virtual StepOutcome step_from_device(const Vec3f* /*device_x0*/, const Vec3f* /*device_x1*/) { return no_device_positions(); }
   /// GPU backend: as step_from_device, with the contacts left in device memory. The CPU backend
   /// throws InputError.
-  virtual AnyDeviceContacts step_on_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) {
-    throw InputError("AnyPipeline::step_on_device", "", "the " + backend() + " backend has no device results (this needs the GPU backend)");
-  }
+  virtual AnyDeviceContacts step_on_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) { return no_device_results(); }
+  virtual AnyDeviceContacts step_on_device(const Vec3f* /*device_x0*/, const Vec3f* /*device_x1*/) { return no_device_results(); }
   virtual const TriangleMesh& mesh() const = 0;
   virtual const PipelineParams& params() const = 0;
   /// "cpu" or "gpu".
   virtual std::string backend() const = 0;
+
+ private:
+  [[noreturn]] StepOutcome no_device_positions() const {
+    throw InputError("AnyPipeline::step_from_device", "", "the " + backend() + " backend takes host positions (this needs the GPU backend)");
+  }
+  [[noreturn]] AnyDeviceContacts no_device_results() const {
+    throw InputError("AnyPipeline::step_on_device", "", "the " + backend() + " backend has no device results (this needs the GPU backend)");
+  }
 };
 
 namespace detail {
@@ -117,16 +126,18 @@ class PipelineAdapter : public AnyPipeline {
   template <class... Args>
   explicit PipelineAdapter(std::string backend, Args&&... args)
       : pipeline_(std::forward<Args>(args)...), backend_(std::move(backend)) {}
-  StepOutcome step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) override {
-    auto r = pipeline_.step(x0, x1);
-    return {r.stats, detail::to_double(std::move(r.contacts))};
-  }
+  StepOutcome step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) override { return outcome(pipeline_.step(x0, x1)); }
+  StepOutcome step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) override { return outcome(pipeline_.step(x0, x1)); }
   const TriangleMesh& mesh() const override { return pipeline_.mesh(); }
   const PipelineParams& params() const override { return pipeline_.params(); }
   std::string backend() const override { return backend_; }
   Pipeline& pipeline() { return pipeline_; }
 
  protected:
+  template <class Result>
+  static StepOutcome outcome(Result&& r) {
+    return {r.stats, detail::to_double(std::move(r.contacts))};
+  }
   Pipeline pipeline_;
   std::string backend_;
 };

@@ -48,12 +48,24 @@ class CcdPipeline {
     bvh_.set_leaf_margin(params_.min_separation / 2);
   }
 
+  /// One step: the vertices move from x0 to x1 (mesh().num_vertices() points each).
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
     StepResult<T> r;
     StepInProgress step{r, x0, x1};
     lwsccd::detail::run_stage_sequence(*this, step);
     r.stats.total_ms = ms_since(step.start);
     return r;
+  }
+  /// The same from float positions, widened first (exactly: the answers are certified for the
+  /// float positions as given, and equal the GPU backend's for them).
+  StepResult<T> step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) {
+    auto widen = [](const std::vector<Vec3f>& from, std::vector<Vec3d>& to) {
+      to.resize(from.size());
+      for (std::size_t v = 0; v < from.size(); ++v) to[v] = from[v].template cast<double>();
+    };
+    widen(x0, wide0_);
+    widen(x1, wide1_);
+    return step(wide0_, wide1_);
   }
 
   const TriangleMesh& mesh() const { return *mesh_; }
@@ -251,6 +263,7 @@ class CcdPipeline {
   bool built_ = false;
   FrontTracker tracker_;
   const std::vector<NodePair> root_{NodePair{0, 0}};
+  std::vector<Vec3d> wide0_, wide1_;  ///< float input, widened (kept: the next step reuses the room)
 };
 
 }  // namespace cpu

@@ -55,48 +55,22 @@ class CcdPipeline {
   CcdPipeline(const CcdPipeline&) = delete;
   CcdPipeline& operator=(const CcdPipeline&) = delete;
 
-  /// One step from host positions (validated, uploaded).
-  StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
-    reset_peak_memory();
-    const auto start = std::chrono::steady_clock::now();
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1);
-    else step_->set_positions(x0, x1);
-    return run_step(start);
-  }
+  /// One step from host positions (validated, uploaded). Positions are double (Vec3d) or float
+  /// (Vec3f): float input crosses as float and is widened on the device, exactly, so the answers
+  /// are certified for the float positions as given.
+  StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) { return step_from_host(x0, x1); }
+  StepResult<T> step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) { return step_from_host(x0, x1); }
 
   /// One step from positions already in device memory (mesh().num_vertices() points each, e.g.
-  /// a simulation's own arrays): no host round trip. Throws InputError for host pointers.
-  StepResult<T> step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) {
-    reset_peak_memory();
-    const auto start = std::chrono::steady_clock::now();
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
-    step_->set_positions_from_device(device_x0, device_x1);
-    return run_step(start);
-  }
+  /// a simulation's own arrays; double, or float widened on the device): no host round trip.
+  /// Throws InputError for host pointers.
+  StepResult<T> step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) { return from_device(device_x0, device_x1); }
+  StepResult<T> step_from_device(const Vec3f* device_x0, const Vec3f* device_x1) { return from_device(device_x0, device_x1); }
 
   /// As step_from_device, with the contacts left in device memory (sorted by pair, valid until the
   /// next step): nothing crosses to the host but the counters the step reads once.
-  DeviceStepResult<T> step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) {
-    reset_peak_memory();
-    const auto start = std::chrono::steady_clock::now();
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
-    step_->set_positions_from_device(device_x0, device_x1);
-    DeviceStepResult<T> r;
-    run_stages(r.stats);
-    const Outcome o = outcome();
-    const bool pairs = params_.mode != CcdMode::earliest;
-    r.contacts.vf = o.hits[0];
-    r.contacts.ee = o.hits[1];
-    r.contacts.num_vf = pairs ? o.num_hits[0] : 0;
-    r.contacts.num_ee = pairs ? o.num_hits[1] : 0;
-    r.contacts.earliest_toi = o.earliest;
-    r.contacts.gave_up = o.gave_up;
-    r.contacts.vf_counts = o.counts[0];
-    r.contacts.ee_counts = o.counts[1];
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));  // the hits' sort is done
-    finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, start);
-    return r;
-  }
+  DeviceStepResult<T> step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) { return on_device(device_x0, device_x1); }
+  DeviceStepResult<T> step_on_device(const Vec3f* device_x0, const Vec3f* device_x1) { return on_device(device_x0, device_x1); }
 
   const TriangleMesh& mesh() const { return *mesh_; }
   const BodyLayout& layout() const { return layout_; }
@@ -121,6 +95,45 @@ class CcdPipeline {
   void set_device_memory_budget(std::size_t bytes) { params_.device_memory_budget = bytes; }
 
  private:
+  template <class Q>
+  StepResult<T> step_from_host(const std::vector<Vec3<Q>>& x0, const std::vector<Vec3<Q>>& x1) {
+    reset_peak_memory();
+    const auto start = std::chrono::steady_clock::now();
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1);
+    else step_->set_positions(x0, x1);
+    return run_step(start);
+  }
+  template <class Q>
+  StepResult<T> from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
+    reset_peak_memory();
+    const auto start = std::chrono::steady_clock::now();
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
+    step_->set_positions_from_device(device_x0, device_x1);
+    return run_step(start);
+  }
+  template <class Q>
+  DeviceStepResult<T> on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
+    reset_peak_memory();
+    const auto start = std::chrono::steady_clock::now();
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
+    step_->set_positions_from_device(device_x0, device_x1);
+    DeviceStepResult<T> r;
+    run_stages(r.stats);
+    const Outcome o = outcome();
+    const bool pairs = params_.mode != CcdMode::earliest;
+    r.contacts.vf = o.hits[0];
+    r.contacts.ee = o.hits[1];
+    r.contacts.num_vf = pairs ? o.num_hits[0] : 0;
+    r.contacts.num_ee = pairs ? o.num_hits[1] : 0;
+    r.contacts.earliest_toi = o.earliest;
+    r.contacts.gave_up = o.gave_up;
+    r.contacts.vf_counts = o.counts[0];
+    r.contacts.ee_counts = o.counts[1];
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));  // the hits' sort is done
+    finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, start);
+    return r;
+  }
+
   // What the last step's narrow phase (or its parts, gathered) found, on the device.
   struct Outcome {
     const FeatureHit<T>* hits[2];

@@ -118,8 +118,35 @@ struct InternalSurfaceArea {
 
 }  // namespace detail
 
+namespace detail {
+
+// Points converted from Q to P (widened exactly, or rounded to nearest as the host's cast does).
+template <class Q, class P>
+__global__ void convert_points_kernel(const Vec3<Q>* in, Vec3<P>* out, std::size_t n) {
+  for (std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < n;
+       i += static_cast<std::size_t>(gridDim.x) * blockDim.x)
+    out[i] = in[i].template cast<P>();
+}
+
+template <class Q, class P>
+void convert_points(const Vec3<Q>* in, Vec3<P>* out, std::size_t n, cudaStream_t stream) {
+  if (n == 0) return;
+  const unsigned blocks = static_cast<unsigned>(std::min<std::size_t>((n + 255) / 256, 4096));
+  convert_points_kernel<Q, P><<<blocks, 256, 0, stream>>>(in, out, n);
+  LWSCCD_CUDA_CHECK_LAUNCH();
+}
+
+template <class Q>
+constexpr void require_position_type() {
+  static_assert(std::is_same<Q, float>::value || std::is_same<Q, double>::value,
+                "lwsccd: positions are given as float or double points (Vec3f, Vec3d)");
+}
+
+}  // namespace detail
+
 template <class P>
-DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1,
+template <class Q>
+DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1,
                           cudaStream_t stream)
     : num_vertices(mesh.num_vertices()) {
   faces.upload(mesh.faces(), stream);
@@ -134,38 +161,57 @@ DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, cudaStream_t stream) : num_v
 }
 
 template <class P>
-void DeviceStep<P>::set_positions_from_device(const Vec3<P>* d0, const Vec3<P>* d1, cudaStream_t stream) {
-  for (const Vec3<P>* d : {d0, d1}) {
+template <class Q>
+void DeviceStep<P>::set_positions_from_device(const Vec3<Q>* d0, const Vec3<Q>* d1, cudaStream_t stream) {
+  detail::require_position_type<Q>();
+  for (const Vec3<Q>* d : {d0, d1}) {
     const char* name = d == d0 ? "x0" : "x1";
     cudaPointerAttributes attributes{};
     LWSCCD_CUDA_CHECK(cudaPointerGetAttributes(&attributes, d));
     if (d == nullptr || (attributes.type != cudaMemoryTypeDevice && attributes.type != cudaMemoryTypeManaged))
       throw InputError("gpu::DeviceStep::set_positions_from_device", name, "is not a pointer to device memory");
   }
-  const std::size_t bytes = static_cast<std::size_t>(num_vertices) * sizeof(Vec3<P>);
-  x0.resize_discard(static_cast<std::size_t>(num_vertices));
-  x1.resize_discard(static_cast<std::size_t>(num_vertices));
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x0.data(), d0, bytes, cudaMemcpyDeviceToDevice, stream));
-  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x1.data(), d1, bytes, cudaMemcpyDeviceToDevice, stream));
+  const auto n = static_cast<std::size_t>(num_vertices);
+  x0.resize_discard(n);
+  x1.resize_discard(n);
+  if constexpr (std::is_same<P, Q>::value) {
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x0.data(), d0, n * sizeof(Vec3<P>), cudaMemcpyDeviceToDevice, stream));
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x1.data(), d1, n * sizeof(Vec3<P>), cudaMemcpyDeviceToDevice, stream));
+  } else {
+    detail::convert_points(d0, x0.data(), n, stream);
+    detail::convert_points(d1, x1.data(), n, stream);
+  }
 }
 
 template <class P>
-void DeviceStep<P>::set_positions(const std::vector<Vec3d>& h0, const std::vector<Vec3d>& h1, cudaStream_t stream) {
+template <class Q>
+void DeviceStep<P>::set_positions(const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1, cudaStream_t stream) {
+  detail::require_position_type<Q>();
   for (const auto* h : {&h0, &h1}) {
     const char* name = h == &h0 ? "x0" : "x1";
     if (h->size() != static_cast<std::size_t>(num_vertices))
       throw InputError("gpu::DeviceStep", name, "has " + std::to_string(h->size()) + " positions, the mesh has " +
                                                     std::to_string(num_vertices) + " vertices");
   }
-  if constexpr (std::is_same<P, double>::value) {
+  if constexpr (std::is_same<P, Q>::value) {
     // Copied as they are (a copy from pageable memory returns once the driver has taken the data):
     // staging them first cost a host copy of 24 bytes a vertex, twice (~25 ms at 5 M vertices).
     x0.upload(h0, stream);
     x1.upload(h1, stream);
+  } else if constexpr (std::is_same<P, double>::value) {
+    // Float input: half the bytes cross, widened on the device (exact). The second upload waits
+    // for the first conversion (stream order), so one buffer serves both.
+    const auto n = static_cast<std::size_t>(num_vertices);
+    x0.resize_discard(n);
+    x1.resize_discard(n);
+    wide_.upload(h0, stream);
+    detail::convert_points(wide_.data(), x0.data(), n, stream);
+    wide_.upload(h1, stream);
+    detail::convert_points(wide_.data(), x1.data(), n, stream);
   } else {
     // Staged through a host array of P; the copy must finish before the staging is reused.
     for (int which = 0; which < 2; ++which) {
-      const std::vector<Vec3d>& h = which == 0 ? h0 : h1;
+      const std::vector<Vec3<Q>>& h = which == 0 ? h0 : h1;
       staging_.resize(h.size());
       for (std::size_t v = 0; v < h.size(); ++v) staging_[v] = h[v].template cast<P>();
       (which == 0 ? x0 : x1).upload(staging_, stream);

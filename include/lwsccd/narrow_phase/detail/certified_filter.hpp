@@ -166,7 +166,113 @@ struct CertifiedFilter {
     const W mag = fmul(W(4), max_component(m));
     BernsteinPiece<W> piece;
     if (!cubic_on_step<Policy>(q, mag, perturbation, piece)) return -1;
-    // The interval's piece, by the halvings the search made on the way (the same values).
+    return expand_piece(piece, params, node, mask);
+  }
+
+  /// The single-precision filter (FP32 first): both rounds in float, as a proof of a miss on its
+  /// own. The pair relative to its first point, rounded to float (relative_single, bound B9);
+  /// the cubic's pieces down to kLevel pruned as `intervals` prunes them, with only the perturbed
+  /// bound (the float query is not the query as given: nothing is claimed of it as given, so no
+  /// lower bound is noted); an interval left whose inside test in float is `unknown` may be split
+  /// once more to kDeepLevel (expand_single, as `expand`), and every interval left must be
+  /// certainly outside. Together the pieces pruned and the intervals outside cover the step: no
+  /// query within the perturbation, the input as given among them, touches in it.
+  /// intervals_single lists the first round's intervals (-1: single precision cannot decide the
+  /// pair; 0: a miss), inside_single tests one (of either round), expand_single lists the second
+  /// round's below one; decides_single is all of them on one thread (the CPU batch and the tests;
+  /// a GPU batch runs the tests a thread each). They read CcdParams<float> (single_params): no
+  /// double arithmetic. True: a certain miss of the input as given (and within the double path's
+  /// perturbation); false: the double path decides.
+  template <class Q>
+  LWSCCD_HD static int intervals_single(const Q& q, const CcdParams<float>& params, std::uint32_t& mask) {
+    mask = 0;
+    if (!Policy::kSingleFirst || params.min_separation > 0.0f) return -1;
+    // Leaves within the filter's levels (certified_max_level <= kLevel, i.e. a tolerance of at
+    // least 2^-(kLevel - 1)): the double path's (a tolerance that rounds up to the limit is only
+    // declined, which is always sound).
+    if (params.tolerance >= exact_pow2_neg<float>(kLevel - 1)) return -1;
+    return intervals_of(relative_single(q), params, mask);
+  }
+  template <class Q>
+  LWSCCD_HD static InsideVerdict inside_single(const Q& q, unsigned node) {
+    return verdict_of(relative_single(q), node);
+  }
+  /// The second round's intervals below `node` (a first-round interval), numbered as `expand`
+  /// numbers them; -1 when the round cannot take it (then the double path decides the pair).
+  template <class Q>
+  LWSCCD_HD static int expand_single(const Q& q, const CcdParams<float>& params, unsigned node, std::uint32_t& mask) {
+    mask = 0;
+    if (!Policy::kSingleSecondRound || params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1)) return -1;
+    return expand_of(relative_single(q), params, node, mask);
+  }
+  template <class Q, class T>
+  LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params_in) {
+    const CcdParams<float> params = single_params(params_in);
+    std::uint32_t mask = 0;
+    const int count = intervals_single(q, params, mask);
+    if (count < 0) return false;
+    if (mask == 0) return true;
+    const auto s = relative_single(q);  // (once for all its intervals)
+    for (unsigned node = 0; node < 32; ++node) {
+      if (!((mask >> node) & 1u)) continue;
+      const InsideVerdict v = verdict_of(s, node);
+      if (v == InsideVerdict::outside) continue;
+      std::uint32_t deep = 0;
+      if (v != InsideVerdict::unknown || !expandable(count) || !Policy::kSingleSecondRound ||
+          params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1) || expand_of(s, params, node, deep) < 0)
+        return false;
+      for (unsigned local = 0; local < 32; ++local)
+        if (((deep >> local) & 1u) && verdict_of(s, deep_node(node, local)) != InsideVerdict::outside) return false;
+    }
+    return true;
+  }
+
+ private:
+  // The cubic on the step for a single-precision query: perturbed bound only (halvings add the
+  // same to both bounds).
+  template <class QF>
+  LWSCCD_HD static bool single_cubic(const SingleQuery<QF>& s, BernsteinPiece<float>& root) {
+    const float mag = fmul(4.0f, max_component(s.m));  // bounds every difference and its motion
+    if (!cubic_on_step<Policy>(s.q, mag, single_input_perturbation<Policy>(), root, &s.m)) return false;
+    root.exact = root.bound;
+    return true;
+  }
+  // (T is float: a deduced parameter keeps the calls below dependent, which GCC 12's host pass of
+  // nvcc needs to compile them.)
+  template <class QF, class T>
+  LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask) {
+    BernsteinPiece<float> root;
+    if (!single_cubic(s, root)) return -1;
+    if (same_sign_beyond(root.c, root.bound)) return 0;
+    if (!finite_value(underflow_slack(fmul(4.0f, max_component(s.m)), 4))) return -1;
+    Noted<T> noted;
+    if (!visit<0>(root, 0u, params, mask, noted)) return -1;
+    int n = 0;
+    for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
+    return n;
+  }
+  template <class QF, class T>
+  LWSCCD_HD static int expand_of(const SingleQuery<QF>& s, const CcdParams<T>& params, unsigned node, std::uint32_t& mask) {
+    if (params.mode == CcdMode::set || node < (1u << kLevel) || node >= (2u << kLevel)) return -1;
+    BernsteinPiece<float> piece;
+    if (!single_cubic(s, piece)) return -1;
+    return expand_piece(piece, params, node, mask);
+  }
+  template <class QF>
+  LWSCCD_HD static InsideVerdict verdict_of(const SingleQuery<QF>& s, unsigned node) {
+    const float perturbation = single_input_perturbation<Policy>();
+    const float slack = underflow_slack(fmul(4.0f, max_component(s.m)), 4);
+    int level = 0;
+    while ((node >> (level + 1)) != 0u) ++level;
+    const float half = exact_pow2_neg<float>(level + 1);
+    const float mid = fadd(static_cast<float>(node - (1u << level)) * exact_pow2_neg<float>(level), half);
+    return inside_over<Policy>(s.q, mid, half, s.m, perturbation, slack);
+  }
+  // The second round below `node` from the cubic's piece on the step (either precision): the
+  // interval's piece by the halvings the search made on the way (the same values), halved once
+  // more and visited to kDeepLevel.
+  template <class W, class T>
+  LWSCCD_HD static int expand_piece(BernsteinPiece<W> piece, const CcdParams<T>& params, unsigned node, std::uint32_t& mask) {
     for (int d = kLevel - 1; d >= 0; --d) {
       BernsteinPiece<W> left, right;
       bernstein_halves<Policy>(piece, left, right);
@@ -180,67 +286,6 @@ struct CertifiedFilter {
     int n = 0;
     for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
     return n;
-  }
-
-  /// The single-precision filter (FP32 first): the first round in float, as a proof of a miss on
-  /// its own. The pair relative to its first point, rounded to float (relative_single, bound B9);
-  /// the cubic's pieces down to kLevel pruned as `intervals` prunes them, with only the perturbed
-  /// bound (the float query is not the query as given: nothing is claimed of it as given, so no
-  /// lower bound is noted); every interval left must be certainly outside by the inside test in
-  /// float. intervals_single lists the intervals (-1: single precision cannot decide the pair;
-  /// 0: a miss), outside_single tests one; decides_single is both on one thread (the CPU batch
-  /// and the tests; a GPU batch runs the tests a thread each). True: a certain miss of the input as
-  /// given (and within the double path's perturbation); false: the double path decides.
-  template <class Q, class T>
-  LWSCCD_HD static int intervals_single(const Q& q, const CcdParams<T>& params, std::uint32_t& mask) {
-    mask = 0;
-    if (!Policy::kSingleFirst || params.min_separation > T(0)) return -1;
-    // Leaves within the filter's levels (certified_max_level <= kLevel, i.e. a tolerance of at
-    // least 2^-(kLevel - 1)): the double path's. Compared in float, without double arithmetic
-    // (a tolerance that rounds up to the limit is only declined, which is always sound).
-    if (static_cast<float>(params.tolerance) >= exact_pow2_neg<float>(kLevel - 1)) return -1;
-    return intervals_of(relative_single(q), params, mask);
-  }
-  template <class Q>
-  LWSCCD_HD static bool outside_single(const Q& q, unsigned node) {
-    return outside_of(relative_single(q), node);
-  }
-  template <class Q, class T>
-  LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params) {
-    std::uint32_t mask = 0;
-    if (intervals_single(q, params, mask) < 0) return false;
-    if (mask == 0) return true;
-    const auto s = relative_single(q);  // (once for all its intervals)
-    for (unsigned node = 0; node < 32; ++node)
-      if (((mask >> node) & 1u) && !outside_of(s, node)) return false;
-    return true;
-  }
-
- private:
-  template <class QF, class T>
-  LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask) {
-    const float perturbation = single_input_perturbation<Policy>();
-    const float mag = fmul(4.0f, max_component(s.m));  // bounds every difference and its motion
-    BernsteinPiece<float> root;
-    if (!cubic_on_step<Policy>(s.q, mag, perturbation, root, &s.m)) return -1;
-    root.exact = root.bound;  // perturbed only (halvings add the same to both)
-    if (same_sign_beyond(root.c, root.bound)) return 0;
-    if (!finite_value(underflow_slack(mag, 4))) return -1;
-    Noted<T> noted;
-    if (!visit<0>(root, 0u, params, mask, noted)) return -1;
-    int n = 0;
-    for (std::uint32_t b = mask; b; b &= b - 1u) ++n;
-    return n;
-  }
-  template <class QF>
-  LWSCCD_HD static bool outside_of(const SingleQuery<QF>& s, unsigned node) {
-    const float perturbation = single_input_perturbation<Policy>();
-    const float slack = underflow_slack(fmul(4.0f, max_component(s.m)), 4);
-    int level = 0;
-    while ((node >> (level + 1)) != 0u) ++level;
-    const float half = exact_pow2_neg<float>(level + 1);
-    const float mid = fadd(static_cast<float>(node - (1u << level)) * exact_pow2_neg<float>(level), half);
-    return inside_over<Policy>(s.q, mid, half, s.m, perturbation, slack) == InsideVerdict::outside;
   }
 
  public:
@@ -265,12 +310,13 @@ struct CertifiedFilter {
   }
 };
 
-/// The whole certified classification of one query: the screen, the single-precision filter,
-/// then the refinement.
+/// The whole certified classification of one query, in the order batches run it: the first
+/// screen, the single-precision filter, the double screen on what they leave, then the refinement.
 template <class Policy, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q, const CcdParams<T>& params) {
-  if (certified_screen<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
+  if (certified_first_screen<Policy>(q, params) != ScreenVerdict::passed) return {Certainty::miss, T(0), T(1)};
   if (CertifiedFilter<Policy>::decides_single(q, params)) return {Certainty::miss, T(0), T(1)};
+  if (certified_screen_after_single<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
   return certified_refine<Policy>(q, params);
 }
 

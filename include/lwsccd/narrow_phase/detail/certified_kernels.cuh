@@ -80,6 +80,7 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
       append_index(counters + kSingleMisses);
       continue;
     }
+    if (Method::screen_after_single(q, params)) continue;
     bool later = false;
     const CertifiedAnswer<T> a = Method::template refine_until<kDeferLevel, false>(q, params, &later);
     if (later) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
@@ -128,11 +129,22 @@ __device__ inline void append_pair(unsigned long long* counter, std::pair<index_
   list[at].second = p.second;
 }
 
-// FP32 first, before the filter: a thread per screened pair lists the single-precision filter's
-// intervals (CertifiedFilter::intervals_single) in `intervals` for single_inside_kernel; a pair
-// it decides at once is counted, one it cannot decide is appended to `double_kept` for the
-// double filter. A pair whose intervals do not fit is decided on its thread (decides_single:
-// the same answer), and the room grows for the next run.
+// FP32 first, before the double filter: the single-precision filter's two rounds as the double
+// filter's (CertifiedFilter::intervals_single, inside_single, expand_single), a thread per pair,
+// then per interval. A pair every one of whose intervals is outside in float is a miss (counted:
+// kSingleMisses at once, else kSingleListed less kSingleFailed); any other goes once to
+// `double_kept` for the double filter (fail_single; its bit in `failed`, cleared before the run).
+__device__ inline void fail_single(unsigned i, unsigned* failed, unsigned long long* counters,
+                                   const std::pair<index_t, index_t>* kept, std::pair<index_t, index_t>* double_kept) {
+  const unsigned bit = 1u << (i & 31u);
+  if (atomicOr(failed + (i >> 5), bit) & bit) return;
+  append_index(counters + kSingleFailed);
+  append_pair(counters + kDoubleKept, double_kept, kept[i]);
+}
+
+// First kernel: a thread per screened pair lists its first round's intervals in `intervals` for
+// single_inside_kernel. A pair whose intervals do not fit is decided on its thread
+// (decides_single: the same answer), and the room grows for the next run.
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void single_filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                      const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
@@ -141,49 +153,93 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
                                      std::pair<index_t, index_t>* double_kept) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
+  const CcdParams<float> single = lwsccd::detail::single_params(params);
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
     std::uint32_t found = 0;
-    const int count = Filter::intervals_single(q, params, found);
-    bool single = count == 0;
+    const int count = Filter::intervals_single(q, single, found);
+    bool decided = count == 0;
     if (count > 0) {
       bool fits = true;
       const unsigned long long base = append_run(counters + kSingleIntervals, static_cast<unsigned>(count), interval_room, fits);
+      const bool expandable = Filter::expandable(count);
       for (int k = 0; k < count; ++k, found &= found - 1u)
         if (base + k < interval_room)
-          intervals[base + k] = fits ? filter_item(i, false, static_cast<unsigned>(__ffs(found) - 1)) : kNoInterval;
+          intervals[base + k] = fits ? filter_item(i, expandable, static_cast<unsigned>(__ffs(found) - 1)) : kNoInterval;
       if (fits) {
         append_index(counters + kSingleListed);
         continue;
       }
-      single = Filter::decides_single(q, params);
+      decided = Filter::decides_single(q, params);
     }
-    if (single) append_index(counters + kSingleMisses);
+    if (decided) append_index(counters + kSingleMisses);
     else append_pair(counters + kDoubleKept, double_kept, kept[i]);
   }
 }
 
-// A thread per listed single-precision interval: the inside test in float; a pair with an
-// interval not certainly outside goes to the double filter, once (its bit in `failed`).
+// A thread per listed interval (the first round's, counter kSingleIntervals, or the second's,
+// kSingleDeepIntervals): the inside test in float. In the first round (`expanded` not null) an
+// interval whose test is unknown is listed in `expanded` for the second round when its pair may
+// take it; any other interval not certainly outside sends its pair to the double filter.
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void single_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                      const std::pair<index_t, index_t>* kept, const unsigned long long* control,
-                                     unsigned long long* counters, const unsigned long long* intervals,
-                                     std::size_t interval_room, unsigned* failed, std::pair<index_t, index_t>* double_kept) {
+                                     unsigned long long* counters, int counter, const unsigned long long* intervals,
+                                     std::size_t interval_room, unsigned* failed, std::pair<index_t, index_t>* double_kept,
+                                     unsigned long long* expanded) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  using lwsccd::detail::InsideVerdict;
   if (control[kSkip]) return;
-  const std::size_t n =
-      counters[kSingleIntervals] < interval_room ? static_cast<std::size_t>(counters[kSingleIntervals]) : interval_room;
+  const std::size_t n = counters[counter] < interval_room ? static_cast<std::size_t>(counters[counter]) : interval_room;
   LWSCCD_GRID_STRIDE(j, n) {
     const unsigned long long item = intervals[j];
     if (item == kNoInterval) continue;
-    const unsigned i = item_pair_index(item);
-    if (Filter::outside_single(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), item_node(item))) continue;
-    const unsigned bit = 1u << (i & 31u);
-    if (atomicOr(failed + (i >> 5), bit) & bit) continue;
-    append_index(counters + kSingleFailed);
-    append_pair(counters + kDoubleKept, double_kept, kept[i]);
+    const unsigned i = item_pair_index(item), node = item_node(item);
+    const InsideVerdict verdict = Filter::inside_single(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), node);
+    if (verdict == InsideVerdict::outside) continue;
+    // Its own slot in `expanded`, whose room is the first round's list's.
+    if (expanded && verdict == InsideVerdict::unknown && item_expandable(item) && (node >> Filter::kLevel) == 1u)
+      expanded[append_index(counters + kSingleExpanded)] = item;
+    else
+      fail_single(i, failed, counters, kept, double_kept);
+  }
+}
+
+// The second round: a thread per interval left unknown by the first lists the intervals below it
+// (CertifiedFilter::expand_single) for single_inside_kernel; a pair already failed is skipped, one
+// the round cannot take goes to the double filter, one whose pieces do not fit (slots marked
+// empty, room grown for the next run) is decided on the thread.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void single_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, CcdParams<T> params,
+                                     const unsigned long long* control, unsigned long long* counters,
+                                     const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
+                                     unsigned* failed, std::pair<index_t, index_t>* double_kept) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  if (control[kSkip]) return;
+  const CcdParams<float> single = lwsccd::detail::single_params(params);
+  const std::size_t n = static_cast<std::size_t>(counters[kSingleExpanded]);
+  LWSCCD_GRID_STRIDE(j, n) {
+    const unsigned long long item = expanded[j];
+    const unsigned i = item_pair_index(item), node = item_node(item);
+    if ((failed[i >> 5] >> (i & 31u)) & 1u) continue;  // failed already (a racing read is only a missed shortcut)
+    std::uint32_t below = 0;
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
+    const int count = Filter::expand_single(q, single, node, below);
+    if (count < 0) {
+      fail_single(i, failed, counters, kept, double_kept);
+      continue;
+    }
+    if (count == 0) continue;
+    bool fits = true;
+    const unsigned long long base = append_run(counters + kSingleDeepIntervals, static_cast<unsigned>(count), deep_room, fits);
+    for (int k = 0; k < count; ++k, below &= below - 1u)
+      if (base + k < deep_room)
+        deep[base + k] = fits ? filter_item(i, false, Filter::deep_node(node, static_cast<unsigned>(__ffs(below) - 1))) : kNoInterval;
+    // Pieces that do not fit: the pair decided on this thread (both rounds, the same answer as
+    // every interval's test: a miss leaves its other intervals outside too).
+    if (!fits && !Filter::decides_single(q, params)) fail_single(i, failed, counters, kept, double_kept);
   }
 }
 
@@ -198,6 +254,7 @@ __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
   const std::size_t n = counters[kept_counter] < room ? static_cast<std::size_t>(counters[kept_counter]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
+    if (Method::screen_after_single(q, params)) continue;  // (FP32 first: the double screen runs here)
     std::uint32_t found = 0;
     lwsccd::detail::Noted<T> noted;
     const int count = Filter::intervals(q, params, found, noted);

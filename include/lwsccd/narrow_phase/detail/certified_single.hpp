@@ -59,6 +59,22 @@ LWSCCD_HD LWSCCD_HOST_INLINE float single_input_perturbation() {
   return fmul(fadd(u, u * exact_pow2_neg<float>(18)), static_cast<float>(Policy::kSingleInputBound));
 }
 
+/// The parameters the single-precision passes read, in float, so that they need no double
+/// arithmetic: the time limit rounded up (pruning only pieces that start at or after it stays
+/// sound) and the tolerance rounded to nearest (its only use, declining tolerances of at least a
+/// power of two, is monotone under rounding).
+template <class T>
+LWSCCD_HD LWSCCD_HOST_INLINE CcdParams<float> single_params(const CcdParams<T>& params) {
+  CcdParams<float> s;
+  s.min_separation = params.min_separation > T(0) ? 1.0f : 0.0f;  // (only its sign is read)
+  s.tolerance = static_cast<float>(params.tolerance);
+  s.max_iterations = params.max_iterations;
+  s.mode = params.mode;
+  s.time_limit = round_up<float>(params.time_limit);
+  s.time_from = 0.0f;  // (not read by the single passes)
+  return s;
+}
+
 /// The single-precision screen: true when the pair certainly never touches in the step (or
 /// before params.time_limit), decided in float alone, with the double path's guarantee (for the
 /// input as given and within its perturbation). The swept boxes and the cubic's Bernstein signs,
@@ -79,11 +95,10 @@ LWSCCD_HD bool certified_screen_single(const Q& q_in, const CcdParams<T>& params
 /// or passed on to the refinement.
 enum class ScreenVerdict : std::uint8_t { single_miss, double_miss, passed };
 
-/// The certified path's cheap first step. In single precision first (Policy::kSingleFirst), then
-/// in the path's own precision for what that leaves, unless single precision found the cubic's
-/// signs certainly mixed (the double screen's cubic test cannot reject such a pair; its box test
-/// is left to the refinement, which decides the pair whatever the screen says). Most pairs of a
-/// real step end here; a batch runs it on every pair and certified_refine on the others.
+/// The certified path's cheap first step, whole: in single precision first (Policy::kSingleFirst),
+/// then in the path's own precision for what that leaves, unless single precision found the
+/// cubic's signs certainly mixed (the double screen's cubic test cannot reject such a pair; its
+/// box test is left to the refinement, which decides the pair whatever the screen says).
 template <class Policy, class Q, class T>
 LWSCCD_HD ScreenVerdict certified_screen_verdict(const Q& q, const CcdParams<T>& params) {
   bool mixed = false;
@@ -96,6 +111,23 @@ LWSCCD_HD ScreenVerdict certified_screen_verdict(const Q& q, const CcdParams<T>&
 template <class Policy, class Q, class T>
 LWSCCD_HD bool certified_screen(const Q& q, const CcdParams<T>& params) {
   return certified_screen_verdict<Policy>(q, params) != ScreenVerdict::passed;
+}
+
+/// The screen as a batch runs it first, on every pair: single precision alone when
+/// Policy::kSingleFirst (the single-precision filter, then certified_screen_after_single, take
+/// what it leaves: the filter decides nearly every pair the double screen would, in float), else
+/// the double screen. Most pairs of a real step end here.
+template <class Policy, class Q, class T>
+LWSCCD_HD ScreenVerdict certified_first_screen(const Q& q, const CcdParams<T>& params) {
+  if (Policy::kSingleFirst) return certified_screen_single<Policy>(q, params) ? ScreenVerdict::single_miss : ScreenVerdict::passed;
+  return certified_screen_double<Policy>(q, params) ? ScreenVerdict::double_miss : ScreenVerdict::passed;
+}
+
+/// The double screen on what the single-precision passes left (false without
+/// Policy::kSingleFirst: the first screen was the double one).
+template <class Policy, class Q, class T>
+LWSCCD_HD bool certified_screen_after_single(const Q& q, const CcdParams<T>& params) {
+  return Policy::kSingleFirst && certified_screen_double<Policy>(q, params);
 }
 
 }  // namespace lwsccd::detail

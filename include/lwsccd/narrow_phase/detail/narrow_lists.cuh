@@ -71,6 +71,8 @@ enum NarrowCounter : int {
   kSingleListed,    // pairs whose intervals it listed
   kSingleFailed,    // of those, pairs with an interval not certainly outside in float (to the double filter)
   kDoubleKept,      // pairs the double filter takes (kept by the screen, not decided in single precision)
+  kSingleExpanded,  // the single-precision filter's second round: intervals whose test was unknown
+  kSingleDeepIntervals,  // its intervals listed for the inside test (more than the room: the pair to double)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.

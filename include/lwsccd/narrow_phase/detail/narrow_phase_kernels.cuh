@@ -87,6 +87,11 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
           l.single_intervals.resize_discard(l.single_interval_room);
           l.single_failed.resize_discard((l.work_room + 31) / 32);
           l.double_kept.resize_discard(l.work_room);
+          if (single_second_round(params.mode)) {
+            l.single_expanded.resize_discard(l.single_interval_room);
+            l.single_deep_room = std::max(l.single_deep_room, std::max<std::size_t>(l.work_room / 100 * Policy::kDeepRoomPercent, 1));
+            l.single_deep.resize_discard(l.single_deep_room);
+          }
         }
         if (second_round(params.mode)) {
           l.expanded.resize_discard(l.interval_room);
@@ -165,11 +170,24 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
                 l.single_intervals.data(), l.single_interval_room, l.double_kept.data());
         LWSCCD_CUDA_CHECK_LAUNCH();
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
-        detail::single_inside_kernel<Method, kVertexFace, T, P>
-            <<<grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, x0, x1, l.survivors.data(), control_.data(), l.counters.data(), l.single_intervals.data(),
-                l.single_interval_room, l.single_failed.data(), l.double_kept.data());
+        const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
+        const bool single_deeper = single_second_round(params.mode);
+        detail::single_inside_kernel<Method, kVertexFace, T, P><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, l.survivors.data(), control_.data(), l.counters.data(), detail::kSingleIntervals,
+            l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(),
+            single_deeper ? l.single_expanded.data() : nullptr);
         LWSCCD_CUDA_CHECK_LAUNCH();
+        if (single_deeper) {
+          detail::single_expand_kernel<Method, kVertexFace, T, P><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
+              l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data());
+          LWSCCD_CUDA_CHECK_LAUNCH();
+          detail::single_inside_kernel<Method, kVertexFace, T, P>
+              <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                  mesh, x0, x1, l.survivors.data(), control_.data(), l.counters.data(), detail::kSingleDeepIntervals,
+                  l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), nullptr);
+          LWSCCD_CUDA_CHECK_LAUNCH();
+        }
         kept = l.double_kept.data();
         kept_counter = detail::kDoubleKept;
       }
@@ -282,6 +300,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     if (c[detail::kIntervals] > l.interval_room) l.interval_room = detail::grown_room(c[detail::kIntervals]);
     if (c[detail::kDeepIntervals] > l.deep_room) l.deep_room = detail::grown_room(c[detail::kDeepIntervals]);
     if (c[detail::kSingleIntervals] > l.single_interval_room) l.single_interval_room = detail::grown_room(c[detail::kSingleIntervals]);
+    if (c[detail::kSingleDeepIntervals] > l.single_deep_room) l.single_deep_room = detail::grown_room(c[detail::kSingleDeepIntervals]);
   }
   if (!complete) {
     ++reruns_;
