@@ -129,7 +129,8 @@ class Pipeline:
                 arrays (float64 or float32, C-contiguous) that expose
                 ``__cuda_array_interface__`` or DLPack, read in place (GPU backend). Float32
                 positions are widened exactly, so the answers are certified for the float32
-                values as given. x0 and x1 must have the same dtype.
+                values as given. Host arrays of two dtypes are both taken as float64; CUDA arrays
+                must have one dtype.
             on_device: GPU backend: leave the contacts in device memory and return a
                 :class:`DeviceStepResult` instead of a :class:`StepResult`.
 
@@ -152,8 +153,8 @@ class Pipeline:
             d = self._core.step_from_device(a0[0], a1[0], a0[1])
         else:
             h0, h1 = _host_positions(x0, "x0", n), _host_positions(x1, "x1", n)
-            if h0.dtype != h1.dtype:
-                raise TypeError(f"lwsccd: x0 and x1 must have the same dtype, got {h0.dtype} and {h1.dtype}")
+            if h0.dtype != h1.dtype:  # one float32, one float64: the float32 one widened (exactly)
+                h0, h1 = h0.astype(np.float64, copy=False), h1.astype(np.float64, copy=False)
             d = (self._core.step_f32 if h0.dtype == np.float32 else self._core.step)(h0, h1)
         return StepResult(
             d["vf"].view(VERTEX_FACE_DTYPE),  # 24-byte records written by the extension

@@ -57,8 +57,9 @@ def test_float32_positions_are_taken_as_given(cloth_steps):
         contacts += r.num_contacts
     assert contacts > 0
     x0, x1 = steps[0]
-    with pytest.raises(TypeError, match="same dtype"):
-        f32.step(x0, x1.astype(np.float32))
+    a1 = x1.astype(np.float32)  # two dtypes: both taken as float64 (the float32 one exactly)
+    mixed, expected = f32.step(x0, a1), f64.step(x0, a1.astype(np.float64))
+    assert np.array_equal(mixed.vertex_face, expected.vertex_face) and np.array_equal(mixed.edge_edge, expected.edge_edge)
 
 
 def test_rigid_ball_has_no_self_pairs(cloth_steps):
