@@ -79,6 +79,43 @@ LWSCCD_HD EdgeEdgeQuery<T> gather_edge_edge(const MeshFeatures& m, const Vec3<P>
                           local_point<T>(x1[b.v[0]], o), local_point<T>(x1[b.v[1]], o)};
 }
 
+/// A vertex's positions at t = 0 and t = 1 rounded to float (to nearest; float input exactly),
+/// in one 32-byte record: the certified path's single-precision passes (FP32 first) read a
+/// vertex in one memory transaction, and compute in float alone (no double subtraction of an
+/// origin: they subtract theirs in float, with a bound that covers the rounding to float).
+struct alignas(32) SingleVertex {
+  Vec3f x0, x1;
+  float unused[2];
+};
+
+template <class P>
+LWSCCD_HD SingleVertex single_vertex(const Vec3<P>& x0, const Vec3<P>& x1) {
+  return {x0.template cast<float>(), x1.template cast<float>(), {0.0f, 0.0f}};
+}
+
+/// Every vertex's SingleVertex (the CPU batch; the GPU builds the same records in a kernel).
+template <class P>
+std::vector<SingleVertex> single_vertices(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
+  std::vector<SingleVertex> v(x0.size());
+  for (std::size_t i = 0; i < x0.size(); ++i) v[i] = single_vertex(x0[i], x1[i]);
+  return v;
+}
+
+/// The pair's query in float from SingleVertex records, in absolute coordinates (the
+/// single-precision passes take it as it is: detail::relative_single).
+LWSCCD_HD inline VertexFaceQuery<float> gather_single_vertex_face(const MeshFeatures& m, const SingleVertex* x, index_t vertex,
+                                                                  index_t face_feature) {
+  const Face f = m.faces[face_feature - m.num_vertices - m.num_edges];
+  const SingleVertex p = x[vertex], a = x[f.v[0]], b = x[f.v[1]], c = x[f.v[2]];
+  return {p.x0, a.x0, b.x0, c.x0, p.x1, a.x1, b.x1, c.x1};
+}
+LWSCCD_HD inline EdgeEdgeQuery<float> gather_single_edge_edge(const MeshFeatures& m, const SingleVertex* x, index_t edge_a,
+                                                              index_t edge_b) {
+  const Edge e = m.edges[edge_a - m.num_vertices], g = m.edges[edge_b - m.num_vertices];
+  const SingleVertex a = x[e.v[0]], b = x[e.v[1]], c = x[g.v[0]], d = x[g.v[1]];
+  return {a.x0, b.x0, c.x0, d.x0, a.x1, b.x1, c.x1, d.x1};
+}
+
 inline MeshFeatures mesh_features(const TriangleMesh& mesh) {
   return {mesh.faces().data(), mesh.edges().data(), mesh.num_vertices(), mesh.num_edges()};
 }

@@ -134,7 +134,9 @@ struct CertifiedCcdT {
   /// pair (single precision alone when Policy::kSingleFirst, saying in which precision a miss was
   /// decided); filter_single on what it passes (detail::CertifiedFilter::decides_single: true for
   /// a certain miss proved in float by the refinement's first levels); screen_after_single, the
-  /// double screen, on what that leaves; then refine.
+  /// double screen, on what that leaves; then refine. The batches give the first two the pair's
+  /// vertices rounded to float (gather_single_vertex_face: no double arithmetic before a pair is
+  /// decided in float), the others the double query.
   template <class Q, class T>
   LWSCCD_HD static detail::ScreenVerdict screen_verdict(const Q& q, const CcdParams<T>& params) {
     return detail::certified_first_screen<Policy>(q, params);

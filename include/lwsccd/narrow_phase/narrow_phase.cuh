@@ -72,6 +72,12 @@ struct NarrowPhasePolicy {
   static constexpr bool kFilterSecondRound = true;
   /// Its list's starting room, as a percentage of the screened pairs' room (grown like the first's).
   static constexpr int kDeepRoomPercent = 100;
+  /// FP32 first: a pair with an interval certainly inside in float (a contact, nearly always)
+  /// goes from the single-precision filter straight to the whole search, past the double filter,
+  /// which would only pass it on (same answers: the filter decides only what the search decides
+  /// alike; the double screen still runs first). Only pairs the float filter fails take the
+  /// double filter's kernels.
+  static constexpr bool kSingleInsideWhole = true;
   /// Kernels whose input length is read on the device loop over it (grid-stride) in a grid of
   /// this many blocks per SM (or fewer, where the input's room is smaller).
   static constexpr int kGridBlocksPerSm = 16;
@@ -193,7 +199,7 @@ class NarrowPhase {
   const FeatureHit<T>* vf_hits() const { return lists_[0].hits.data(); }
   const FeatureHit<T>* ee_hits() const { return lists_[1].hits.data(); }
   std::size_t device_bytes() const {
-    std::size_t bytes = control_.capacity_bytes();
+    std::size_t bytes = control_.capacity_bytes() + single_.capacity_bytes();
     for (const auto& l : lists_)
       bytes += l.hits.capacity_bytes() + l.sorter.device_bytes() + l.survivors.capacity_bytes() + l.undecided.capacity_bytes() +
                l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes() + l.intervals.capacity_bytes() +
@@ -255,6 +261,7 @@ class NarrowPhase {
   cudaStream_t stream_ = nullptr;  ///< the last enqueue's
   std::size_t id_limit_ = 0;       ///< the last enqueue's mesh: its feature count (ids are below it)
   DeviceBuffer<unsigned long long> control_;  ///< detail::NarrowControl words
+  DeviceBuffer<SingleVertex> single_;         ///< FP32 first: the vertices rounded to float, for the single-precision passes
   std::size_t gave_up_ = 0, reruns_ = 0;
   T earliest_ = T(1);
   int sms_ = 1;

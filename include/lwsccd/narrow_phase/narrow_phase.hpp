@@ -107,9 +107,13 @@ namespace detail {
 /// so that the answer does not depend on the order of work); other methods run as they are.
 /// Item i of the list is the pair `pair_of(i)` and the query `gather(i)`, with no contact before
 /// `from_of(i)`; `undecided` (first pass of a certified method) receives the items left to the
-/// fallback, each with the time before which the certified pass excluded contact.
-template <class Method, class T, class Gather, class PairOf, class FromOf>
-void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_of, const CcdParams<T>& params,
+/// fallback, each with the time before which the certified pass excluded contact. A certified
+/// method that decides in single precision first takes its first pass's float query from
+/// `gather_single(i)` (the pair's points rounded to float: gather_single_vertex_face), as the GPU
+/// batch does, and gathers the double query only for the pairs that pass it.
+template <class Method, class T, class Gather, class GatherSingle, class PairOf, class FromOf>
+void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, PairOf&& pair_of, FromOf&& from_of,
+               const CcdParams<T>& params,
                std::enable_if_t<true, std::vector<std::pair<std::size_t, T>>>* undecided,  // (not deduced: may be nullptr)
                std::vector<FeatureHit<T>>& hits,
                NarrowPhaseCounts& counts, std::size_t& gave_up) {
@@ -138,21 +142,29 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
     // as workers free up (contacts cluster, so a fixed split would leave one worker the hard part).
     for (std::size_t begin = next.fetch_add(kRun); begin < n; begin = next.fetch_add(kRun))
     for (std::size_t i = begin, end = std::min(n, begin + kRun); i < end; ++i) {
-      const auto q = gather(i);
       if constexpr (lwsccd::detail::certified_of<Method>::value) {
         if (undecided) {  // first pass: the screen, then the refinement of what it passes
-          const lwsccd::detail::ScreenVerdict screened = Method::screen_verdict(q, params);
-          if (screened != lwsccd::detail::ScreenVerdict::passed) {
-            ++out.counts.certified_misses;
-            out.counts.single_misses += screened == lwsccd::detail::ScreenVerdict::single_miss;
-            continue;
+          if constexpr (lwsccd::detail::single_first_of<Method>::value) {
+            const auto s = gather_single(i);
+            if (Method::screen_verdict(s, params) != lwsccd::detail::ScreenVerdict::passed) {
+              ++out.counts.certified_misses;
+              ++out.counts.single_misses;
+              continue;
+            }
+            ++out.counts.screened;
+            if (Method::filter_single(s, params)) {
+              ++out.counts.certified_misses;
+              ++out.counts.single_misses;
+              continue;
+            }
+          } else {
+            if (Method::screen_verdict(gather(i), params) != lwsccd::detail::ScreenVerdict::passed) {
+              ++out.counts.certified_misses;
+              continue;
+            }
+            ++out.counts.screened;
           }
-          ++out.counts.screened;
-          if (Method::filter_single(q, params)) {
-            ++out.counts.certified_misses;
-            ++out.counts.single_misses;
-            continue;
-          }
+          const auto q = gather(i);
           if (Method::screen_after_single(q, params)) {
             ++out.counts.certified_misses;
             continue;
@@ -164,6 +176,7 @@ void test_list(std::size_t n, Gather&& gather, PairOf&& pair_of, FromOf&& from_o
           continue;
         }
       }
+      const auto q = gather(i);
       CcdResult<T> r;
       CcdParams<T> item_params = params;
       item_params.time_from = std::max(params.time_from, static_cast<T>(from_of(i)));
@@ -209,6 +222,11 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
   auto ee_query = [&](std::size_t i) {
     return gather_edge_edge<T>(features, x0.data(), x1.data(), pairs.ee[i].first, pairs.ee[i].second);
   };
+  // FP32 first: the first pass's float queries, from every vertex rounded to float once.
+  std::vector<SingleVertex> single;
+  if constexpr (lwsccd::detail::single_first_of<Method>::value) single = single_vertices(x0, x1);
+  auto vf_single = [&](std::size_t i) { return gather_single_vertex_face(features, single.data(), pairs.vf[i].first, pairs.vf[i].second); };
+  auto ee_single = [&](std::size_t i) { return gather_single_edge_edge(features, single.data(), pairs.ee[i].first, pairs.ee[i].second); };
   NarrowPhaseResult<T> result;
   result.vf_counts.pairs = pairs.vf.size();
   result.ee_counts.pairs = pairs.ee.size();
@@ -220,20 +238,20 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
     // limit limited.time_limit; into `out` (its counts' pairs already set).
     auto certified_pass = [&](const CcdParams<T>& limited, NarrowPhaseResult<T>& out) {
       std::vector<std::pair<std::size_t, T>> open_vf, open_ee;
-      lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, limited, &open_vf, out.vf,
+      lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_single, vf_pair, from_zero, limited, &open_vf, out.vf,
                                         out.vf_counts, out.gave_up);
-      lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, from_zero, limited, &open_ee, out.ee,
+      lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_single, ee_pair, from_zero, limited, &open_ee, out.ee,
                                         out.ee_counts, out.gave_up);
       CcdParams<T> fallback_params = limited;
       if (limited.mode == CcdMode::earliest)
         for (const auto* list : {&out.vf, &out.ee})
           for (const auto& h : *list) fallback_params.time_limit = std::min(fallback_params.time_limit, h.toi);
       lwsccd::detail::test_list<Method>(
-          open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k].first); },
+          open_vf.size(), [&](std::size_t k) { return vf_query(open_vf[k].first); }, vf_single,
           [&](std::size_t k) { return pairs.vf[open_vf[k].first]; }, [&](std::size_t k) { return open_vf[k].second; },
           fallback_params, nullptr, out.vf, out.vf_counts, out.gave_up);
       lwsccd::detail::test_list<Method>(
-          open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k].first); },
+          open_ee.size(), [&](std::size_t k) { return ee_query(open_ee[k].first); }, ee_single,
           [&](std::size_t k) { return pairs.ee[open_ee[k].first]; }, [&](std::size_t k) { return open_ee[k].second; },
           fallback_params, nullptr, out.ee, out.ee_counts, out.gave_up);
     };
@@ -257,9 +275,9 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
       }
     }
   } else {
-    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_pair, from_zero, params, nullptr, result.vf,
+    lwsccd::detail::test_list<Method>(pairs.vf.size(), vf_query, vf_single, vf_pair, from_zero, params, nullptr, result.vf,
                                       result.vf_counts, result.gave_up);
-    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_pair, from_zero, params, nullptr, result.ee,
+    lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_single, ee_pair, from_zero, params, nullptr, result.ee,
                                       result.ee_counts, result.gave_up);
   }
   std::sort(result.vf.begin(), result.vf.end());

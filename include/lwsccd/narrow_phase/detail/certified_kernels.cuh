@@ -24,21 +24,23 @@ __device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
 }
 
 // Pass 1: the pairs that the method's cheap first step does not reject, appended to `kept`.
+// FP32 first (CertifiedCcd deciding in single precision): the screen reads only `single`, the
+// vertices rounded to float, and counts its misses; the double screen runs later, on what the
+// single-precision filter leaves.
 template <class Method, bool kVertexFace, class T, class P>
-__global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList in, CcdParams<T> params,
-                              const unsigned long long* control, std::pair<index_t, index_t>* kept, std::size_t room,
-                              unsigned long long* counters) {
+__global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const SingleVertex* single, PairList in,
+                              CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
+                              std::size_t room, unsigned long long* counters) {
   if (control[kSkip]) return;
   const std::size_t n = in.count.get();
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = in.pairs[i];
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    if constexpr (lwsccd::detail::certified_of<Method>::value) {
-      // FP32 first (its misses counted), FP64 for what it leaves.
-      const lwsccd::detail::ScreenVerdict screened = Method::screen_verdict(q, params);
-      if (screened == lwsccd::detail::ScreenVerdict::single_miss) append_index(counters + kSingleMisses);
-      if (screened != lwsccd::detail::ScreenVerdict::passed) continue;
-    } else if (first_step_rejects<Method>(q, params)) {
+    if constexpr (lwsccd::detail::single_first_of<Method>::value) {
+      if (Method::screen_verdict(gather_single_query<kVertexFace>(mesh, single, p), params) != lwsccd::detail::ScreenVerdict::passed) {
+        append_index(counters + kSingleMisses);
+        continue;
+      }
+    } else if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) {
       continue;
     }
     const unsigned long long at = append_index(counters + kSurvivors);
@@ -68,18 +70,21 @@ __device__ void settle_refined(const CertifiedAnswer<T>& a, index_t first, index
 // of quick misses); the others settle their answer.
 template <class Method, bool kVertexFace, int kDeferLevel, int kBlock, int kMinBlocks, class T, class P>
 __global__ void __launch_bounds__(kBlock, kMinBlocks)
-    refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
-                  std::size_t room, CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                  FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
+    refine_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const SingleVertex* single,
+                  const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
+                  const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
+                  std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
   if (control[kSkip]) return;
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = kept[i];
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    if (Method::filter_single(q, params)) {  // FP32 first (counted), as the CPU batch
-      append_index(counters + kSingleMisses);
-      continue;
+    if constexpr (lwsccd::detail::single_first_of<Method>::value) {
+      if (Method::filter_single(gather_single_query<kVertexFace>(mesh, single, p), params)) {  // counted, as the CPU batch
+        append_index(counters + kSingleMisses);
+        continue;
+      }
     }
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
     if (Method::screen_after_single(q, params)) continue;
     bool later = false;
     const CertifiedAnswer<T> a = Method::template refine_until<kDeferLevel, false>(q, params, &later);
@@ -132,33 +137,50 @@ __device__ inline void append_pair(unsigned long long* counter, std::pair<index_
 // FP32 first, before the double filter: the single-precision filter's two rounds as the double
 // filter's (CertifiedFilter::intervals_single, inside_single, expand_single), a thread per pair,
 // then per interval. A pair every one of whose intervals is outside in float is a miss (counted:
-// kSingleMisses at once, else kSingleListed less kSingleFailed); any other goes once to
-// `double_kept` for the double filter (fail_single; its bit in `failed`, cleared before the run).
+// kSingleMisses at once, else kSingleListed less kSingleFailed); any other goes once (its bit in
+// `failed`, cleared before the run) to the double filter: appended to `double_kept`. With `whole`
+// (an interval inside in float: a contact, which the double filter would only pass on) it goes
+// straight to the whole search instead: listed from the top of `double_kept` (whose `room` holds
+// every screened pair, so the two ends never meet) and deferred; refine_deferred_kernel runs the
+// double screen on it first, as the double filter would have.
 __device__ inline void fail_single(unsigned i, unsigned* failed, unsigned long long* counters,
-                                   const std::pair<index_t, index_t>* kept, std::pair<index_t, index_t>* double_kept) {
+                                   const std::pair<index_t, index_t>* kept, std::pair<index_t, index_t>* double_kept,
+                                   std::size_t room = 0, unsigned* deferred = nullptr, bool whole = false) {
   const unsigned bit = 1u << (i & 31u);
   if (atomicOr(failed + (i >> 5), bit) & bit) return;
   append_index(counters + kSingleFailed);
-  append_pair(counters + kDoubleKept, double_kept, kept[i]);
+  if (!whole) {
+    append_pair(counters + kDoubleKept, double_kept, kept[i]);
+    return;
+  }
+  const auto at = static_cast<unsigned>(room - 1 - append_index(counters + kSingleWhole));
+  double_kept[at].first = kept[i].first;  // (std::pair's assignment is host-only before C++20)
+  double_kept[at].second = kept[i].second;
+  deferred[append_index(counters + kDeferred)] = at;
+}
+// Whether entry `at` of the double filter's list came straight from the single-precision filter.
+__device__ inline bool sent_whole(unsigned at, std::size_t room, const unsigned long long* counters) {
+  const unsigned long long whole = counters[kSingleWhole];
+  return whole > 0 && at >= room - whole;
 }
 
 // First kernel: a thread per screened pair lists its first round's intervals in `intervals` for
 // single_inside_kernel. A pair whose intervals do not fit is decided on its thread
 // (decides_single: the same answer), and the room grows for the next run.
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void single_filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+template <class Method, bool kVertexFace, class T>
+__global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* single,
                                      const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
                                      const unsigned long long* control, unsigned long long* counters,
                                      unsigned long long* intervals, std::size_t interval_room,
                                      std::pair<index_t, index_t>* double_kept) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
-  const CcdParams<float> single = lwsccd::detail::single_params(params);
+  const CcdParams<float> single_params = lwsccd::detail::single_params(params);
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
+    const auto q = gather_single_query<kVertexFace>(mesh, single, kept[i]);
     std::uint32_t found = 0;
-    const int count = Filter::intervals_single(q, single, found);
+    const int count = Filter::intervals_single(q, single_params, found);
     bool decided = count == 0;
     if (count > 0) {
       bool fits = true;
@@ -181,13 +203,14 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
 // A thread per listed interval (the first round's, counter kSingleIntervals, or the second's,
 // kSingleDeepIntervals): the inside test in float. In the first round (`expanded` not null) an
 // interval whose test is unknown is listed in `expanded` for the second round when its pair may
-// take it; any other interval not certainly outside sends its pair to the double filter.
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void single_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                     const std::pair<index_t, index_t>* kept, const unsigned long long* control,
+// take it; any other interval not certainly outside sends its pair to the double filter, or with
+// kInsideWhole, one inside in float straight to the whole search (fail_single).
+template <class Method, bool kVertexFace, class T, bool kInsideWhole>
+__global__ void single_inside_kernel(MeshFeatures mesh, const SingleVertex* single, const std::pair<index_t, index_t>* kept,
+                                     std::size_t room, const unsigned long long* control,
                                      unsigned long long* counters, int counter, const unsigned long long* intervals,
                                      std::size_t interval_room, unsigned* failed, std::pair<index_t, index_t>* double_kept,
-                                     unsigned long long* expanded) {
+                                     unsigned* deferred, unsigned long long* expanded) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   using lwsccd::detail::InsideVerdict;
   if (control[kSkip]) return;
@@ -196,13 +219,13 @@ __global__ void single_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
     const unsigned long long item = intervals[j];
     if (item == kNoInterval) continue;
     const unsigned i = item_pair_index(item), node = item_node(item);
-    const InsideVerdict verdict = Filter::inside_single(gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]), node);
+    const InsideVerdict verdict = Filter::inside_single(gather_single_query<kVertexFace>(mesh, single, kept[i]), node);
     if (verdict == InsideVerdict::outside) continue;
     // Its own slot in `expanded`, whose room is the first round's list's.
     if (expanded && verdict == InsideVerdict::unknown && item_expandable(item) && (node >> Filter::kLevel) == 1u)
       expanded[append_index(counters + kSingleExpanded)] = item;
     else
-      fail_single(i, failed, counters, kept, double_kept);
+      fail_single(i, failed, counters, kept, double_kept, room, deferred, kInsideWhole && verdict == InsideVerdict::inside);
   }
 }
 
@@ -210,23 +233,23 @@ __global__ void single_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
 // (CertifiedFilter::expand_single) for single_inside_kernel; a pair already failed is skipped, one
 // the round cannot take goes to the double filter, one whose pieces do not fit (slots marked
 // empty, room grown for the next run) is decided on the thread.
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void single_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+template <class Method, bool kVertexFace, class T>
+__global__ void single_expand_kernel(MeshFeatures mesh, const SingleVertex* single,
                                      const std::pair<index_t, index_t>* kept, CcdParams<T> params,
                                      const unsigned long long* control, unsigned long long* counters,
                                      const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
                                      unsigned* failed, std::pair<index_t, index_t>* double_kept) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
-  const CcdParams<float> single = lwsccd::detail::single_params(params);
+  const CcdParams<float> single_params = lwsccd::detail::single_params(params);
   const std::size_t n = static_cast<std::size_t>(counters[kSingleExpanded]);
   LWSCCD_GRID_STRIDE(j, n) {
     const unsigned long long item = expanded[j];
     const unsigned i = item_pair_index(item), node = item_node(item);
     if ((failed[i >> 5] >> (i & 31u)) & 1u) continue;  // failed already (a racing read is only a missed shortcut)
     std::uint32_t below = 0;
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
-    const int count = Filter::expand_single(q, single, node, below);
+    const auto q = gather_single_query<kVertexFace>(mesh, single, kept[i]);
+    const int count = Filter::expand_single(q, single_params, node, below);
     if (count < 0) {
       fail_single(i, failed, counters, kept, double_kept);
       continue;
@@ -337,16 +360,18 @@ __global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
 // Second part: the deferred searches, whole (a grid-stride loop keeps the warps full).
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                       const std::pair<index_t, index_t>* kept, const unsigned* deferred, CcdParams<T> params,
-                                       const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
-                                       std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
+                                       const std::pair<index_t, index_t>* kept, std::size_t room, const unsigned* deferred,
+                                       CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                                       FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
   if (n <= warp_below) return;  // refine_deferred_warp_kernel's
   LWSCCD_GRID_STRIDE(w, n) {
-    const std::pair<index_t, index_t> p = kept[deferred[w]];
-    const CertifiedAnswer<T> a = Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params);
-    settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+    const unsigned at = deferred[w];
+    const std::pair<index_t, index_t> p = kept[at];
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
+    if (sent_whole(at, room, counters) && Method::screen_after_single(q, params)) continue;
+    settle_refined(Method::template refine<false>(q, params), p.first, p.second, counters, hits, hit_room, undecided);
   }
 }
 
@@ -394,7 +419,7 @@ struct WarpInsideSubtree {
 // after the other took ~255 us in one thread on an H100).
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                            const std::pair<index_t, index_t>* kept, const unsigned* deferred,
+                                            const std::pair<index_t, index_t>* kept, std::size_t room, const unsigned* deferred,
                                             CcdParams<T> params, const unsigned long long* control,
                                             unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room,
                                             FeatureHit<T>* undecided, std::size_t warp_below) {
@@ -404,11 +429,14 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
   const int lane = static_cast<int>(threadIdx.x) % 32;
   const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
   for (std::size_t w = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; w < n; w += warps) {
-    const std::pair<index_t, index_t> p = kept[deferred[w]];
+    const unsigned at = deferred[w];
+    const std::pair<index_t, index_t> p = kept[at];
+    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
+    if (sent_whole(at, room, counters) && Method::screen_after_single(q, params)) continue;  // (the same on every lane)
     WarpInsideSubtree inside;
     inside.lane = lane;
     inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
-    const CertifiedAnswer<T> a = Method::template refine_with<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, inside);
+    const CertifiedAnswer<T> a = Method::template refine_with<false>(q, params, inside);
     if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
     __syncwarp();
   }

@@ -40,6 +40,13 @@ LWSCCD_HD auto gather_query(const MeshFeatures& mesh, const Vec3<P>* x0, const V
   else return gather_edge_edge<T>(mesh, x0, x1, p.first, p.second);
 }
 
+// The pair's float query for the single-precision passes (FP32 first), from SingleVertex records.
+template <bool kVertexFace>
+__device__ auto gather_single_query(const MeshFeatures& mesh, const SingleVertex* x, const std::pair<index_t, index_t>& p) {
+  if constexpr (kVertexFace) return gather_single_vertex_face(mesh, x, p.first, p.second);
+  else return gather_single_edge_edge(mesh, x, p.first, p.second);
+}
+
 // A method's test of either kind of query.
 template <class Method, class T>
 LWSCCD_HD CcdResult<T> run_method(const VertexFaceQuery<T>& q, const CcdParams<T>& params) {
@@ -73,6 +80,7 @@ enum NarrowCounter : int {
   kDoubleKept,      // pairs the double filter takes (kept by the screen, not decided in single precision)
   kSingleExpanded,  // the single-precision filter's second round: intervals whose test was unknown
   kSingleDeepIntervals,  // its intervals listed for the inside test (more than the room: the pair to double)
+  kSingleWhole,     // pairs it sends straight to the whole search (listed from the top of the double filter's list)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.
@@ -128,6 +136,12 @@ __device__ CcdParams<T> limited_params(CcdParams<T> params, const unsigned long 
 #define LWSCCD_GRID_STRIDE(i, n)                                                                              \
   for (std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < (n); \
        i += static_cast<std::size_t>(gridDim.x) * blockDim.x)
+
+// Every vertex's SingleVertex record (the positions of both times rounded to float).
+template <class P>
+__global__ void single_vertices_kernel(const Vec3<P>* x0, const Vec3<P>* x1, std::size_t n, SingleVertex* out) {
+  LWSCCD_GRID_STRIDE(i, n) out[i] = single_vertex(x0[i], x1[i]);
+}
 
 // Starts a window of a run (one thread). The first: clears the counters and records the inputs'
 // lengths. A later one (mode earliest): skipped when an earlier window holds a hit, else the

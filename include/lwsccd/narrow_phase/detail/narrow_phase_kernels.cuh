@@ -108,6 +108,15 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   // Other modes and methods: one window, the caller's.
   const bool windows = kCertified && params.mode == CcdMode::earliest;
   unsigned long long* control = control_.data();
+  if constexpr (kSingleFirst) {  // the single-precision passes' positions, once for every window
+    const std::size_t vertices = static_cast<std::size_t>(mesh.num_vertices);
+    single_.resize_discard(std::max<std::size_t>(vertices, 1));
+    const unsigned blocks = grid_for(vertices, 256, 8);
+    if (blocks > 0) {
+      detail::single_vertices_kernel<P><<<blocks, 256, 0, stream>>>(x0, x1, vertices, single_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
+  }
   for (int round = 0;; ++round) {
     CcdParams<T> limited = params;
     if constexpr (kCertified)
@@ -151,7 +160,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     const unsigned blocks = grid_for(in.count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
     if (blocks == 0) return;
     detail::screen_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
+        mesh, x0, x1, single_.data(), in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
   if constexpr (kCertified) {
@@ -164,28 +173,29 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     int kept_counter = detail::kSurvivors;
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       if constexpr (kSingleFirst) {
-        detail::single_filter_kernel<Method, kVertexFace, T, P>
+        detail::single_filter_kernel<Method, kVertexFace, T>
             <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
+                mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
                 l.single_intervals.data(), l.single_interval_room, l.double_kept.data());
         LWSCCD_CUDA_CHECK_LAUNCH();
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
         const bool single_deeper = single_second_round(params.mode);
-        detail::single_inside_kernel<Method, kVertexFace, T, P><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
-            mesh, x0, x1, l.survivors.data(), control_.data(), l.counters.data(), detail::kSingleIntervals,
-            l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(),
+        detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+            mesh, single_.data(), l.survivors.data(), l.work_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
+            l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
             single_deeper ? l.single_expanded.data() : nullptr);
         LWSCCD_CUDA_CHECK_LAUNCH();
         if (single_deeper) {
-          detail::single_expand_kernel<Method, kVertexFace, T, P><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
+          detail::single_expand_kernel<Method, kVertexFace, T><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+              mesh, single_.data(), l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
               l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data());
           LWSCCD_CUDA_CHECK_LAUNCH();
-          detail::single_inside_kernel<Method, kVertexFace, T, P>
+          detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>
               <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                  mesh, x0, x1, l.survivors.data(), control_.data(), l.counters.data(), detail::kSingleDeepIntervals,
-                  l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), nullptr);
+                  mesh, single_.data(), l.survivors.data(), l.work_room, control_.data(), l.counters.data(),
+                  detail::kSingleDeepIntervals, l.single_deep.data(), l.single_deep_room, l.single_failed.data(),
+                  l.double_kept.data(), l.deferred.data(), nullptr);
           LWSCCD_CUDA_CHECK_LAUNCH();
         }
         kept = l.double_kept.data();
@@ -216,7 +226,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     } else {
       detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
           <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
+              mesh, x0, x1, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
               l.hit_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
@@ -224,14 +234,14 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // list's), else a thread each; each kernel returns at once where the other one's case holds.
     const auto warp_below = static_cast<std::size_t>(Policy::kRefineWarpBelow);
     detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, kept, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+        mesh, x0, x1, kept, l.work_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
         l.hit_room, l.undecided.data(), warp_below);
     LWSCCD_CUDA_CHECK_LAUNCH();
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
       detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
           <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, kept, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+              mesh, x0, x1, kept, l.work_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
               l.hit_room, l.undecided.data(), warp_below);
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
