@@ -13,6 +13,8 @@
 //               filtered inclusion (the method before it) in mode contacts: scenes, built-in 100K
 //   scaling     the default policies on the built-in scene at --sizes (default 1K..10M)
 //   default     the default policies on every scene (for the CPU backend: a short sweep)
+//   threads     CPU backend: the scenes with ground truth and built-in 100K at each thread count of
+//               --threads (default 1,2,4,8,16; PipelineParams::threads)
 //   front       horse-gallop and built-in 100K, device-resident too, at several front growth
 //               limits (PipelineParams::front_growth_limit): restarts from the root against
 //               fronts that grow
@@ -47,6 +49,7 @@ struct Row {
   std::size_t rebuilds = 0, restarts = 0;  // measured steps that rebuilt the BVH / traversed from the root
   std::vector<lwsccd::StepStats> steps;    // every measured step's stats, in order (what the mean averages)
   double front_growth_limit = 0;
+  unsigned threads = 0;  // CPU: PipelineParams::threads (0: every core)
   lwsccd::StepStats last;  // counts of the last measured step
   double earliest_toi = 1;
   bool has_truth = false;
@@ -91,6 +94,7 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     r.policies = policies;
     r.mode = mode;
     r.front_growth_limit = params.front_growth_limit;
+    r.threads = params.threads;
     r.steps_measured = static_cast<int>(to - from);
     auto med = [&](double lwsccd::StepStats::*field) {
       std::vector<double> v;
@@ -145,7 +149,8 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
   for (std::size_t k = first_row; k < rows.size(); ++k) {
     const Row& r = rows[k];
     std::printf("%-10s %-24s %9d %-4s %-10s %-18s %-6s %-6s %9.2f %8.3f %8.3f %8.3f %9.2f %10zu %9zu %8zu %9.3g %8.1f", r.sweep.c_str(),
-                r.scene.c_str(), r.triangles, r.policies.bv.c_str(), device == "gpu" ? r.policies.scheduler.c_str() : "cpu",
+                r.scene.c_str(), r.triangles, r.policies.bv.c_str(),
+                device == "gpu" ? r.policies.scheduler.c_str() : r.threads ? ("cpu x" + std::to_string(r.threads)).c_str() : "cpu",
                 (r.policies.method + (r.mode == lwsccd::CcdMode::contacts ? "" : std::string("/") + mode_name(r.mode))).c_str(),
                 r.policies.precision.c_str(), r.step.c_str(), r.total, r.refit, r.traverse,
                 r.features, r.narrow, r.last.triangle_pairs, r.last.feature_pairs_vf + r.last.feature_pairs_ee,
@@ -169,9 +174,9 @@ std::vector<std::size_t> parse_sizes(const std::string& text) {
 
 int main(int argc, char** argv) {
   const auto args = lwsccd_bench::parse_bench_args(
-      argc, argv, 5, {"--sweep=", "--device=", "--sizes="},
-      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default|front[,...]] [--device gpu|cpu] [--sizes 1e3,1e4,...]\n"
-      "                             [--data DIR] [--reps N] [--json FILE]");
+      argc, argv, 5, {"--sweep=", "--device=", "--sizes=", "--threads="},
+      "usage: lwsccd-bench-pipeline [--sweep all|schedulers|methods|modes|scaling|default|front|threads[,...]] [--device gpu|cpu]\n"
+      "                             [--sizes 1e3,1e4,...] [--threads 1,2,4,...] [--data DIR] [--reps N] [--json FILE]");
   try {
     // One sweep or several, comma-separated (one run, one JSON file: what run_benchmarks.sh uses).
     const std::string sweep = args.value("--sweep", "all");
@@ -181,9 +186,9 @@ int main(int argc, char** argv) {
       std::string item;
       while (std::getline(in, item, ',')) {
         if (item != "all" && item != "schedulers" && item != "methods" && item != "modes" && item != "scaling" &&
-            item != "default" && item != "front")
+            item != "default" && item != "front" && item != "threads")
           throw lwsccd::InputError("command line", "--sweep",
-                                   "expected all, schedulers, methods, modes, scaling, default or front (or a comma-separated list), got '" +
+                                   "expected all, schedulers, methods, modes, scaling, default, front or threads (or a comma-separated list), got '" +
                                        item + "'");
         sweeps.push_back(item);
       }
@@ -192,7 +197,7 @@ int main(int argc, char** argv) {
     // `all` means schedulers, methods, modes and scaling.
     auto wants = [&](const std::string& name) {
       for (const std::string& w : sweeps)
-        if (w == name || (w == "all" && name != "default" && name != "front")) return true;
+        if (w == name || (w == "all" && name != "default" && name != "front" && name != "threads")) return true;
       return false;
     };
     const std::string gpu = ccd_app::gpu_name();
@@ -202,6 +207,9 @@ int main(int argc, char** argv) {
       return 77;
     }
     const std::vector<std::size_t> sizes = parse_sizes(args.value("--sizes", "1000,10000,100000,1000000,10000000"));
+    const std::vector<std::size_t> thread_counts = parse_sizes(args.value("--threads", "1,2,4,8,16"));
+    if (wants("threads") && device != "cpu")
+      throw lwsccd::InputError("command line", "--sweep threads", "measures the CPU backend: add --device cpu");
     const std::string dir = lwsccd_bench::data_dir(args.data, LWSCCD_BENCH_DATA_DIR);
     std::printf("lwsccd-bench-pipeline: %s; sweep %s; medians of %d steady steps; times in ms, host to host\n",
                 device == "gpu" ? ("GPU " + gpu).c_str() : "CPU backend", sweep.c_str(), args.reps);
@@ -302,6 +310,19 @@ int main(int argc, char** argv) {
                 lwsccd::CcdMode::contacts, true, params);
       }
     }
+    if (wants("threads")) {
+      for (const std::size_t t : thread_counts) {
+        lwsccd::PipelineParams params;
+        params.threads = static_cast<unsigned>(t);
+        if (have_data)
+          for (const auto& name : truth_scenes)
+            measure(data_scenario(name), "threads", ccd_app::PolicyChoice{}, device, args.reps, rows, lwsccd::CcdMode::contacts,
+                    false, params);
+        std::shared_ptr<lwsccd::ClothBallSimulation> sim;
+        measure(builtin_scenario(100000, sim), "threads", ccd_app::PolicyChoice{}, device, args.reps, rows,
+                lwsccd::CcdMode::contacts, false, params);
+      }
+    }
     if (wants("scaling")) {
       for (const std::size_t n : sizes) {
         std::shared_ptr<lwsccd::ClothBallSimulation> sim;
@@ -317,6 +338,7 @@ int main(int argc, char** argv) {
                            {"triangles", r.triangles},
                            {"bv", r.policies.bv},
                            {"scheduler", device == "gpu" ? r.policies.scheduler : std::string("cpu-work-stealing")},
+                           {"threads", device == "gpu" ? 0u : r.threads ? r.threads : ccd_app::cpu_threads()},
                            {"method", r.policies.method},
                            {"precision", r.policies.precision},
                            {"mode", mode_name(r.mode)},

@@ -30,6 +30,11 @@ inline std::unique_ptr<AnyPipeline> make_cpu_pipeline(std::shared_ptr<const lwsc
   return lwsccd::cpu::make_any_pipeline(std::move(mesh), layout, params, choice);
 }
 
+/// The threads the CPU backend uses for `params` (PipelineParams::threads, or every core).
+inline unsigned cpu_threads(const lwsccd::PipelineParams& params = {}) {
+  return lwsccd::cpu::ThreadLimit(params.threads).effective_threads();
+}
+
 /// The first CUDA device's name, or "" when there is none (or the program was built without CUDA).
 std::string gpu_name();
 

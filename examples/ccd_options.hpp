@@ -63,6 +63,7 @@ inline void print_usage(std::FILE* out) {
                "                   limit); a step that needs more runs in parts that fit (same contacts)\n"
                "  --part-pairs N   run each step in parts of at most N candidate triangle pairs (both\n"
                "                   devices; same contacts, less memory at once)\n"
+               "  --threads N      CPU backend: at most N threads (default: every core)\n"
                "  --no-front-tracking  traverse from the root every step\n"
                "  --check          also run the CPU oracle (sort-and-sweep, every candidate pair) and\n"
                "                   compare contacts pair for pair (slow on large scenes)\n"
@@ -150,6 +151,8 @@ inline Options parse_options(int argc, char** argv) {
       o.params.device_memory_budget = parse_bytes(a, value());
     } else if (a == "--part-pairs") {
       o.params.part_pairs = static_cast<std::size_t>(parse_integer(a, value(), 1, 1LL << 40));
+    } else if (a == "--threads") {
+      o.params.threads = static_cast<unsigned>(parse_integer(a, value(), 1, 1 << 16));
     } else if (a == "--max-iterations") {
       o.params.max_iterations = static_cast<int>(parse_integer(a, value(), 1, 1 << 30));
     } else if (a == "--no-front-tracking") {

@@ -45,9 +45,11 @@ inline const char* mode_name(lwsccd::CcdMode m) {
 
 inline void print_table(const StepSource& src, const std::string& backend, const Options& o, const std::vector<StepReport>& reports) {
   std::printf("lwsccd-ccd: %s\n", src.description.c_str());
+  const std::string cpu = "work stealing, " + std::to_string(ccd_app::cpu_threads(o.params)) + " threads" +
+                          (lwsccd::cpu::kUsesTbb ? " (oneTBB)" : "");
   std::printf("  %d vertices, %d triangles; %s | BV %s | %s%s | %s, %s, mode %s | front tracking %s\n", src.mesh->num_vertices(),
               src.mesh->num_faces(), backend.c_str(), o.policies.bv.c_str(),
-              backend == "CPU" ? "" : "scheduler ", backend == "CPU" ? "work stealing" : o.policies.scheduler.c_str(),
+              backend == "CPU" ? "" : "scheduler ", backend == "CPU" ? cpu.c_str() : o.policies.scheduler.c_str(),
               o.policies.method.c_str(), o.policies.precision.c_str(), mode_name(o.params.mode),
               o.params.front_tracking ? "on" : "off");
   std::printf("\n%-40s | %8s %7s %8s %8s %8s | %10s %9s %9s %9s %9s | %7s %7s %12s\n", "step", "total ms", "refit",
@@ -99,6 +101,7 @@ inline void print_json(const StepSource& src, const std::string& backend, const 
   doc["backend"] = backend;
   doc["bv"] = o.policies.bv;
   doc["scheduler"] = backend == "CPU" ? std::string("work-stealing") : o.policies.scheduler;
+  if (backend == "CPU") doc["threads"] = ccd_app::cpu_threads(o.params);
   doc["method"] = o.policies.method;
   doc["precision"] = o.policies.precision;
   doc["mode"] = mode_name(o.params.mode);

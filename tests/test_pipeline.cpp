@@ -307,3 +307,56 @@ TEST_CASE("run_stage_sequence: a whole step is one part of each kind; a step in 
   detail::run_stage_sequence(empty, unused);
   CHECK(empty.calls == "refit done0 ?T traversal done1 ?N ?T traversal done1 ?N ?T ?N complete");
 }
+
+TEST_CASE("CPU pipeline: any thread count gives the same steps, bit for bit (PipelineParams::threads)", "[pipeline][threads]") {
+  lwsccd::ClothBallSimulation simulation(12000);
+  simulation.advance(30);
+  std::vector<lwsccd::Step> steps;
+  for (int s = 0; s < 3; ++s) steps.push_back(simulation.next_step());
+  auto with_threads = [&](unsigned n) {
+    lwsccd::PipelineParams params;
+    params.threads = n;
+    params.rebuild_factor = 1;  // a rebuild every step: the parallel build as well as the refit
+    return lwsccd::cpu::CcdPipeline<>(simulation.mesh(), simulation.layout(), params);
+  };
+  auto one = with_threads(1), two = with_threads(2), five = with_threads(5);
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    INFO("step " << i);
+    const auto a = one.step(steps[i].x0, steps[i].x1);
+    REQUIRE(a.stats.hits_vf + a.stats.hits_ee > 0);
+    for (auto* other : {&two, &five}) {
+      const auto b = other->step(steps[i].x0, steps[i].x1);
+      lwsccd_test::require_same_contacts(b.contacts, a.contacts);
+      REQUIRE(b.contacts.earliest_toi == a.contacts.earliest_toi);
+      REQUIRE(b.stats.triangle_pairs == a.stats.triangle_pairs);
+      REQUIRE(b.stats.bvtt_nodes == a.stats.bvtt_nodes);
+      REQUIRE(b.stats.front_size == a.stats.front_size);
+      REQUIRE(b.stats.feature_pairs_vf == a.stats.feature_pairs_vf);
+      REQUIRE(b.stats.feature_pairs_ee == a.stats.feature_pairs_ee);
+      lwsccd_test::require_same_counts(b.contacts.vf_counts, a.contacts.vf_counts);
+      lwsccd_test::require_same_counts(b.contacts.ee_counts, a.contacts.ee_counts);
+    }
+  }
+}
+
+TEST_CASE("cpu::ThreadLimit: the work inside run() gets the limit; the BVH it builds is the one of all cores",
+          "[pipeline][threads]") {
+  const auto m = lwsccd_test::folded_cloth(24, 1);
+  const cpu::ThreadLimit three(3), every_core;
+  CHECK(three.threads() == 3);
+  CHECK(three.effective_threads() == 3);
+  CHECK(every_core.effective_threads() >= 1);
+  CHECK(three.run([] { return detail::worker_count(); }) == 3u);
+  CHECK(cpu::ThreadLimit(1).run([] { return detail::worker_count(); }) == 1u);
+  // Exceptions pass through run().
+  CHECK_THROWS_AS(three.run([]() -> int { throw InputError("here", "x", "thrown inside"); }), InputError);
+  const auto serial = cpu::ThreadLimit(1).run([&] { return cpu::Bvh<Aabbf>(m.mesh, m.x0, m.x1); });
+  const cpu::Bvh<Aabbf> parallel(m.mesh, m.x0, m.x1);
+  REQUIRE(serial.nodes().leaf_primitive == parallel.nodes().leaf_primitive);
+  REQUIRE(serial.nodes().parent == parallel.nodes().parent);
+  REQUIRE(serial.cost_at_build() == parallel.cost_at_build());
+  for (std::size_t i = 0; i < parallel.nodes().bvs.size(); ++i) {
+    REQUIRE(serial.nodes().bvs[i].lo == parallel.nodes().bvs[i].lo);
+    REQUIRE(serial.nodes().bvs[i].hi == parallel.nodes().bvs[i].hi);
+  }
+}

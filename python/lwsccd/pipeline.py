@@ -43,6 +43,8 @@ class Pipeline:
         part_pairs: at most this many candidate triangle pairs go through the narrow phase
             together, the traversal running in parts of about as many (0: no limit); both
             devices, same contacts, less memory at once.
+        threads: CPU backend: at most this many threads (0, the default: every core). The
+            GPU backend ignores it.
         device: "auto" (the GPU when the package has it and a device is present, else the
             CPU), "gpu" or "cpu".
 
@@ -71,6 +73,7 @@ class Pipeline:
         front_growth_limit: float = 0.0,
         device_memory_budget: int = 0,
         part_pairs: int = 0,
+        threads: int = 0,
         device: str = "auto",
     ) -> None:
         f = np.asarray(faces)
@@ -96,7 +99,7 @@ class Pipeline:
             int(num_vertices), f, body_list, collides, bv, scheduler, method, precision, mode,
             float(min_separation), float(tolerance), int(max_iterations), bool(front_tracking),
             float(rebuild_factor), float(front_growth_limit), int(device_memory_budget),
-            int(part_pairs), device,
+            int(part_pairs), int(threads), device,
         )
         self.mode = mode
 

@@ -98,6 +98,18 @@ def test_parts_give_the_whole_steps_contacts(cloth_steps):
         cpu_pipeline(sim, part_pairs=-1)
 
 
+def test_thread_counts_give_the_same_contacts(cloth_steps):
+    # The CPU backend is the oracle: one thread or several, the same contacts bit for bit.
+    sim, steps = cloth_steps
+    one, three = cpu_pipeline(sim, threads=1), cpu_pipeline(sim, threads=3)
+    for x0, x1 in steps:
+        a, b = one.step(x0, x1), three.step(x0, x1)
+        assert np.array_equal(a.vertex_face, b.vertex_face) and np.array_equal(a.edge_edge, b.edge_edge)
+        assert a.earliest_toi == b.earliest_toi and len(a.vertex_face) + len(a.edge_edge) > 0
+    with pytest.raises(ValueError, match="threads"):
+        cpu_pipeline(sim, threads=-2)
+
+
 def test_obb_finds_a_subset_with_the_same_tois(cloth_steps):
     # OBBs cull more triangle pairs than AABBs; the narrow phase is the same, so every pair an
     # OBB pipeline reports is the AABB pipeline's, with the same TOI.

@@ -13,7 +13,9 @@
 // order). The root is node 0 for every n >= 1 (a single triangle is a leaf root).
 #pragma once
 
+#include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -94,6 +96,31 @@ template <class BV, class P>
 std::string check_bvh_invariants(const BvhView<BV>& bvh, const std::vector<Face>& faces,
                                  const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1);
 
+namespace detail {
+/// The per-node arrival counters of the CPU's parallel bottom-up fit, zero between fits. Scratch:
+/// a copy is a zeroed array of the same size.
+class ArrivalCounters {
+ public:
+  ArrivalCounters() = default;
+  ArrivalCounters(const ArrivalCounters& other) { resize(other.size_); }
+  ArrivalCounters& operator=(const ArrivalCounters& other) {
+    if (this != &other) resize(other.size_);
+    return *this;
+  }
+  ArrivalCounters(ArrivalCounters&&) noexcept = default;
+  ArrivalCounters& operator=(ArrivalCounters&&) noexcept = default;
+  void resize(std::size_t n) {
+    counters_.reset(n ? new std::atomic<unsigned char>[n]() : nullptr);  // value-initialised: zero
+    size_ = n;
+  }
+  std::atomic<unsigned char>* data() { return counters_.get(); }
+
+ private:
+  std::unique_ptr<std::atomic<unsigned char>[]> counters_;
+  std::size_t size_ = 0;
+};
+}  // namespace detail
+
 namespace cpu {
 
 /// A BVH on the CPU backend. Position type P (float/double) may differ from the BV's scalar.
@@ -143,6 +170,7 @@ class Bvh {
   std::uint64_t generation_ = 0;
   double cost_at_build_ = 0;
   typename bv_traits<BV>::scalar_type leaf_margin_ = 0;
+  detail::ArrivalCounters arrivals_;
 };
 
 }  // namespace cpu

@@ -5,10 +5,10 @@
 
 #include <algorithm>
 #include <atomic>
-#include <thread>
 #include <utility>
 #include <vector>
 
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/features/detail/oracle_impl.hpp"
 #include "lwsccd/features/oracle.hpp"
 #include "lwsccd/io/dataset.hpp"
@@ -117,7 +117,7 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
                std::enable_if_t<true, std::vector<std::pair<std::size_t, T>>>* undecided,  // (not deduced: may be nullptr)
                std::vector<FeatureHit<T>>& hits,
                NarrowPhaseCounts& counts, std::size_t& gave_up) {
-  const unsigned workers = std::max(1u, std::thread::hardware_concurrency());
+  const unsigned workers = worker_count();
   struct Part {
     std::vector<FeatureHit<T>> hits;
     std::vector<std::pair<std::size_t, T>> open;
@@ -128,7 +128,7 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
   // (Short lists, such as the fallback's few expensive queries, in short runs.)
   const std::size_t kRun = std::max<std::size_t>(1, std::min<std::size_t>(1024, n / (std::size_t(workers) * 64)));
   std::atomic<std::size_t> next{0};
-  run_on_all_cores([&](unsigned w, unsigned nw) {
+  for_each_worker([&](unsigned w, unsigned) {
     // A local part, moved out at the end: the workers' counters side by side in `parts` would
     // share cache lines, and every query bumps one.
     Part out;
@@ -137,7 +137,6 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
       Part& to;
       ~MoveOut() { to = std::move(from); }
     } move_out{out, parts[w]};
-    (void)nw;
     // Runs of consecutive pairs (neighbours in space: they share vertices and cache lines), taken
     // as workers free up (contacts cluster, so a fixed split would leave one worker the hard part).
     for (std::size_t begin = next.fetch_add(kRun); begin < n; begin = next.fetch_add(kRun))
@@ -190,7 +189,7 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
       ++out.counts.fallbacks;
       if (r.hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, r.toi}), out.gave_up += r.gave_up;
     }
-  });
+  }, workers);
   for (auto& part : parts) {
     hits.insert(hits.end(), part.hits.begin(), part.hits.end());
     if (undecided) undecided->insert(undecided->end(), part.open.begin(), part.open.end());
@@ -280,8 +279,8 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
     lwsccd::detail::test_list<Method>(pairs.ee.size(), ee_query, ee_single, ee_pair, from_zero, params, nullptr, result.ee,
                                       result.ee_counts, result.gave_up);
   }
-  std::sort(result.vf.begin(), result.vf.end());
-  std::sort(result.ee.begin(), result.ee.end());
+  lwsccd::detail::parallel_sort(result.vf.begin(), result.vf.end());
+  lwsccd::detail::parallel_sort(result.ee.begin(), result.ee.end());
   for (const auto* list : {&result.vf, &result.ee})
     for (const auto& h : *list) result.earliest_toi = std::min(result.earliest_toi, h.toi);
   if (params.mode == CcdMode::earliest) result.vf.clear(), result.ee.clear();

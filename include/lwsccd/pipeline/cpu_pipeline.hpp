@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "lwsccd/bvh/bvh.hpp"
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/features/orphans.hpp"
 #include "lwsccd/features/representative.hpp"
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
@@ -31,7 +32,8 @@ namespace lwsccd {
 
 namespace cpu {
 
-/// The pipeline on the CPU backend (all cores).
+/// The pipeline on the CPU backend: every core, or PipelineParams::threads (on oneTBB where the
+/// build has it: core/parallel.hpp).
 template <class BV = Aabbf, class Method = CertifiedCcd, class T = double>
 class CcdPipeline {
  public:
@@ -42,7 +44,8 @@ class CcdPipeline {
   /// subtrees are pruned whole in the traversal, its orphan pairs dropped).
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(detail::checked_mesh(std::move(mesh), "cpu::CcdPipeline")), layout_(std::move(layout)), self_collides_(detail::self_collision_flags(layout_)),
-        params_(detail::validated(params)), representatives_(*mesh_, layout_),
+        params_(detail::validated(params)), threads_(params_.threads),
+        representatives_(*mesh_, layout_),
         tracker_(FrontPolicy{detail::front_growth_limit_of(params, kCpuFrontGrowthLimit)}) {
     // Features that come within min_separation: their boxes, each grown by half of it, overlap.
     bvh_.set_leaf_margin(params_.min_separation / 2);
@@ -52,7 +55,7 @@ class CcdPipeline {
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
     StepResult<T> r;
     StepInProgress step{r, x0, x1};
-    lwsccd::detail::run_stage_sequence(*this, step);
+    threads_.run([&] { lwsccd::detail::run_stage_sequence(*this, step); });
     r.stats.total_ms = ms_since(step.start);
     return r;
   }
@@ -258,6 +261,7 @@ class CcdPipeline {
   std::vector<index_t> node_body_;
   std::uint64_t node_body_generation_ = ~std::uint64_t(0);
   PipelineParams params_;
+  ThreadLimit threads_;
   RepresentativeTriangles representatives_;
   Bvh<BV> bvh_;
   bool built_ = false;

@@ -38,6 +38,9 @@ struct PipelineParams {
   /// candidates (0: no limit). A step in parts holds less memory at once; same answer.
   std::size_t part_pairs = 0;
   CcdMode mode = CcdMode::contacts;      ///< contacts, only the earliest TOI, or the colliding set (ccd_query.hpp)
+  /// CPU backend: at most this many threads (0: every core; cpu::ThreadLimit). The GPU backend's
+  /// host side is one thread and ignores it.
+  unsigned threads = 0;
 
   /// Throws InputError naming the first parameter out of range.
   void validate() const;

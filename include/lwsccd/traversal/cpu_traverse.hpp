@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/traversal/traversal_task.hpp"
 
 namespace lwsccd {
@@ -46,12 +47,13 @@ struct SerialScheduler {};
 
 /// All cores: each thread works depth first on a private stack and shares the older half of it
 /// through its deque whenever that deque is empty; a thread out of work takes its deque's newest
-/// items (a batch) or steals the oldest half of another's (the largest subtrees). Termination: a shared count
-/// of the items in the deques and of those taken from them but not settled reaches zero only when
-/// no thread holds or can create work (a thread settles only with an empty private stack, and
-/// counts items before it shares them). No lock or shared counter per item.
+/// items (a batch), else the next batch of the seeds, else steals the oldest half of another's
+/// deque (the largest subtrees). Termination: a shared count of the unclaimed seeds, the items in
+/// the deques and those taken from either but not settled reaches zero only when no thread holds
+/// or can create work (a thread settles only with an empty private stack, and counts items before
+/// it shares them). No lock or shared counter per item.
 struct WorkStealingScheduler {
-  unsigned threads = 0;  ///< 0: std::thread::hardware_concurrency()
+  unsigned threads = 0;  ///< 0: the threads the caller may use (cpu::ThreadLimit; default every core)
 };
 
 template <class Task>
@@ -100,7 +102,7 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
                                WorkStealingScheduler scheduler) {
   static_assert(require_traversal_task<Task>::value, "");
   using Item = typename Task::item_type;
-  const unsigned n = scheduler.threads ? scheduler.threads : std::max(1u, std::thread::hardware_concurrency());
+  const unsigned n = scheduler.threads ? scheduler.threads : lwsccd::detail::worker_count();
   struct Worker {
     std::mutex lock;
     std::deque<Item> deque;                     ///< shared: the owner takes its newest, thieves the oldest half
@@ -110,44 +112,51 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
     std::size_t processed = 0;
   };
   std::vector<Worker> workers(n);
-  // Items in the deques plus, per worker, the items it took from them and has not settled; a
-  // worker settles (subtracts what it took) only once its private stack is empty, and adds items
-  // before it shares them, so this is 0 only when no item is left anywhere.
+  // The unclaimed seeds, plus the items in the deques, plus, per worker, the items it took from
+  // either and has not settled; a worker settles (subtracts what it took) only once its private
+  // stack is empty, and adds items before it shares them, so this is 0 only when no item is left.
   std::atomic<long long> pending{static_cast<long long>(seeds.size())};
-  for (std::size_t i = 0; i < seeds.size(); ++i) workers[i % n].deque.push_back(seeds[i]);
-  for (Worker& w : workers) w.shared_size.store(w.deque.size());
+  std::atomic<std::size_t> next_seed{0};  // seeds are claimed in batches (a front seeds millions)
   // A worker runs a private stack (no lock, no shared counter per item) and shares the older half
   // of it, in one batch, whenever its own deque has been emptied (by itself or by thieves).
   constexpr std::size_t kShareAbove = 8;
-  constexpr std::size_t kTakeBatch = 64;  // items a worker moves from its own deque at once
+  constexpr std::size_t kTakeBatch = 64;  // items a worker moves from its own deque, or the seeds, at once
 
   auto run = [&](unsigned self) {
     Worker& me = workers[self];
     std::minstd_rand rng(self + 1);
     std::vector<Item> children, local;
-    long long taken = 0;  // items this worker took from the deques and has not settled
+    long long taken = 0;  // items this worker took from the seeds or the deques and has not settled
     detail::VectorEmitter<Task> emit{&children, &me.results, record_front ? &me.front : nullptr};
     while (true) {
       if (local.empty()) {
         if (taken) pending.fetch_sub(taken, std::memory_order_acq_rel), taken = 0;
         {
           std::lock_guard<std::mutex> guard(me.lock);
-          if (!me.deque.empty()) {  // its newest items, a batch at a time (a front seeds millions)
+          if (!me.deque.empty()) {  // its newest items, a batch at a time
             const std::size_t take = std::min(me.deque.size(), kTakeBatch);
             local.insert(local.end(), me.deque.end() - static_cast<std::ptrdiff_t>(take), me.deque.end());
             me.deque.erase(me.deque.end() - static_cast<std::ptrdiff_t>(take), me.deque.end());
             me.shared_size.store(me.deque.size(), std::memory_order_relaxed);
           }
         }
+        if (local.empty() && next_seed.load(std::memory_order_relaxed) < seeds.size()) {
+          const std::size_t first = next_seed.fetch_add(kTakeBatch, std::memory_order_relaxed);
+          // Reversed onto the stack, so the batch's first seed is processed first.
+          for (std::size_t i = std::min(seeds.size(), first + kTakeBatch); i > first && i <= seeds.size(); --i)
+            local.push_back(seeds[i - 1]);
+        }
         if (local.empty() && n > 1) {  // steal the oldest half of a random victim's deque
           Worker& victim = workers[(self + 1 + rng() % (n - 1)) % n];
-          std::lock_guard<std::mutex> guard(victim.lock);
-          const std::size_t take = (victim.deque.size() + 1) / 2;
-          for (std::size_t i = 0; i < take; ++i) {
-            local.push_back(victim.deque.front());
-            victim.deque.pop_front();
+          if (victim.shared_size.load(std::memory_order_relaxed) > 0) {
+            std::lock_guard<std::mutex> guard(victim.lock);
+            const std::size_t take = (victim.deque.size() + 1) / 2;
+            for (std::size_t i = 0; i < take; ++i) {
+              local.push_back(victim.deque.front());
+              victim.deque.pop_front();
+            }
+            victim.shared_size.store(victim.deque.size(), std::memory_order_relaxed);
           }
-          victim.shared_size.store(victim.deque.size(), std::memory_order_relaxed);
         }
         if (local.empty()) {
           if (pending.load(std::memory_order_acquire) == 0) return;
@@ -174,17 +183,19 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
       }
     }
   };
-  std::vector<std::thread> threads;
-  for (unsigned t = 1; t < n; ++t) threads.emplace_back(run, t);
-  run(0);
-  for (auto& t : threads) t.join();
+  lwsccd::detail::for_each_worker([&](unsigned self, unsigned) { run(self); }, n);
 
+  // The workers' lists, concatenated in worker order (copies in parallel).
   TraversalResult<Task> out;
-  for (Worker& w : workers) {
-    out.results.insert(out.results.end(), w.results.begin(), w.results.end());
-    out.front.insert(out.front.end(), w.front.begin(), w.front.end());
-    out.stats.items_processed += w.processed;
+  std::vector<std::vector<typename Task::result_type>> results(n);
+  std::vector<std::vector<Item>> fronts(n);
+  for (unsigned w = 0; w < n; ++w) {
+    results[w] = std::move(workers[w].results);
+    fronts[w] = std::move(workers[w].front);
+    out.stats.items_processed += workers[w].processed;
   }
+  lwsccd::detail::append_in_parallel(results, out.results);
+  lwsccd::detail::append_in_parallel(fronts, out.front);
   out.stats.results = out.results.size();
   out.stats.front = out.front.size();
   return out;

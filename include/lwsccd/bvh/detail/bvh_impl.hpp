@@ -9,6 +9,7 @@
 #include "lwsccd/bvh/bvh.hpp"
 #include "lwsccd/bvh/detail/lbvh.hpp"
 #include "lwsccd/core/error.hpp"
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/geometry/morton.hpp"
 
 namespace lwsccd {
@@ -116,6 +117,29 @@ void check_step_positions(index_t num_vertices, const std::vector<Vec3<P>>& x0, 
 
 }  // namespace detail
 
+namespace detail {
+/// BvhQuality::sah_cost alone, on all cores: the internal nodes' surface areas summed in fixed
+/// blocks, then the blocks' sums in order (the same value whatever the thread count).
+template <class BV>
+double sah_cost(const BvhView<BV>& bvh) {
+  const index_t n = bvh.num_leaves;
+  if (n < 2) return 0.0;
+  const double root_area = static_cast<double>(bv_traits<BV>::surface_area(bvh.bvs[0]));
+  if (!(root_area > 0)) return 0.0;
+  constexpr std::size_t kBlock = 4096;
+  const auto internal = static_cast<std::size_t>(n - 1);
+  std::vector<double> block_sums((internal + kBlock - 1) / kBlock, 0.0);
+  parallel_ranges(block_sums.size(), 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t b = first; b < last; ++b)
+      for (std::size_t i = b * kBlock; i < std::min(internal, (b + 1) * kBlock); ++i)
+        block_sums[b] += static_cast<double>(bv_traits<BV>::surface_area(bvh.bvs[i])) / root_area;
+  });
+  double cost = 0;
+  for (const double s : block_sums) cost += s;
+  return cost;
+}
+}  // namespace detail
+
 template <class BV>
 BvhQuality measure_quality(const BvhView<BV>& bvh) {
   BvhQuality q;
@@ -212,25 +236,26 @@ template <class BV>
 template <class P>
 void Bvh<BV>::build_tree(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
   const auto n = static_cast<index_t>(faces_.size());
-  std::vector<BV> leaf_bvs(static_cast<std::size_t>(n));
-  std::vector<Vec3<P>> centers(static_cast<std::size_t>(n));
+  const auto size = static_cast<std::size_t>(n);
+  std::vector<Vec3<P>> centers(size);
+  detail::parallel_ranges(size, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
+    BV unused_bv;
+    for (std::size_t f = begin; f < end; ++f) detail::leaf_volume(faces_[f], x0.data(), x1.data(), unused_bv, centers[f], leaf_margin_);
+  });
   Aabb<P> scene = Aabb<P>::empty();
-  for (index_t f = 0; f < n; ++f) {
-    detail::leaf_volume(faces_[f], x0.data(), x1.data(), leaf_bvs[f], centers[f], leaf_margin_);
-    scene.expand(centers[f]);
-  }
-  std::vector<std::uint64_t> codes(static_cast<std::size_t>(n));
-  for (index_t f = 0; f < n; ++f) codes[f] = morton63(centers[f], scene);
-  // Stable: equal codes keep triangle order, as CUB's radix sort does on the GPU.
-  std::vector<index_t> order(static_cast<std::size_t>(n));
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](index_t a, index_t b) { return codes[a] < codes[b]; });
+  for (const Vec3<P>& c : centers) scene.expand(c);
+  // Sorted by (code, triangle): the order of a stable sort by code, as CUB's radix sort gives on the GPU.
+  std::vector<std::pair<std::uint64_t, index_t>> keyed(size);
+  detail::parallel_ranges(size, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) keyed[f] = {morton63(centers[f], scene), static_cast<index_t>(f)};
+  });
+  detail::parallel_sort(keyed.begin(), keyed.end());
 
   BvhNodes<BV>& t = nodes_;
   t.num_leaves = n;
-  t.leaf_primitive = order;
-  t.leaf_codes.resize(static_cast<std::size_t>(n));
-  for (index_t k = 0; k < n; ++k) t.leaf_codes[k] = codes[order[k]];
+  t.leaf_primitive.resize(size);
+  t.leaf_codes.resize(size);
+  for (std::size_t k = 0; k < size; ++k) t.leaf_codes[k] = keyed[k].first, t.leaf_primitive[k] = keyed[k].second;
   const index_t nodes = 2 * n - 1;
   t.bvs.assign(static_cast<std::size_t>(nodes), BV{});
   t.left.assign(static_cast<std::size_t>(n - 1), -1);
@@ -238,17 +263,21 @@ void Bvh<BV>::build_tree(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<
   t.parent.assign(static_cast<std::size_t>(nodes), -1);
   t.ranges.assign(static_cast<std::size_t>(nodes), LeafRange{0, 0});
   for (index_t k = 0; k < n; ++k) t.ranges[n - 1 + k] = {k, k};
-  for (index_t i = 0; i + 1 < n; ++i) {
-    const detail::RadixNode node = detail::radix_tree_node(t.leaf_codes.data(), n, i);
-    t.left[i] = node.left;
-    t.right[i] = node.right;
-    t.ranges[i] = {node.first, node.last};
-    t.parent[node.left] = i;
-    t.parent[node.right] = i;
-  }
+  // Each node is made from the codes alone (Karras's radix tree), and each child has one parent.
+  detail::parallel_ranges(size > 0 ? size - 1 : 0, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
+    for (auto i = static_cast<index_t>(begin); i < static_cast<index_t>(end); ++i) {
+      const detail::RadixNode node = detail::radix_tree_node(t.leaf_codes.data(), n, i);
+      t.left[i] = node.left;
+      t.right[i] = node.right;
+      t.ranges[i] = {node.first, node.last};
+      t.parent[node.left] = i;
+      t.parent[node.right] = i;
+    }
+  });
+  arrivals_.resize(size > 0 ? size - 1 : 0);
   fit_bottom_up(x0, x1);
   ++generation_;
-  cost_at_build_ = measure_quality(view()).sah_cost;
+  cost_at_build_ = detail::sah_cost(view());
 }
 
 template <class BV>
@@ -256,17 +285,23 @@ template <class P>
 void Bvh<BV>::fit_bottom_up(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
   BvhNodes<BV>& t = nodes_;
   const index_t n = t.num_leaves;
-  // The serial form of the GPU's bottom-up pass: a node is fitted by the second child to arrive,
-  // always as merge(left, right), so both backends compute the same values in the same order.
-  std::vector<unsigned char> arrived(static_cast<std::size_t>(n > 0 ? n - 1 : 0), 0);
-  for (index_t k = 0; k < n; ++k) {
-    Vec3<P> unused_center;
-    detail::leaf_volume(faces_[t.leaf_primitive[k]], x0.data(), x1.data(), t.bvs[n - 1 + k], unused_center, leaf_margin_);
-    for (index_t p = t.parent[n - 1 + k]; p != -1; p = t.parent[p]) {
-      if (arrived[p]++ == 0) break;
-      t.bvs[p] = bv_traits<BV>::merge(t.bvs[t.left[p]], t.bvs[t.right[p]]);
+  // The GPU's bottom-up pass on all cores: a node is fitted by the second child to arrive, always
+  // as merge(left, right), so both backends compute the same values in the same order. The
+  // arrival counters are left at zero for the next pass.
+  std::atomic<unsigned char>* arrived = arrivals_.data();
+  detail::parallel_ranges(static_cast<std::size_t>(n), detail::grain_for(static_cast<std::size_t>(n)),
+                          [&](std::size_t begin, std::size_t end) {
+    for (auto k = static_cast<index_t>(begin); k < static_cast<index_t>(end); ++k) {
+      Vec3<P> unused_center;
+      detail::leaf_volume(faces_[t.leaf_primitive[k]], x0.data(), x1.data(), t.bvs[n - 1 + k], unused_center, leaf_margin_);
+      for (index_t p = t.parent[n - 1 + k]; p != -1; p = t.parent[p]) {
+        // The first to arrive leaves; the second (which sees the first's writes) fits the node.
+        if (arrived[p].fetch_add(1, std::memory_order_acq_rel) == 0) break;
+        arrived[p].store(0, std::memory_order_relaxed);
+        t.bvs[p] = bv_traits<BV>::merge(t.bvs[t.left[p]], t.bvs[t.right[p]]);
+      }
     }
-  }
+  });
 }
 
 template <class BV>
@@ -282,7 +317,7 @@ template <class P>
 bool Bvh<BV>::refit_or_rebuild(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
                                const RebuildPolicy& policy) {
   refit(x0, x1);
-  if (!policy.should_rebuild(measure_quality(view()).sah_cost, cost_at_build_)) return false;
+  if (!policy.should_rebuild(detail::sah_cost(view()), cost_at_build_)) return false;
   build_tree(x0, x1);
   return true;
 }

@@ -5,9 +5,9 @@
 
 #include <algorithm>
 #include <numeric>
-#include <thread>
 
 #include "lwsccd/core/error.hpp"
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/features/oracle.hpp"
 
 namespace lwsccd {
@@ -38,23 +38,13 @@ std::vector<BV> swept_triangle_bvs(const TriangleMesh& mesh, const std::vector<V
 
 namespace detail {
 
-// Runs body(worker, num_workers) on every hardware thread and waits.
-template <class Body>
-void run_on_all_cores(Body body) {
-  const unsigned n = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<std::thread> threads;
-  for (unsigned w = 1; w < n; ++w) threads.emplace_back(body, w, n);
-  body(0u, n);
-  for (auto& t : threads) t.join();
-}
-
 inline std::vector<TrianglePair> merge_sorted(std::vector<std::vector<TrianglePair>>& parts) {
   std::vector<TrianglePair> out;
   std::size_t total = 0;
   for (const auto& p : parts) total += p.size();
   out.reserve(total);
   for (auto& p : parts) out.insert(out.end(), p.begin(), p.end());
-  std::sort(out.begin(), out.end());
+  parallel_sort(out.begin(), out.end());
   return out;
 }
 
@@ -66,15 +56,16 @@ std::vector<TrianglePair> brute_force_pairs(const TriangleMesh& mesh, const std:
   require_bounding_volume<BV>();
   layout.validate(mesh);
   const index_t n = static_cast<index_t>(bvs.size());
-  std::vector<std::vector<TrianglePair>> parts(std::max(1u, std::thread::hardware_concurrency()));
-  detail::run_on_all_cores([&](unsigned worker, unsigned workers) {
+  const unsigned workers = detail::worker_count();
+  std::vector<std::vector<TrianglePair>> parts(workers);
+  detail::for_each_worker([&](unsigned worker, unsigned) {
     auto& out = parts[worker];
     // Rows are dealt round-robin so that long and short rows spread evenly.
     for (index_t a = static_cast<index_t>(worker); a < n; a += static_cast<index_t>(workers))
       for (index_t b = a + 1; b < n; ++b)
         if (layout.considers(a, b) && bv_traits<BV>::overlap(bvs[a], bvs[b]))
           out.push_back({a, b, mesh.faces_share_vertex(a, b)});
-  });
+  }, workers);
   return detail::merge_sorted(parts);
 }
 
@@ -88,8 +79,9 @@ std::vector<TrianglePair> sweep_and_prune_pairs(const TriangleMesh& mesh, const 
   std::sort(order.begin(), order.end(), [&](index_t i, index_t j) {
     return bvs[i].lo.x != bvs[j].lo.x ? bvs[i].lo.x < bvs[j].lo.x : i < j;
   });
-  std::vector<std::vector<TrianglePair>> parts(std::max(1u, std::thread::hardware_concurrency()));
-  detail::run_on_all_cores([&](unsigned worker, unsigned workers) {
+  const unsigned workers = detail::worker_count();
+  std::vector<std::vector<TrianglePair>> parts(workers);
+  detail::for_each_worker([&](unsigned worker, unsigned) {
     auto& out = parts[worker];
     for (index_t k = static_cast<index_t>(worker); k < n; k += static_cast<index_t>(workers)) {
       const Aabb<T>& box = bvs[order[k]];
@@ -100,7 +92,7 @@ std::vector<TrianglePair> sweep_and_prune_pairs(const TriangleMesh& mesh, const 
           out.push_back({a, b, mesh.faces_share_vertex(a, b)});
       }
     }
-  });
+  }, workers);
   return detail::merge_sorted(parts);
 }
 

@@ -4,9 +4,9 @@
 #include <algorithm>
 #include <numeric>
 #include <string>
-#include <thread>
 
 #include "lwsccd/core/error.hpp"
+#include "lwsccd/core/parallel.hpp"
 
 #include "lwsccd/features/representative.hpp"
 
@@ -16,28 +16,38 @@ namespace detail {
 
 // (vertex_ring_of_face and edges_share_vertex: orphans_impl.hpp.)
 
-// Splits [0, n) into one contiguous range per worker, runs body(begin, end, worker) on each and
-// returns the per-worker outputs in range order (so the concatenation keeps the input order).
+// Splits [0, n) into contiguous ranges, several per worker (emission is uneven: contacts
+// cluster), runs body(begin, end, part) on each in parallel and returns the parts in range order
+// (so that their concatenation keeps the input order).
 template <class Part, class Body>
 std::vector<Part> ordered_parts(std::size_t n, Body body) {
-  const unsigned workers = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<Part> parts(workers);
-  run_on_all_cores([&](unsigned w, unsigned nw) {
-    const std::size_t begin = n * w / nw, end = n * (w + 1) / nw;
-    body(begin, end, parts[w]);
-  });
+  const std::size_t count = std::max<std::size_t>(1, std::min<std::size_t>(n / 256 + 1, std::size_t(worker_count()) * 8));
+  std::vector<Part> parts(count);
+  parallel_parts(n, count, [&](std::size_t begin, std::size_t end, std::size_t k) { body(begin, end, parts[k]); });
   return parts;
 }
 
-inline void append_parts(std::vector<FeaturePairs>& parts, FeaturePairs& out) {
-  std::size_t vf = out.vf.size(), ee = out.ee.size();
-  for (const auto& p : parts) vf += p.vf.size(), ee += p.ee.size();
-  out.vf.reserve(vf);
-  out.ee.reserve(ee);
-  for (const auto& p : parts) {
-    out.vf.insert(out.vf.end(), p.vf.begin(), p.vf.end());
-    out.ee.insert(out.ee.end(), p.ee.begin(), p.ee.end());
+// Appends the parts' lists to out's, in order, copying in parallel.
+inline void append_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out) {
+  const auto vf_at = out.vf.size(), ee_at = out.ee.size();
+  std::size_t vf_total = vf_at, ee_total = ee_at;
+  for (const auto& p : parts) vf_total += p.vf.size(), ee_total += p.ee.size();
+  out.vf.resize(vf_total);
+  out.ee.resize(ee_total);
+  // Both lists' copies in one parallel loop: part k's vf (k even) or ee (k odd) list.
+  std::vector<std::size_t> vf_offset(parts.size() + 1, vf_at), ee_offset(parts.size() + 1, ee_at);
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    vf_offset[k + 1] = vf_offset[k] + parts[k].vf.size();
+    ee_offset[k + 1] = ee_offset[k] + parts[k].ee.size();
   }
+  parallel_ranges(2 * parts.size(), 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t j = first; j < last; ++j) {
+      const std::size_t k = j / 2;
+      const auto& from = j % 2 ? parts[k].ee : parts[k].vf;
+      auto& to = j % 2 ? out.ee : out.vf;
+      std::copy(from.begin(), from.end(), to.begin() + static_cast<std::ptrdiff_t>(j % 2 ? ee_offset[k] : vf_offset[k]));
+    }
+  });
 }
 
 }  // namespace detail
@@ -167,11 +177,12 @@ std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec
   const float grow = detail::checked_margin<Aabbf>(margin, "feature_boxes");
   const index_t n = mesh.num_vertices() + mesh.num_edges() + mesh.num_faces();
   std::vector<Aabbf> boxes(static_cast<std::size_t>(n));
-  detail::run_on_all_cores([&](unsigned w, unsigned nw) {
-    for (index_t id = static_cast<index_t>(w); id < n; id += static_cast<index_t>(nw))
-      boxes[id] = feature_box(mesh.faces().data(), mesh.edges().data(), mesh.num_vertices(), mesh.num_edges(), x0.data(),
-                              x1.data(), id, grow);
-  });
+  detail::parallel_ranges(static_cast<std::size_t>(n), detail::grain_for(static_cast<std::size_t>(n)),
+                          [&](std::size_t begin, std::size_t end) {
+                            for (auto id = static_cast<index_t>(begin); id < static_cast<index_t>(end); ++id)
+                              boxes[id] = feature_box(mesh.faces().data(), mesh.edges().data(), mesh.num_vertices(),
+                                                      mesh.num_edges(), x0.data(), x1.data(), id, grow);
+                          });
   return boxes;
 }
 
@@ -208,7 +219,7 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
           for (std::size_t i = begin; i < end; ++i)
             if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
         });
-    for (const auto& part : kept) target.insert(target.end(), part.begin(), part.end());
+    detail::append_in_parallel(kept, target);
   }
   return out;
 }
@@ -233,11 +244,11 @@ inline void add_feature_query(const RepresentativeTriangles& rep, index_t x, ind
   }
 }
 
-inline FeaturePairs sorted_union(std::vector<FeaturePairs>& parts) {
+inline FeaturePairs sorted_union(const std::vector<FeaturePairs>& parts) {
   FeaturePairs out;
   append_parts(parts, out);
-  std::sort(out.vf.begin(), out.vf.end());
-  std::sort(out.ee.begin(), out.ee.end());
+  parallel_sort(out.vf.begin(), out.vf.end());
+  parallel_sort(out.ee.begin(), out.ee.end());
   return out;
 }
 
@@ -246,8 +257,9 @@ inline FeaturePairs sorted_union(std::vector<FeaturePairs>& parts) {
 inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes) {
   const TriangleMesh& mesh = rep.mesh();
   const index_t nv = mesh.num_vertices(), ne = mesh.num_edges(), nf = mesh.num_faces();
-  std::vector<FeaturePairs> parts(std::max(1u, std::thread::hardware_concurrency()));
-  detail::run_on_all_cores([&](unsigned w, unsigned nw) {
+  const unsigned workers = detail::worker_count();
+  std::vector<FeaturePairs> parts(workers);
+  detail::for_each_worker([&](unsigned w, unsigned nw) {
     FeaturePairs& out = parts[w];
     for (index_t v = static_cast<index_t>(w); v < nv; v += static_cast<index_t>(nw))
       for (index_t f = 0; f < nf; ++f) {
@@ -257,7 +269,7 @@ inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep
     for (index_t e = static_cast<index_t>(w); e < ne; e += static_cast<index_t>(nw))
       for (index_t g = e + 1; g < ne; ++g)
         if (boxes[nv + e].overlaps(boxes[nv + g])) detail::add_feature_query(rep, nv + e, nv + g, out);
-  });
+  }, workers);
   return detail::sorted_union(parts);
 }
 
@@ -268,14 +280,15 @@ inline FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, cons
   std::sort(order.begin(), order.end(), [&](index_t i, index_t j) {
     return boxes[i].lo.x != boxes[j].lo.x ? boxes[i].lo.x < boxes[j].lo.x : i < j;
   });
-  std::vector<FeaturePairs> parts(std::max(1u, std::thread::hardware_concurrency()));
-  detail::run_on_all_cores([&](unsigned w, unsigned nw) {
+  const unsigned workers = detail::worker_count();
+  std::vector<FeaturePairs> parts(workers);
+  detail::for_each_worker([&](unsigned w, unsigned nw) {
     for (index_t k = static_cast<index_t>(w); k < n; k += static_cast<index_t>(nw)) {
       const Aabbf& box = boxes[order[k]];
       for (index_t m = k + 1; m < n && boxes[order[m]].lo.x <= box.hi.x; ++m)
         if (box.overlaps(boxes[order[m]])) detail::add_feature_query(rep, order[k], order[m], parts[w]);
     }
-  });
+  }, workers);
   return detail::sorted_union(parts);
 }
 

@@ -1,0 +1,188 @@
+// lwsccd — the CPU backend's threads: a thread limit a caller chooses (cpu::ThreadLimit) and the
+// parallel loops every CPU stage runs on (lwsccd::detail below).
+//
+// With oneTBB (the build defines LWSCCD_WITH_TBB=1 where CMake finds it; Debian libtbb-dev) the
+// loops run on TBB's persistent pool with work stealing: no thread is created per call, and a
+// ThreadLimit is a tbb::task_arena. Without it they start std::threads per call (correct, the
+// same answers, slower on many cores and for short calls).
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <cstddef>
+#include <functional>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#ifndef LWSCCD_WITH_TBB
+#define LWSCCD_WITH_TBB 0
+#endif
+
+#if LWSCCD_WITH_TBB
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
+#endif
+
+namespace lwsccd {
+
+namespace detail {
+// Without TBB: the thread limit of the calling thread (0: every core), set by ThreadLimit::run.
+inline unsigned& fallback_thread_limit() {
+  static thread_local unsigned limit = 0;
+  return limit;
+}
+}  // namespace detail
+
+namespace cpu {
+
+/// True when the CPU backend runs on oneTBB (else on std::threads started per call).
+inline constexpr bool kUsesTbb = LWSCCD_WITH_TBB != 0;
+
+/// At most `threads` threads (0: every core) for the CPU backend's work run inside run(): the
+/// pipeline, or any free function of the CPU backend (traverse, emit_feature_pairs,
+/// test_feature_pairs...). Outside of one, the CPU backend uses every core. Copyable; a copy has
+/// the same limit.
+class ThreadLimit {
+ public:
+  explicit ThreadLimit(unsigned threads = 0)
+      : threads_(threads)
+#if LWSCCD_WITH_TBB
+        ,
+        arena_(threads ? static_cast<int>(threads) : tbb::task_arena::automatic)
+#endif
+  {
+  }
+  /// The limit as given (0: every core).
+  unsigned threads() const { return threads_; }
+  /// The threads work inside run() gets: the limit, or the machine's hardware threads.
+  unsigned effective_threads() const { return threads_ ? threads_ : std::max(1u, std::thread::hardware_concurrency()); }
+
+  /// Runs fn() under the limit and returns its result; exceptions pass through.
+  template <class Fn>
+  decltype(auto) run(Fn&& fn) const {
+#if LWSCCD_WITH_TBB
+    return arena_.execute(std::forward<Fn>(fn));
+#else
+    struct Restore {
+      unsigned saved = detail::fallback_thread_limit();
+      ~Restore() { detail::fallback_thread_limit() = saved; }
+    } restore;
+    detail::fallback_thread_limit() = threads_;
+    return std::forward<Fn>(fn)();
+#endif
+  }
+
+ private:
+  unsigned threads_ = 0;
+#if LWSCCD_WITH_TBB
+  mutable tbb::task_arena arena_;  // (execute() is not const; the arena's state is not the limit's)
+#endif
+};
+
+}  // namespace cpu
+
+namespace detail {
+
+/// The threads the calling context may use (inside a ThreadLimit's run(): its limit).
+inline unsigned worker_count() {
+#if LWSCCD_WITH_TBB
+  return static_cast<unsigned>(std::max(1, tbb::this_task_arena::max_concurrency()));
+#else
+  const unsigned limit = fallback_thread_limit();
+  return limit ? limit : std::max(1u, std::thread::hardware_concurrency());
+#endif
+}
+
+/// Runs body(worker, workers) once for each worker in [0, workers), concurrently where threads are
+/// free, and waits: for work that keeps per-worker state (a work-stealing loop, private output
+/// lists). `workers` = worker_count() unless given.
+template <class Body>
+void for_each_worker(Body body, unsigned workers = 0) {
+  const unsigned n = workers ? workers : worker_count();
+  if (n == 1) {
+    body(0u, 1u);
+    return;
+  }
+#if LWSCCD_WITH_TBB
+  tbb::parallel_for(tbb::blocked_range<unsigned>(0, n, 1),
+                    [&](const tbb::blocked_range<unsigned>& r) {
+                      for (unsigned w = r.begin(); w != r.end(); ++w) body(w, n);
+                    },
+                    tbb::simple_partitioner());
+#else
+  std::vector<std::thread> threads;
+  threads.reserve(n - 1);
+  for (unsigned w = 1; w < n; ++w) threads.emplace_back([&body, w, n] { body(w, n); });
+  body(0u, n);
+  for (auto& t : threads) t.join();
+#endif
+}
+
+/// Runs body(begin, end) over [0, n) in ranges of about `grain` items, taken by threads as they
+/// free up (load balance for uneven items), and waits.
+template <class Body>
+void parallel_ranges(std::size_t n, std::size_t grain, Body body) {
+  if (n == 0) return;
+  grain = std::max<std::size_t>(1, grain);
+  if (n <= grain) {
+    body(std::size_t(0), n);
+    return;
+  }
+#if LWSCCD_WITH_TBB
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
+                    [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+#else
+  std::atomic<std::size_t> next{0};
+  for_each_worker([&](unsigned, unsigned) {
+    for (std::size_t begin = next.fetch_add(grain); begin < n; begin = next.fetch_add(grain))
+      body(begin, std::min(n, begin + grain));
+  });
+#endif
+}
+
+/// A grain that gives each worker several ranges of [0, n) (load balance) but none shorter than
+/// `at_least` items (overhead).
+inline std::size_t grain_for(std::size_t n, std::size_t at_least = 1024) {
+  return std::max(at_least, n / (std::size_t(worker_count()) * 16 + 1));
+}
+
+/// Splits [0, n) into `parts` contiguous ranges (part k: [n k / parts, n (k + 1) / parts)) and runs
+/// body(begin, end, k) on each in parallel: for outputs gathered in input order (one list per part).
+template <class Body>
+void parallel_parts(std::size_t n, std::size_t parts, Body body) {
+  parallel_ranges(parts, 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t k = first; k < last; ++k) body(n * k / parts, n * (k + 1) / parts, k);
+  });
+}
+
+/// Appends the lists to `out` in their order, copying in parallel.
+template <class T>
+void append_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out) {
+  std::vector<std::size_t> at(lists.size() + 1, out.size());
+  for (std::size_t k = 0; k < lists.size(); ++k) at[k + 1] = at[k] + lists[k].size();
+  out.resize(at.back());
+  parallel_ranges(lists.size(), 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t k = first; k < last; ++k) std::copy(lists[k].begin(), lists[k].end(), out.begin() + static_cast<std::ptrdiff_t>(at[k]));
+  });
+}
+
+/// std::sort on all cores (a total order gives the same result as std::sort).
+template <class It, class Less>
+void parallel_sort(It first, It last, Less less) {
+#if LWSCCD_WITH_TBB
+  tbb::parallel_sort(first, last, less);
+#else
+  std::sort(first, last, less);
+#endif
+}
+template <class It>
+void parallel_sort(It first, It last) {
+  parallel_sort(first, last, std::less<>());
+}
+
+}  // namespace detail
+
+}  // namespace lwsccd
