@@ -158,15 +158,27 @@ void parallel_parts(std::size_t n, std::size_t parts, Body body) {
   });
 }
 
-/// Appends the lists to `out` in their order, copying in parallel.
+/// Appends the lists to `out[from..]` in their order, copying in parallel: `out` ends with
+/// from + their total size elements. Elements `out` already held are overwritten, not
+/// value-initialised first (a serial pass over memory that a reused `out` does not pay).
 template <class T>
-void append_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out) {
-  std::vector<std::size_t> at(lists.size() + 1, out.size());
+void copy_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out, std::size_t from) {
+  std::vector<std::size_t> at(lists.size() + 1, from);
   for (std::size_t k = 0; k < lists.size(); ++k) at[k + 1] = at[k] + lists[k].size();
   out.resize(at.back());
   parallel_ranges(lists.size(), 1, [&](std::size_t first, std::size_t last) {
     for (std::size_t k = first; k < last; ++k) std::copy(lists[k].begin(), lists[k].end(), out.begin() + static_cast<std::ptrdiff_t>(at[k]));
   });
+}
+/// Appends the lists to `out`, in their order (copy_in_parallel).
+template <class T>
+void append_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out) {
+  copy_in_parallel(lists, out, out.size());
+}
+/// `out` becomes the lists' concatenation (copy_in_parallel: its memory and elements reused).
+template <class T>
+void concatenate_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out) {
+  copy_in_parallel(lists, out, 0);
 }
 
 /// std::sort on all cores (a total order gives the same result as std::sort).

@@ -206,6 +206,11 @@ FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::v
 /// (a step split into parts lists them with one part).
 FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                 const std::vector<Aabbf>& boxes, bool with_orphans);
+/// The same into `out` (its lists' memory reused), with `part_lists` (the per-thread lists) kept
+/// for the next call: a caller that emits every step (a pipeline) allocates nothing once warm.
+void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                             std::vector<FeaturePairs>& part_lists);
 
 /// The oracle: every non-incident vertex-face pair and every edge-edge pair without a common
 /// vertex whose feature boxes overlap (and, with a layout, that rep.considers), sorted; vertices

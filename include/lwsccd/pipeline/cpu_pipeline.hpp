@@ -55,7 +55,14 @@ class CcdPipeline {
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) {
     StepResult<T> r;
     StepInProgress step{r, x0, x1};
+    // The lists' memory of the last step, reused (fresh pages cost page faults, which serialise threads).
+    step.candidates.swap(candidates_);
+    step.features.vf.swap(features_.vf);
+    step.features.ee.swap(features_.ee);
     threads_.run([&] { lwsccd::detail::run_stage_sequence(*this, step); });
+    candidates_.swap(step.candidates);
+    features_.vf.swap(step.features.vf);
+    features_.ee.swap(step.features.ee);
     r.stats.total_ms = ms_since(step.start);
     return r;
   }
@@ -150,10 +157,10 @@ class CcdPipeline {
     StepStats& stats = step.result.stats;
     const Task task = traversal_task();
     const bool record = params_.front_tracking;
-    TraversalResult<Task> traversal;
+    TraversalResult<Task>& traversal = traversal_;
     if (!step.in_parts) {
-      traversal = cpu::traverse(task, *step.seeds, record, WorkStealingScheduler{});
-      if (record) tracker_.update(std::move(traversal.front));
+      cpu::traverse_into(task, *step.seeds, record, WorkStealingScheduler{}, traversal, traversal_workspace_);
+      if (record) tracker_.exchange(traversal.front);  // (the seeds, read no more, become the next front's memory)
       stats.front_size = tracker_.size();
     } else if (step.expansion_due) {
       traversal = expand(task, *step.seeds, StreamingPolicy::kCutItems, record, step.cut);
@@ -167,7 +174,7 @@ class CcdPipeline {
         n = std::min(step.seeds_per_part, num_seeds - step.next_seed);
         const auto first = step.seeds->begin() + static_cast<std::ptrdiff_t>(step.next_seed);
         const std::vector<NodePair> part_seeds(first, first + static_cast<std::ptrdiff_t>(n));
-        traversal = cpu::traverse(task, part_seeds, record, WorkStealingScheduler{});
+        cpu::traverse_into(task, part_seeds, record, WorkStealingScheduler{}, traversal, traversal_workspace_);
         if (traversal.results.size() <= step.cap || n == 1) break;
         step.seeds_per_part = n / 2;
         ++stats.reruns;
@@ -179,7 +186,7 @@ class CcdPipeline {
     if (step.in_parts) step.front.insert(step.front.end(), traversal.front.begin(), traversal.front.end());
     stats.bvtt_nodes += traversal.stats.items_processed;
     stats.triangle_pairs += traversal.results.size();
-    step.candidates = std::move(traversal.results);
+    step.candidates.swap(traversal.results);  // (the last part's memory goes to the next traversal)
     step.next_candidate = 0;
   }
 
@@ -206,8 +213,8 @@ class CcdPipeline {
   void stage_feature_pairs(StepInProgress& step) {
     if (!step.boxes_ready) step.boxes = feature_boxes(*mesh_, step.x0, step.x1, params_.min_separation / 2);
     step.boxes_ready = true;
-    step.features = emit_feature_pairs(representatives_, step.candidates.data() + step.part_first, step.part_count,
-                                       step.boxes, step.orphans_in_part);
+    emit_feature_pairs_into(representatives_, step.candidates.data() + step.part_first, step.part_count, step.boxes,
+                            step.orphans_in_part, step.features, feature_part_lists_);
     step.result.stats.feature_pairs_vf += step.features.vf.size();
     step.result.stats.feature_pairs_ee += step.features.ee.size();
   }
@@ -268,6 +275,13 @@ class CcdPipeline {
   FrontTracker tracker_;
   const std::vector<NodePair> root_{NodePair{0, 0}};
   std::vector<Vec3d> wide0_, wide1_;  ///< float input, widened (kept: the next step reuses the room)
+  // Memory kept from step to step (a warm step allocates no large list): the traversal's result
+  // and workers' lists, the candidates, the feature pairs and their per-thread lists.
+  TraversalResult<Task> traversal_;
+  TraversalWorkspace<Task> traversal_workspace_;
+  std::vector<TrianglePair> candidates_;
+  FeaturePairs features_;
+  std::vector<FeaturePairs> feature_part_lists_;
 };
 
 }  // namespace cpu

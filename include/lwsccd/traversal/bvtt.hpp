@@ -172,14 +172,24 @@ class FrontTracker {
   /// Records the front the traversal just produced.
   void update(std::vector<NodePair> front) {
     front_ = std::move(front);
-    if (restarted_) size_at_restart_ = front_.size();
-    reset_next_ = static_cast<double>(front_.size()) > policy_.growth_limit * static_cast<double>(size_at_restart_);
+    recorded();
+  }
+  /// The same, taking `front`'s memory: `front` receives the previous front's (a traversal that
+  /// writes its next front there allocates nothing).
+  void exchange(std::vector<NodePair>& front) {
+    front_.swap(front);
+    recorded();
   }
   bool last_was_restart() const { return restarted_; }
   std::size_t size() const { return front_.size(); }
   void reset() { front_.clear(); }
 
  private:
+  void recorded() {
+    if (restarted_) size_at_restart_ = front_.size();
+    reset_next_ = static_cast<double>(front_.size()) > policy_.growth_limit * static_cast<double>(size_at_restart_);
+  }
+
   FrontPolicy policy_;
   std::vector<NodePair> front_, root_seed_;
   std::uint64_t generation_ = ~std::uint64_t(0);

@@ -56,6 +56,15 @@ struct WorkStealingScheduler {
   unsigned threads = 0;  ///< 0: the threads the caller may use (cpu::ThreadLimit; default every core)
 };
 
+/// The memory a work-stealing traversal keeps for the next one: its workers' lists. A caller that
+/// traverses every step (a pipeline) passes the same workspace and result to traverse_into, so
+/// that a warm step allocates nothing (fresh pages cost page faults, which serialise threads).
+template <class Task>
+struct TraversalWorkspace {
+  std::vector<std::vector<typename Task::result_type>> results;
+  std::vector<std::vector<typename Task::item_type>> fronts;
+};
+
 template <class Task>
 TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task::item_type>& seeds,
                                bool record_front = false, SerialScheduler = {}) {
@@ -97,9 +106,11 @@ TraversalResult<Task> expand(const Task& task, const std::vector<typename Task::
   return out;
 }
 
+/// As traverse() with the WorkStealingScheduler, into `out` (its lists' memory reused), the
+/// workers' lists kept in `workspace` for the next call.
 template <class Task>
-TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task::item_type>& seeds, bool record_front,
-                               WorkStealingScheduler scheduler) {
+void traverse_into(const Task& task, const std::vector<typename Task::item_type>& seeds, bool record_front,
+                   WorkStealingScheduler scheduler, TraversalResult<Task>& out, TraversalWorkspace<Task>& workspace) {
   static_assert(require_traversal_task<Task>::value, "");
   using Item = typename Task::item_type;
   const unsigned n = scheduler.threads ? scheduler.threads : lwsccd::detail::worker_count();
@@ -112,6 +123,14 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
     std::size_t processed = 0;
   };
   std::vector<Worker> workers(n);
+  workspace.results.resize(n);
+  workspace.fronts.resize(n);
+  for (unsigned w = 0; w < n; ++w) {  // the lists of the last call, emptied (their memory kept)
+    workers[w].results.swap(workspace.results[w]);
+    workers[w].front.swap(workspace.fronts[w]);
+    workers[w].results.clear();
+    workers[w].front.clear();
+  }
   // The unclaimed seeds, plus the items in the deques, plus, per worker, the items it took from
   // either and has not settled; a worker settles (subtracts what it took) only once its private
   // stack is empty, and adds items before it shares them, so this is 0 only when no item is left.
@@ -185,19 +204,25 @@ TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task
   };
   lwsccd::detail::for_each_worker([&](unsigned self, unsigned) { run(self); }, n);
 
-  // The workers' lists, concatenated in worker order (copies in parallel).
-  TraversalResult<Task> out;
-  std::vector<std::vector<typename Task::result_type>> results(n);
-  std::vector<std::vector<Item>> fronts(n);
+  // The workers' lists, concatenated in worker order (copies in parallel), then kept.
+  out.stats = {};
   for (unsigned w = 0; w < n; ++w) {
-    results[w] = std::move(workers[w].results);
-    fronts[w] = std::move(workers[w].front);
+    workspace.results[w].swap(workers[w].results);
+    workspace.fronts[w].swap(workers[w].front);
     out.stats.items_processed += workers[w].processed;
   }
-  lwsccd::detail::append_in_parallel(results, out.results);
-  lwsccd::detail::append_in_parallel(fronts, out.front);
+  lwsccd::detail::concatenate_in_parallel(workspace.results, out.results);
+  lwsccd::detail::concatenate_in_parallel(workspace.fronts, out.front);
   out.stats.results = out.results.size();
   out.stats.front = out.front.size();
+}
+
+template <class Task>
+TraversalResult<Task> traverse(const Task& task, const std::vector<typename Task::item_type>& seeds, bool record_front,
+                               WorkStealingScheduler scheduler) {
+  TraversalResult<Task> out;
+  TraversalWorkspace<Task> workspace;
+  traverse_into(task, seeds, record_front, scheduler, out, workspace);
   return out;
 }
 

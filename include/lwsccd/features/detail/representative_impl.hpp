@@ -16,25 +16,32 @@ namespace detail {
 
 // (vertex_ring_of_face and edges_share_vertex: orphans_impl.hpp.)
 
+// Empties a part, keeping its memory.
+inline void clear_part(FeaturePairs& p) { p.vf.clear(), p.ee.clear(); }
+template <class T>
+void clear_part(std::vector<T>& p) { p.clear(); }
+
 // Splits [0, n) into contiguous ranges, several per worker (emission is uneven: contacts
-// cluster), runs body(begin, end, part) on each in parallel and returns the parts in range order
-// (so that their concatenation keeps the input order).
+// cluster), runs body(begin, end, part) on each in parallel, each with its own of `parts`
+// (emptied first, their memory kept), in range order (so that their concatenation keeps the
+// input order).
 template <class Part, class Body>
-std::vector<Part> ordered_parts(std::size_t n, Body body) {
+void ordered_parts(std::size_t n, std::vector<Part>& parts, Body body) {
   const std::size_t count = std::max<std::size_t>(1, std::min<std::size_t>(n / 256 + 1, std::size_t(worker_count()) * 8));
-  std::vector<Part> parts(count);
-  parallel_parts(n, count, [&](std::size_t begin, std::size_t end, std::size_t k) { body(begin, end, parts[k]); });
-  return parts;
+  parts.resize(count);
+  parallel_parts(n, count, [&](std::size_t begin, std::size_t end, std::size_t k) {
+    clear_part(parts[k]);
+    body(begin, end, parts[k]);
+  });
 }
 
-// Appends the parts' lists to out's, in order, copying in parallel.
-inline void append_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out) {
-  const auto vf_at = out.vf.size(), ee_at = out.ee.size();
+// Appends the parts' lists to out's from (vf_at, ee_at) on, in order, copying in parallel.
+inline void copy_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out, std::size_t vf_at, std::size_t ee_at) {
   std::size_t vf_total = vf_at, ee_total = ee_at;
   for (const auto& p : parts) vf_total += p.vf.size(), ee_total += p.ee.size();
   out.vf.resize(vf_total);
   out.ee.resize(ee_total);
-  // Both lists' copies in one parallel loop: part k's vf (k even) or ee (k odd) list.
+  // Both lists' copies in one parallel loop: part k's vf (j = 2k) or ee (j = 2k + 1) list.
   std::vector<std::size_t> vf_offset(parts.size() + 1, vf_at), ee_offset(parts.size() + 1, ee_at);
   for (std::size_t k = 0; k < parts.size(); ++k) {
     vf_offset[k + 1] = vf_offset[k] + parts[k].vf.size();
@@ -48,6 +55,9 @@ inline void append_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& o
       std::copy(from.begin(), from.end(), to.begin() + static_cast<std::ptrdiff_t>(j % 2 ? ee_offset[k] : vf_offset[k]));
     }
   });
+}
+inline void append_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out) {
+  copy_parts(parts, out, out.vf.size(), out.ee.size());
 }
 
 }  // namespace detail
@@ -193,14 +203,22 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
 
 inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                        const std::vector<Aabbf>& boxes, bool with_orphans) {
+  FeaturePairs out;
+  std::vector<FeaturePairs> part_lists;
+  emit_feature_pairs_into(rep, candidates, n, boxes, with_orphans, out, part_lists);
+  return out;
+}
+
+inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                                    std::vector<FeaturePairs>& part_lists) {
   const TriangleMesh& mesh = rep.mesh();
   const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
   if (boxes.size() != features)
     throw InputError("emit_feature_pairs", "boxes",
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
   const EmissionView view = rep.view(boxes.data());
-  FeaturePairs out;
-  auto parts = detail::ordered_parts<FeaturePairs>(n, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
+  detail::ordered_parts(n, part_lists, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
     for (std::size_t i = begin; i < end; ++i) {
       const TrianglePair& p = candidates[i];
       if (p.adjacent) continue;
@@ -209,19 +227,18 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
           [&](index_t x, index_t y) { part.ee.emplace_back(x, y); });
     }
   });
-  detail::append_parts(parts, out);
-  if (!with_orphans) return out;
+  detail::copy_parts(part_lists, out, 0, 0);
+  if (!with_orphans) return;
   const OrphanSets& orphans = rep.orphans();
   for (const auto* list : {&orphans.vf, &orphans.ee}) {
     auto& target = list == &orphans.vf ? out.vf : out.ee;
-    auto kept = detail::ordered_parts<std::vector<std::pair<index_t, index_t>>>(
-        list->size(), [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
-          for (std::size_t i = begin; i < end; ++i)
-            if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
-        });
+    std::vector<std::vector<std::pair<index_t, index_t>>> kept;
+    detail::ordered_parts(list->size(), kept, [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
+      for (std::size_t i = begin; i < end; ++i)
+        if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
+    });
     detail::append_in_parallel(kept, target);
   }
-  return out;
 }
 
 namespace detail {
