@@ -4,7 +4,7 @@
 # scene, no data needed): on the GPU when there is one, else on the CPU backend; see README.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-packages=(cmake g++ make ccache nlohmann-json3-dev)
+packages=(cmake g++ make ccache nlohmann-json3-dev libtbb-dev)
 missing=()
 for p in "${packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then

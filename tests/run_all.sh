@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds and runs every test of lwsccd on a fresh Debian machine:
-#   1. installs the Debian packages it needs (cmake, g++, catch2, libeigen3-dev, nlohmann-json3-dev, ccache);
+#   1. installs the Debian packages it needs (cmake, g++, catch2, libeigen3-dev, nlohmann-json3-dev, libtbb-dev, ccache);
 #   2. configures and builds everything (every CUDA translation unit too when nvcc is found;
 #      GPU tests then run, or report "Skipped" where no GPU is present);
 #   3. runs CTest (tests on ../shared/data report "Skipped" where that folder is absent);
@@ -11,7 +11,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-packages=(cmake g++ make catch2 libeigen3-dev nlohmann-json3-dev ccache python3 python3-venv python3-pip)
+packages=(cmake g++ make catch2 libeigen3-dev nlohmann-json3-dev libtbb-dev ccache python3 python3-venv python3-pip)
 missing=()
 for p in "${packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then

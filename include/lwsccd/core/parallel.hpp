@@ -143,6 +143,26 @@ void parallel_ranges(std::size_t n, std::size_t grain, Body body) {
 #endif
 }
 
+/// As parallel_ranges, with body(begin, end, worker): `worker` in [0, worker_count()) names the
+/// thread running the range (no two ranges run at once with the same worker), for per-thread
+/// output lists.
+template <class Body>
+void parallel_ranges_by_worker(std::size_t n, std::size_t grain, Body body) {
+  if (n == 0) return;
+  grain = std::max<std::size_t>(1, grain);
+#if LWSCCD_WITH_TBB
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain), [&](const tbb::blocked_range<std::size_t>& r) {
+    body(r.begin(), r.end(), static_cast<unsigned>(tbb::this_task_arena::current_thread_index()));
+  });
+#else
+  std::atomic<std::size_t> next{0};
+  for_each_worker([&](unsigned w, unsigned) {
+    for (std::size_t begin = next.fetch_add(grain); begin < n; begin = next.fetch_add(grain))
+      body(begin, std::min(n, begin + grain), w);
+  });
+#endif
+}
+
 /// A grain that gives each worker several ranges of [0, n) (load balance) but none shorter than
 /// `at_least` items (overhead).
 inline std::size_t grain_for(std::size_t n, std::size_t at_least = 1024) {
