@@ -141,8 +141,13 @@ void traverse_into(const Task& task, const std::vector<typename Task::item_type>
   const std::size_t grain = std::max<std::size_t>(8, items->size() / (std::size_t(n) * 64 + 1));
   lwsccd::detail::parallel_ranges_by_worker(items->size(), grain, [&](std::size_t begin, std::size_t end, unsigned w) {
     assert(w < n && "a thread of the pool outside the arena's slots");
-    std::vector<Item> stack;
-    detail::VectorEmitter<Task> emit{&stack, &workspace.results[w], record_front ? &workspace.fronts[w] : nullptr};
+    // The thread's lists moved to this frame while the range runs: the workspace's list headers
+    // sit side by side, and pushing through them would bounce their cache line between threads.
+    std::vector<typename Task::result_type> results;
+    std::vector<Item> front, stack;
+    results.swap(workspace.results[w]);
+    front.swap(workspace.fronts[w]);
+    detail::VectorEmitter<Task> emit{&stack, &results, record_front ? &front : nullptr};
     std::size_t processed = 0;
     for (std::size_t i = begin; i < end; ++i) {
       stack.push_back((*items)[i]);
@@ -153,6 +158,8 @@ void traverse_into(const Task& task, const std::vector<typename Task::item_type>
         ++processed;
       }
     }
+    workspace.results[w].swap(results);
+    workspace.fronts[w].swap(front);
     counts[w].processed += processed;
   });
   for (const Count& c : counts) out.stats.items_processed += c.processed;

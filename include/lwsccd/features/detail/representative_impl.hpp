@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <numeric>
 #include <string>
+#include <utility>
 
 #include "lwsccd/core/error.hpp"
 #include "lwsccd/core/parallel.hpp"
@@ -30,8 +31,13 @@ void ordered_parts(std::size_t n, std::vector<Part>& parts, Body body) {
   const std::size_t count = std::max<std::size_t>(1, std::min<std::size_t>(n / 256 + 1, std::size_t(worker_count()) * 8));
   parts.resize(count);
   parallel_parts(n, count, [&](std::size_t begin, std::size_t end, std::size_t k) {
-    clear_part(parts[k]);
-    body(begin, end, parts[k]);
+    // Filled in this frame (the parts' list headers sit side by side: appending through them
+    // would bounce their cache lines between threads), then moved back.
+    Part part;
+    std::swap(part, parts[k]);
+    clear_part(part);
+    body(begin, end, part);
+    std::swap(part, parts[k]);
   });
 }
 
