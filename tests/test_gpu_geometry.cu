@@ -3,9 +3,12 @@
 
 #include <cstring>
 #include <random>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "lwsccd/core/cuda_check.cuh"
+#include "lwsccd/core/cuda_handles.cuh"
 #include "lwsccd/geometry/bv_traits.hpp"
 #include "lwsccd/geometry/morton.hpp"
 
@@ -155,4 +158,37 @@ TEST_CASE("GPU Morton codes equal the host's", "[gpu][morton]") {
     REQUIRE(m30[i] == morton30(pts[i], scene));
     REQUIRE(m63[i] == morton63(pts[i], scene));
   }
+}
+
+// The owners of CUDA events and streams (core/cuda_handles.cuh): move-only, the handle moves.
+static_assert(!std::is_copy_constructible_v<gpu::CudaEvent> && std::is_nothrow_move_constructible_v<gpu::CudaEvent> &&
+                  std::is_nothrow_move_assignable_v<gpu::CudaEvent>,
+              "CudaEvent: move-only");
+static_assert(!std::is_copy_constructible_v<gpu::CudaStream> && std::is_nothrow_move_constructible_v<gpu::CudaStream> &&
+                  std::is_nothrow_move_assignable_v<gpu::CudaStream>,
+              "CudaStream: move-only");
+
+TEST_CASE("CudaEvent and CudaStream own their handle: moved, it stays valid; the source is empty", "[gpu][handles]") {
+  gpu::CudaStream stream(cudaStreamNonBlocking);
+  gpu::CudaEvent event(cudaEventDisableTiming);
+  REQUIRE(stream.get() != nullptr);
+  REQUIRE(event.get() != nullptr);
+  const cudaStream_t raw_stream = stream;
+  const cudaEvent_t raw_event = event;
+  gpu::CudaStream moved_stream(std::move(stream));
+  gpu::CudaEvent moved_event;
+  moved_event = std::move(event);
+  CHECK(stream.get() == nullptr);
+  CHECK(!stream);
+  CHECK(event.get() == nullptr);
+  REQUIRE(moved_stream.get() == raw_stream);
+  REQUIRE(moved_event.get() == raw_event);
+  // The moved handles work: an event recorded on the stream completes.
+  LWSCCD_CUDA_CHECK(cudaEventRecord(moved_event, moved_stream));
+  LWSCCD_CUDA_CHECK(cudaEventSynchronize(moved_event));
+  CHECK(cudaEventQuery(moved_event) == cudaSuccess);
+  // Move-assigning over a live owner releases its old handle (no leak; the new one works).
+  moved_event = gpu::CudaEvent(cudaEventDisableTiming);
+  LWSCCD_CUDA_CHECK(cudaEventRecord(moved_event, moved_stream));
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(moved_stream));
 }

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/core/cuda_handles.cuh"
 #include "lwsccd/core/device_buffer.cuh"
 #include "lwsccd/narrow_phase/ccd_filters.hpp"
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
@@ -161,14 +162,6 @@ class NarrowPhase {
 
   NarrowPhase(const NarrowPhase&) = delete;
   NarrowPhase& operator=(const NarrowPhase&) = delete;
-  ~NarrowPhase() {
-    for (auto& l : lists_) {
-      if (l.stream) cudaStreamDestroy(l.stream);
-      if (l.done) cudaEventDestroy(l.done);
-    }
-    if (start_) cudaEventDestroy(start_);
-    if (joined_) cudaEventDestroy(joined_);
-  }
 
   /// The method that runs on the first pass's survivors: CertifiedCcd's fallback, or Method.
   using FullTest = typename lwsccd::detail::full_test_of<Method>::type;
@@ -233,8 +226,8 @@ class NarrowPhase {
     std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
     std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0;
-    cudaStream_t stream = nullptr;
-    cudaEvent_t done = nullptr;
+    CudaStream stream;
+    CudaEvent done;
   };
 
   void ensure_streams();
@@ -257,7 +250,7 @@ class NarrowPhase {
 
   std::size_t initial_capacity_;
   List lists_[2];  ///< vertex-face, edge-edge
-  cudaEvent_t start_ = nullptr, joined_ = nullptr;
+  CudaEvent start_, joined_;
   cudaStream_t stream_ = nullptr;  ///< the last enqueue's
   std::size_t id_limit_ = 0;       ///< the last enqueue's mesh: its feature count (ids are below it)
   DeviceBuffer<unsigned long long> control_;  ///< detail::NarrowControl words

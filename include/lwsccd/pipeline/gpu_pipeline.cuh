@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "lwsccd/bvh/bvh.cuh"
+#include "lwsccd/core/cuda_handles.cuh"
 #include "lwsccd/features/representative.cuh"
 #include "lwsccd/narrow_phase/narrow_phase.cuh"
 #include "lwsccd/pipeline/pipeline_types.hpp"
@@ -47,10 +48,7 @@ class CcdPipeline {
       face_body_.upload(layout_.face_body);
       self_collides_.upload(self_collides);
     }
-    for (auto& e : mark_) LWSCCD_CUDA_CHECK(cudaEventCreate(&e));
-  }
-  ~CcdPipeline() {
-    for (auto& e : mark_) cudaEventDestroy(e);
+    for (auto& e : mark_) e = CudaEvent(cudaEventDefault);
   }
   CcdPipeline(const CcdPipeline&) = delete;
   CcdPipeline& operator=(const CcdPipeline&) = delete;
@@ -389,7 +387,7 @@ class CcdPipeline {
   bool reset_next_ = false;
   bool emitter_sized_ = false;  ///< the emitter's buffers have been sized by a step
   NarrowPhase<Method, T> narrow_;
-  cudaEvent_t mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
+  CudaEvent mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
   // Streaming under a budget:
   bool streamed_ = false;                        ///< the last step was streamed
   bool refit_pending_ = false;                   ///< this step's refit reads await collect_refit()

@@ -22,8 +22,8 @@ namespace lwsccd::gpu {
 template <class Method, class T, class Policy>
 void NarrowPhase<Method, T, Policy>::ensure_streams() {
   if (start_) return;
-  LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&start_, cudaEventDisableTiming));
-  LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&joined_, cudaEventDisableTiming));
+  start_ = CudaEvent(cudaEventDisableTiming);
+  joined_ = CudaEvent(cudaEventDisableTiming);
   int device = 0;
   LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
   LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms_, cudaDevAttrMultiProcessorCount, device));
@@ -32,8 +32,8 @@ void NarrowPhase<Method, T, Policy>::ensure_streams() {
   for (auto& l : lists_) {
     l.host_counters = PinnedBuffer<unsigned long long>(detail::kNarrowCounters);
     l.counters.resize_discard(detail::kNarrowCounters);
-    LWSCCD_CUDA_CHECK(cudaStreamCreateWithFlags(&l.stream, cudaStreamNonBlocking));
-    LWSCCD_CUDA_CHECK(cudaEventCreateWithFlags(&l.done, cudaEventDisableTiming));
+    l.stream = CudaStream(cudaStreamNonBlocking);
+    l.done = CudaEvent(cudaEventDisableTiming);
   }
 }
 
