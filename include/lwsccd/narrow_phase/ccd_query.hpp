@@ -72,23 +72,45 @@ struct CcdResult {
 };
 
 namespace detail {
+// One detector per member of the method contract, so that a missing one is named on its own.
 template <class M, class = void>
-struct is_ccd_method : std::false_type {};
+struct method_has_name : std::false_type {};
 template <class M>
-struct is_ccd_method<M, std::void_t<decltype(M::name), decltype(M::conservative),
-                                    decltype(M::template vertex_face<float>(std::declval<const VertexFaceQuery<float>&>(),
-                                                                            std::declval<const CcdParams<float>&>())),
-                                    decltype(M::template edge_edge<float>(std::declval<const EdgeEdgeQuery<float>&>(),
-                                                                          std::declval<const CcdParams<float>&>()))>>
+struct method_has_name<M, std::void_t<decltype(M::name)>> : std::true_type {};
+template <class M, class = void>
+struct method_has_conservative : std::false_type {};
+template <class M>
+struct method_has_conservative<M, std::void_t<decltype(M::conservative)>> : std::true_type {};
+template <class M, class = void>
+struct method_has_vertex_face : std::false_type {};
+template <class M>
+struct method_has_vertex_face<M, std::void_t<decltype(M::template vertex_face<float>(
+                                     std::declval<const VertexFaceQuery<float>&>(), std::declval<const CcdParams<float>&>()))>>
     : std::true_type {};
+template <class M, class = void>
+struct method_has_edge_edge : std::false_type {};
+template <class M>
+struct method_has_edge_edge<M, std::void_t<decltype(M::template edge_edge<float>(
+                                   std::declval<const EdgeEdgeQuery<float>&>(), std::declval<const CcdParams<float>&>()))>>
+    : std::true_type {};
+template <class M>
+struct is_ccd_method : std::bool_constant<method_has_name<M>::value && method_has_conservative<M>::value &&
+                                          method_has_vertex_face<M>::value && method_has_edge_edge<M>::value> {};
 }  // namespace detail
 
-/// Compile-time contract of a narrow-phase method.
+/// Compile-time contract of a narrow-phase method (lwsccd/narrow_phase/ccd_query.hpp): one
+/// static_assert per member, each naming what is missing.
 template <class M>
 struct require_ccd_method {
-  static_assert(detail::is_ccd_method<M>::value,
-                "lwsccd: a CCD method needs static vertex_face<T>(query, params), edge_edge<T>(query, params), "
-                "name and conservative (see lwsccd/narrow_phase/ccd_query.hpp)");
+  static_assert(detail::method_has_name<M>::value, "lwsccd: a CCD method needs static constexpr const char* name");
+  static_assert(detail::method_has_conservative<M>::value,
+                "lwsccd: a CCD method needs static constexpr bool conservative (true: never misses a contact)");
+  static_assert(detail::method_has_vertex_face<M>::value,
+                "lwsccd: a CCD method needs static vertex_face<T>(const VertexFaceQuery<T>&, const CcdParams<T>&) "
+                "returning CcdResult<T>");
+  static_assert(detail::method_has_edge_edge<M>::value,
+                "lwsccd: a CCD method needs static edge_edge<T>(const EdgeEdgeQuery<T>&, const CcdParams<T>&) "
+                "returning CcdResult<T>");
   static constexpr bool value = true;
 };
 

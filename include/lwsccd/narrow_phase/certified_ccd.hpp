@@ -152,13 +152,13 @@ struct CertifiedCcdT {
   /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
   template <bool kSettle = true, class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine(const Q& q, const CcdParams<T>& params) {
-    return detail::certified_refine<Policy, 34, kSettle>(q, params);
+    return detail::certified_refine<Policy, detail::kRefineStackMax, kSettle>(q, params);
   }
   /// refine with its inside tests asked of `inside_at` (detail::InsideOneByOne's contract): the
   /// same answer, whatever order the tests are evaluated in.
   template <bool kSettle, class Q, class T, class InsideAt>
   LWSCCD_HD static CertifiedAnswer<T> refine_with(const Q& q, const CcdParams<T>& params, InsideAt&& inside_at) {
-    return detail::certified_refine<Policy, 34, kSettle>(q, params, 1 << 30, nullptr, inside_at);
+    return detail::certified_refine<Policy, detail::kRefineStackMax, kSettle>(q, params, detail::kNeverDefer, nullptr, inside_at);
   }
   /// What refine answers for a query whose search excluded every time before `lower` and found
   /// nothing certain after it (CertifiedFilter's queries with only a noted time): undecided from

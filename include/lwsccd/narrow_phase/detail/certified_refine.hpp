@@ -123,6 +123,13 @@ struct InsideOneByOne {
   }
 };
 
+/// certified_refine's most pending intervals (its stack: one right half per level): enough for
+/// the deepest search, whose levels stop at 30 (dyadic indices in 32 bits; certified_max_level),
+/// with room to spare. A search that defers at level d needs d + 2.
+inline constexpr int kRefineStackMax = 34;
+/// certified_refine's `defer_level` for a search that never defers.
+inline constexpr int kNeverDefer = 1 << 30;
+
 /// The certified classification of a query that certified_screen did not reject (see the file
 /// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
 /// query the screen would reject (it then finds the miss itself, at more cost).
@@ -137,8 +144,8 @@ struct InsideOneByOne {
 /// refinement kernels, whose registers it would cost on every pair.
 /// `inside_at`: where the inside tests are asked for (InsideOneByOne's contract); any evaluator
 /// that returns each test's own verdict gives the same answer.
-template <class Policy, int kStack = 34, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
-LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = 1 << 30,
+template <class Policy, int kStack = kRefineStackMax, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
+LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = kNeverDefer,
                                               bool* deferred = nullptr, InsideAt&& inside_at = InsideOneByOne{}) {
   using W = typename certified_compute<T>::type;
   const auto q = q_in.template cast<W>();
@@ -166,8 +173,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     std::uint32_t index;
     int level;
   };
-  static_assert(kStack >= 3 && kStack <= 34, "lwsccd: certified_refine holds 3 to 34 pending intervals");
-  Entry stack[kStack];  // one pending right half per level, levels <= 30
+  static_assert(kStack >= 3 && kStack <= kRefineStackMax, "lwsccd: certified_refine holds 3 to kRefineStackMax pending intervals");
+  Entry stack[kStack];  // one pending right half per level
   int top = 0, splits = 0, leaves = 0;
   T lower = T(0), open_from = T(0);  // earliest time not excluded for a perturbed query / as given
   bool has_lower = false, has_open = false, open_inside = true;

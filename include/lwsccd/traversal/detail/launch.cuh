@@ -73,6 +73,10 @@ Outputs<Task> outputs_of(TraversalOutput<Task>& out, bool record_front) {
   return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front};
 }
 
+// Threads per block of the flat launches (a thread per item, no shared memory: the block size
+// only sets the grid's granularity).
+inline constexpr int kFlatLaunchThreads = 256;
+
 // One breadth-first level in one launch, a thread per item: in[0, n) processed, their children
 // left in out.work_ (`in` may be out.work_ itself); returns how many (one host synchronisation).
 template <class Task>
@@ -80,7 +84,8 @@ std::size_t expand_level(const Task& task, const typename Task::item_type* in, s
                          bool record_front, cudaStream_t stream) {
   ensure(out.next_, n * Task::kMaxChildren);
   LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
-  expand_kernel<Task, 256><<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(
+  expand_kernel<Task, kFlatLaunchThreads><<<static_cast<unsigned>((n + kFlatLaunchThreads - 1) / kFlatLaunchThreads),
+                                             kFlatLaunchThreads, 0, stream>>>(
       task, in, n, out.next_.data(), n * Task::kMaxChildren, outputs_of(out, record_front));
   LWSCCD_CUDA_CHECK_LAUNCH();
   const auto c = read_counters(out, stream);

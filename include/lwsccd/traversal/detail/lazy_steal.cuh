@@ -83,7 +83,8 @@ template <class Task>
 void enqueue_flat_start(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
                         TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
   ensure(out.next_, out.list_room_);
-  expand_kernel<Task, 256><<<static_cast<unsigned>((num_seeds + 255) / 256), 256, 0, stream>>>(
+  expand_kernel<Task, kFlatLaunchThreads><<<static_cast<unsigned>((num_seeds + kFlatLaunchThreads - 1) / kFlatLaunchThreads),
+                                             kFlatLaunchThreads, 0, stream>>>(
       task, seeds, num_seeds, out.next_.data(), out.list_room_, outputs_of(out, record_front));
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::swap(out.work_, out.next_);
