@@ -121,31 +121,10 @@ void for_each_worker(Body body, unsigned workers = 0) {
 #endif
 }
 
-/// Runs body(begin, end) over [0, n) in ranges of about `grain` items, taken by threads as they
-/// free up (load balance for uneven items), and waits.
-template <class Body>
-void parallel_ranges(std::size_t n, std::size_t grain, Body body) {
-  if (n == 0) return;
-  grain = std::max<std::size_t>(1, grain);
-  if (n <= grain) {
-    body(std::size_t(0), n);
-    return;
-  }
-#if LWSCCD_WITH_TBB
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
-                    [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
-#else
-  std::atomic<std::size_t> next{0};
-  for_each_worker([&](unsigned, unsigned) {
-    for (std::size_t begin = next.fetch_add(grain); begin < n; begin = next.fetch_add(grain))
-      body(begin, std::min(n, begin + grain));
-  });
-#endif
-}
-
-/// As parallel_ranges, with body(begin, end, worker): `worker` in [0, worker_count()) names the
-/// thread running the range (no two ranges run at once with the same worker), for per-thread
-/// output lists.
+/// Runs body(begin, end, worker) over [0, n) in ranges of about `grain` items, taken by threads as
+/// they free up (load balance for uneven items), and waits. `worker` in [0, worker_count()) names
+/// the thread running the range (no two ranges run at once with the same worker), for
+/// per-thread output lists.
 template <class Body>
 void parallel_ranges_by_worker(std::size_t n, std::size_t grain, Body body) {
   if (n == 0) return;
@@ -161,6 +140,17 @@ void parallel_ranges_by_worker(std::size_t n, std::size_t grain, Body body) {
       body(begin, std::min(n, begin + grain), w);
   });
 #endif
+}
+
+/// As parallel_ranges_by_worker, with body(begin, end); a list no longer than `grain` runs on the
+/// calling thread.
+template <class Body>
+void parallel_ranges(std::size_t n, std::size_t grain, Body body) {
+  if (n <= std::max<std::size_t>(1, grain)) {
+    if (n) body(std::size_t(0), n);
+    return;
+  }
+  parallel_ranges_by_worker(n, grain, [&](std::size_t begin, std::size_t end, unsigned) { body(begin, end); });
 }
 
 /// A grain that gives each worker several ranges of [0, n) (load balance) but none shorter than
