@@ -19,6 +19,52 @@ using namespace lwsccd;
 
 namespace {
 
+// Scheduler policies measured or tested beside the defaults (knobs overridden by name).
+struct NoFit : gpu::LazyStealScheduler {
+  static constexpr bool kFitBlocksPerSm = false;
+};
+struct WalkNeverHungry : gpu::RayWalkLazySteal {
+  static constexpr int kShareWhenHungry = 0;
+};
+struct StaticDeepStack : gpu::StaticTaskList {
+  static constexpr int kSharedStack = 4096;
+};
+struct Lazy256 : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 256;
+  static constexpr int kPushThreshold = 2048;
+  static constexpr int kBlocksPerSm = 4;
+};
+struct NoFlat256 : Lazy256 {
+  static constexpr int kFlatStartPerBlock = 0;
+};
+struct NoFit256 : Lazy256 {
+  static constexpr bool kFitBlocksPerSm = false;
+};
+struct Lazy128 : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 128;
+  static constexpr int kSharedStack = 2048;
+  static constexpr int kPopSize = 256;
+  static constexpr int kBlocksPerSm = 8;
+};
+struct Lazy64 : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 64;
+  static constexpr int kSharedStack = 1024;
+  static constexpr int kPopSize = 128;
+  static constexpr int kPushThreshold = 512;
+  static constexpr int kBlocksPerSm = 16;
+};
+struct Lazy64Deep : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 64;
+  static constexpr int kSharedStack = 2048;
+  static constexpr int kPopSize = 256;
+  static constexpr int kBlocksPerSm = 12;
+};
+struct Lazy64Deeper : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 64;
+  static constexpr int kPushThreshold = 2048;
+  static constexpr int kBlocksPerSm = 6;
+};
+
 // The standard approach: one thread per ray, a per-thread stack, near child first.
 __global__ void ray_per_thread_kernel(BvhView<Aabbf> bvh, const Face* faces, const Vec3f* x, const Ray* rays, int n,
                                       std::uint64_t* best) {
@@ -200,21 +246,20 @@ int main(int argc, char** argv) {
       gpu::DeviceBuffer<RayNode> seeds;
       seeds.upload(host_seeds);
       const RayCastTask task{bvh.view(), faces.data(), dx.data(), nullptr, nullptr, false};
-      rows.push_back(scheduler_row<gpu::StaticTaskList<>>("static task list", kind, task, rays, best, seeds, reference, args.reps));
-      rows.push_back(scheduler_row<gpu::GProximityBalancer<>>("gProximity", kind, task, rays, best, seeds, reference, args.reps));
-      rows.push_back(scheduler_row<gpu::LazyStealScheduler<>>("lazy stealing", kind, task, rays, best, seeds, reference, args.reps));
+      rows.push_back(scheduler_row<gpu::StaticTaskList>("static task list", kind, task, rays, best, seeds, reference, args.reps));
+      rows.push_back(scheduler_row<gpu::GProximityBalancer>("gProximity", kind, task, rays, best, seeds, reference, args.reps));
+      rows.push_back(scheduler_row<gpu::LazyStealScheduler>("lazy stealing", kind, task, rays, best, seeds, reference, args.reps));
       // The kernel left to the compiler's register choice (94: one 512-thread block per SM)
       // instead of compiled to fit the default's two (64).
-      using NoFit = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>;
       rows.push_back(scheduler_row<NoFit>("lazy stealing (no fit)", kind, task, rays, best, seeds, reference, args.reps));
       // Each ray's inverse direction stored once (RayCastTask::inverse), not divided for per item.
       gpu::DeviceBuffer<Vec3f> inverse;
       inverse.upload(inverse_directions(host_rays));
       RayCastTask with_inverse = task;
       with_inverse.inverse = inverse.data();
-      rows.push_back(scheduler_row<gpu::LazyStealScheduler<>>("lazy, inverses stored", kind, with_inverse, rays, best, seeds,
+      rows.push_back(scheduler_row<gpu::LazyStealScheduler>("lazy, inverses stored", kind, with_inverse, rays, best, seeds,
                                                               reference, args.reps));
-      rows.push_back(scheduler_row<gpu::StaticTaskList<>>("static, inverses stored", kind, with_inverse, rays, best, seeds,
+      rows.push_back(scheduler_row<gpu::StaticTaskList>("static, inverses stored", kind, with_inverse, rays, best, seeds,
                                                           reference, args.reps));
       // Walks (RayWalkTask): an item takes a ray `budget` nodes down before it hands the rest back.
       gpu::DeviceBuffer<unsigned> overflows;
@@ -233,23 +278,14 @@ int main(int argc, char** argv) {
         rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>(budget ? "lazy, walks of " + std::to_string(budget) : "lazy, whole rays",
                                                            kind, with_inverse, budget, rays, best, seeds, reference, args.reps));
       // RayWalkLazySteal without sharing on demand.
-      using WalkNeverHungry = gpu::LazyStealScheduler<128, 4096, 8192, 512, 2048, 6, 8, 256, 16, true, true, 512, 0>;
       rows.push_back(walk_row<WalkNeverHungry, 14>("lazy, walks of 64, share off", kind, with_inverse, 64, rays, best, seeds,
                                                    reference, args.reps));
-      rows.push_back(walk_row<gpu::StaticTaskList<128, 4096>, 14>("static, walks of 32", kind, with_inverse, 32, rays, best, seeds,
+      rows.push_back(walk_row<StaticDeepStack, 14>("static, walks of 32", kind, with_inverse, 32, rays, best, seeds,
                                                                  reference, args.reps));
       if (args.has("--walks")) {  // the variants weighed for RayWalkTask's defaults (docs/RAYTRACING.md)
-        using Lazy256 = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4>;
-        using NoFlat = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4, 8, 256, 16, true, true, 0>;
-        using NoFit = gpu::LazyStealScheduler<256, 4096, 8192, 512, 2048, 4, 8, 256, 16, true, false>;
-        using Lazy128 = gpu::LazyStealScheduler<128, 2048, 8192, 256, 1024, 8>;
-        using Lazy64 = gpu::LazyStealScheduler<64, 1024, 8192, 128, 512, 16>;
-        using Lazy128Deep = gpu::RayWalkLazySteal;  // 128 x 6, room for stack 14's 16 children
-        using Lazy64Deep = gpu::LazyStealScheduler<64, 2048, 8192, 256, 1024, 12>;
-        using Lazy64Deeper = gpu::LazyStealScheduler<64, 4096, 8192, 512, 2048, 6>;
-        rows.push_back(walk_row<NoFlat, 6>("lazy no flat start, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,
+        rows.push_back(walk_row<NoFlat256, 6>("lazy no flat start, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,
                                            args.reps));
-        rows.push_back(walk_row<NoFit, 6>("lazy no fit, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,
+        rows.push_back(walk_row<NoFit256, 6>("lazy no fit, walks of 16", kind, with_inverse, 16, rays, best, seeds, reference,
                                           args.reps));
         for (const int budget : {8, 16, 32}) {
           const std::string b = std::to_string(budget);
@@ -259,7 +295,7 @@ int main(int argc, char** argv) {
                                               reference, args.reps));
           rows.push_back(walk_row<Lazy64, 6>("lazy 64x16, walks of " + b, kind, with_inverse, budget, rays, best, seeds,
                                              reference, args.reps));
-          rows.push_back(walk_row<Lazy128Deep, 14>("lazy 128x6, stack 14, walks of " + b, kind, with_inverse, budget, rays, best,
+          rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>("lazy 128x6, stack 14, walks of " + b, kind, with_inverse, budget, rays, best,
                                                    seeds, reference, args.reps));
           rows.push_back(walk_row<Lazy64Deep, 14>("lazy 64x12, stack 14, walks of " + b, kind, with_inverse, budget, rays, best,
                                                   seeds, reference, args.reps));
@@ -269,7 +305,7 @@ int main(int argc, char** argv) {
         for (const int budget : {48, 96, 256})
           rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>("lazy, walks of " + std::to_string(budget), kind, with_inverse, budget,
                                                              rays, best, seeds, reference, args.reps));
-        rows.push_back(walk_row<Lazy128Deep, 14>("lazy 128x6, stack 14, whole rays", kind, with_inverse, 0, rays, best, seeds,
+        rows.push_back(walk_row<gpu::RayWalkLazySteal, 14>("lazy 128x6, stack 14, whole rays", kind, with_inverse, 0, rays, best, seeds,
                                                  reference, args.reps));
         rows.push_back(walk_row<Lazy64Deeper, 30>("lazy 64x6, stack 30, whole rays", kind, with_inverse, 0, rays, best, seeds,
                                                   reference, args.reps));

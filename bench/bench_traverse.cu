@@ -21,6 +21,54 @@ using namespace lwsccd;
 
 namespace {
 
+// Scheduler policies measured or tested beside the defaults (knobs overridden by name).
+struct Lazy128Threads : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 128;
+  static constexpr int kSharedStack = 1024;
+  static constexpr int kPopSize = 256;
+  static constexpr int kPushThreshold = 512;
+  static constexpr int kSeedsPerBlock = 128;
+};
+struct Lazy256Threads4PerSm : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 256;
+  static constexpr int kSharedStack = 2048;
+  static constexpr int kPopSize = 256;
+  static constexpr int kPushThreshold = 512;
+  static constexpr int kBlocksPerSm = 4;
+};
+struct LazySeeds0 : gpu::LazyStealScheduler {
+  static constexpr int kSeedsPerBlock = 0;
+};
+struct LazySeeds1 : gpu::LazyStealScheduler {
+  static constexpr int kSeedsPerBlock = 1;
+};
+struct LazySeeds1Pop256 : gpu::LazyStealScheduler {
+  static constexpr int kPopSize = 256;
+  static constexpr int kPushThreshold = 256;
+  static constexpr int kSeedsPerBlock = 1;
+};
+struct LazySleep4k : gpu::LazyStealScheduler {
+  static constexpr int kMaxBackoffNs = 4096;
+};
+struct LazySleep16k : gpu::LazyStealScheduler {
+  static constexpr int kMaxBackoffNs = 16384;
+};
+struct LazyLock4 : gpu::LazyStealScheduler {
+  static constexpr int kStealLockAttempts = 4;
+};
+struct LazyLock64 : gpu::LazyStealScheduler {
+  static constexpr int kStealLockAttempts = 64;
+};
+struct Plain : gpu::LazyStealScheduler {
+  static constexpr int kStealLockAttempts = 0;
+  static constexpr bool kRandomVictim = false;
+  static constexpr int kFlatStartPerBlock = 0;
+  static constexpr int kShareWhenHungry = 0;
+};
+struct NoFit : gpu::LazyStealScheduler {
+  static constexpr bool kFitBlocksPerSm = false;
+};
+
 struct Row {
   std::string scene, scheduler, bv, start;
   double median_ms, p10_ms, p90_ms;
@@ -132,9 +180,13 @@ void sequence_rows(const char* scheduler, const char* bv_name, const Sequence& s
 
 // The default lazy scheduler with another kFlatStartPerBlock (0: no flat start).
 template <int kPerBlock>
-using FlatFrom = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, kPerBlock>;
+struct FlatFrom : gpu::LazyStealScheduler {
+  static constexpr int kFlatStartPerBlock = kPerBlock;
+};
 template <int kAbove>
-using Hungry = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, kAbove>;
+struct Hungry : gpu::LazyStealScheduler {
+  static constexpr int kShareWhenHungry = kAbove;
+};
 
 // Variants of the lazy scheduler's occupancy and batch knobs (AABB only: the knobs do not depend
 // on the BV), beside its defaults.
@@ -142,17 +194,17 @@ template <class BV>
 void lazy_variants(const char* bv_name, const std::string& name, const Step& step, int reps, std::vector<Row>& rows) {
   if (std::string(bv_name) != "AABB float") return;
   // Smaller blocks (128 threads, 2 blocks per SM, batches of 256), and two neighbours of the default shape.
-  scene_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<256, 2048, 8192, 256, 512, 4, 8>, BV>("lazy-256t-4sm", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 0>, BV>("lazy-seeds0", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 1>, BV>("lazy-seeds1", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 256, 256, 2, 1>, BV>("lazy-seeds1-p256", bv_name, name, step, reps, rows);
+  scene_rows<Lazy128Threads, BV>("lazy-128t", bv_name, name, step, reps, rows);
+  scene_rows<Lazy256Threads4PerSm, BV>("lazy-256t-4sm", bv_name, name, step, reps, rows);
+  scene_rows<LazySeeds0, BV>("lazy-seeds0", bv_name, name, step, reps, rows);
+  scene_rows<LazySeeds1, BV>("lazy-seeds1", bv_name, name, step, reps, rows);
+  scene_rows<LazySeeds1Pop256, BV>("lazy-seeds1-p256", bv_name, name, step, reps, rows);
   // The idle blocks' sleep between searches doubling up to 4 us, and up to 16 us (default: 256 ns).
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 4096>, BV>("lazy-sleep4k", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 16384>, BV>("lazy-sleep16k", bv_name, name, step, reps, rows);
+  scene_rows<LazySleep4k, BV>("lazy-sleep4k", bv_name, name, step, reps, rows);
+  scene_rows<LazySleep16k, BV>("lazy-sleep16k", bv_name, name, step, reps, rows);
   // Thieves trying a victim's lock 4 or 64 times before they look again (default 16).
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 4>, BV>("lazy-lock4", bv_name, name, step, reps, rows);
-  scene_rows<gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 64>, BV>("lazy-lock64", bv_name, name, step, reps, rows);
+  scene_rows<LazyLock4, BV>("lazy-lock4", bv_name, name, step, reps, rows);
+  scene_rows<LazyLock64, BV>("lazy-lock64", bv_name, name, step, reps, rows);
   // A flat first launch for starts of at least 128 or 2,048 items per block (default 512).
   scene_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, name, step, reps, rows);
   scene_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, name, step, reps, rows);
@@ -166,9 +218,9 @@ template <class BV>
 void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string, Step>>& scenes, const Sequence& horse,
                     int reps, std::vector<Row>& rows) {
   for (const auto& [name, step] : scenes) {
-    scene_rows<gpu::StaticTaskList<>, BV>("static", bv_name, name, step, reps, rows);
-    scene_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, name, step, reps, rows);
-    scene_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, name, step, reps, rows);
+    scene_rows<gpu::StaticTaskList, BV>("static", bv_name, name, step, reps, rows);
+    scene_rows<gpu::GProximityBalancer, BV>("gproximity", bv_name, name, step, reps, rows);
+    scene_rows<gpu::LazyStealScheduler, BV>("lazy-steal", bv_name, name, step, reps, rows);
     scene_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, name, step, reps, rows);
     lazy_variants<BV>(bv_name, name, step, reps, rows);
     scene_rows<Hungry<0>, BV>("lazy-share-off", bv_name, name, step, reps, rows);  // no sharing on demand
@@ -178,23 +230,21 @@ void all_schedulers(const char* bv_name, const std::vector<std::pair<std::string
   // flat start, no sharing on demand: the variants of each refinement alone are above), and the
   // kernel left to the compiler's register choice (OBB: 113, so one block per SM) instead of
   // compiled to fit the default's two.
-  using Plain = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 0, false, true, 0, 0>;
-  using NoFit = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>;
   for (const auto& [name, step] : scenes) {
     scene_rows<Plain, BV>("lazy-plain", bv_name, name, step, reps, rows);
     scene_rows<NoFit, BV>("lazy-nofit", bv_name, name, step, reps, rows);
   }
   sequence_rows<NoFit, BV>("lazy-nofit", bv_name, horse, rows);
   sequence_rows<Plain, BV>("lazy-plain", bv_name, horse, rows);
-  sequence_rows<gpu::StaticTaskList<>, BV>("static", bv_name, horse, rows);
-  sequence_rows<gpu::GProximityBalancer<>, BV>("gproximity", bv_name, horse, rows);
-  sequence_rows<gpu::LazyStealScheduler<>, BV>("lazy-steal", bv_name, horse, rows);
+  sequence_rows<gpu::StaticTaskList, BV>("static", bv_name, horse, rows);
+  sequence_rows<gpu::GProximityBalancer, BV>("gproximity", bv_name, horse, rows);
+  sequence_rows<gpu::LazyStealScheduler, BV>("lazy-steal", bv_name, horse, rows);
   sequence_rows<FlatFrom<0>, BV>("lazy-flat0", bv_name, horse, rows);
   sequence_rows<Hungry<0>, BV>("lazy-share-off", bv_name, horse, rows);
   if (std::string(bv_name) == "AABB float") {
     sequence_rows<FlatFrom<128>, BV>("lazy-flat128", bv_name, horse, rows);
     sequence_rows<FlatFrom<2048>, BV>("lazy-flat2048", bv_name, horse, rows);
-    sequence_rows<gpu::LazyStealScheduler<128, 1024, 8192, 256, 512, 2, 128>, BV>("lazy-128t", bv_name, horse, rows);
+    sequence_rows<Lazy128Threads, BV>("lazy-128t", bv_name, horse, rows);
   }
 }
 
@@ -208,14 +258,14 @@ void write_timelines(const std::string& dir, const std::vector<std::pair<std::st
     const Task task = scene.task();
     const NodePair* root = scene.root.data();
     gpu::TraversalOutput<Task> out;
-    gpu::traverse<gpu::LazyStealScheduler<>>(task, root, 1, out, true);  // warm-up, and the front
+    gpu::traverse<gpu::LazyStealScheduler>(task, root, 1, out, true);  // warm-up, and the front
     const std::vector<NodePair> front = out.download_front();
     gpu::DeviceBuffer<NodePair> d_front;
     d_front.upload(front);
     out.record_timeline(1 << 16);
     for (const char* start : {"root", "front"}) {
       const bool from_root = std::string(start) == "root";
-      gpu::traverse<gpu::LazyStealScheduler<>>(task, from_root ? root : d_front.data(), from_root ? 1 : front.size(), out, true);
+      gpu::traverse<gpu::LazyStealScheduler>(task, from_root ? root : d_front.data(), from_root ? 1 : front.size(), out, true);
       const std::vector<gpu::BlockTimeline> timeline = out.download_timeline();
       if (timeline.empty()) {  // the flat launch ended every item: no lazy launch to show
         std::printf("%-18s %-5s: no lazy launch (the flat launch ended all %zu start items)\n", name.c_str(), start,

@@ -122,9 +122,9 @@ int main(int argc, char** argv) {
     std::printf("%d triangles, %dx%d, %s\n", mesh->num_faces(), width, height, gpu ? "GPU" : "CPU backend (no GPU)");
     std::vector<unsigned char> image;
     auto run = [&](const std::string& name) {
-      if (name == "static") return render<gpu::StaticTaskList<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
+      if (name == "static") return render<gpu::StaticTaskList>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
       if (name == "gproximity")
-        return render<gpu::GProximityBalancer<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
+        return render<gpu::GProximityBalancer>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
       return render<gpu::RayWalkLazySteal, RayWalkTask<>>(gpu, view, gbvh.view(), cbvh.view(), &d_faces, &d_x, *mesh, x);
     };
     if (scheduler == "all") {

@@ -29,20 +29,20 @@ void check_gpu(const char* config, const lwsccd_test::FuzzScene& s, CcdMode mode
 template <class Method, class T>
 void check_gpu_all(const lwsccd_test::FuzzScene& s, CcdMode mode) {
   const auto oracle = lwsccd_test::fuzz_timed(lwsccd_test::fuzz_times().oracle, [&] { return lwsccd_test::fuzz_oracle<Method, T>(s, mode); });
-  check_gpu<Aabbf, gpu::LazyStealScheduler<>, Method, T>("AABB lazy", s, mode, oracle);
-  check_gpu<Aabbf, gpu::StaticTaskList<>, Method, T>("AABB static", s, mode, oracle);
-  check_gpu<Aabbf, gpu::GProximityBalancer<>, Method, T>("AABB gproximity", s, mode, oracle);
-  check_gpu<Obbf, gpu::LazyStealScheduler<>, Method, T>("OBB lazy", s, mode, oracle);
-  check_gpu<Obbf, gpu::StaticTaskList<>, Method, T>("OBB static", s, mode, oracle);
-  check_gpu<Obbf, gpu::GProximityBalancer<>, Method, T>("OBB gproximity", s, mode, oracle);
+  check_gpu<Aabbf, gpu::LazyStealScheduler, Method, T>("AABB lazy", s, mode, oracle);
+  check_gpu<Aabbf, gpu::StaticTaskList, Method, T>("AABB static", s, mode, oracle);
+  check_gpu<Aabbf, gpu::GProximityBalancer, Method, T>("AABB gproximity", s, mode, oracle);
+  check_gpu<Obbf, gpu::LazyStealScheduler, Method, T>("OBB lazy", s, mode, oracle);
+  check_gpu<Obbf, gpu::StaticTaskList, Method, T>("OBB static", s, mode, oracle);
+  check_gpu<Obbf, gpu::GProximityBalancer, Method, T>("OBB gproximity", s, mode, oracle);
   // Steps in parts: a few candidate pairs (and orphans) a part, under a budget (the streamed path).
   if (!lwsccd_test::fuzz_in_parts(s.seed)) return;
   lwsccd_test::fuzz_timed(lwsccd_test::fuzz_times().parts, [&] {
     PipelineParams parts = lwsccd_test::fuzz_part_params(s, mode);
     parts.device_memory_budget = std::size_t(1) << 30;
-    gpu::CcdPipeline<Aabbf, gpu::LazyStealScheduler<>, Method, T> lazy_parts(s.mesh, s.layout, parts);
+    gpu::CcdPipeline<Aabbf, gpu::LazyStealScheduler, Method, T> lazy_parts(s.mesh, s.layout, parts);
     lwsccd_test::require_parts_agreement(lazy_parts.step(s.x0, s.x1), oracle, mode);
-    gpu::CcdPipeline<Aabbf, gpu::StaticTaskList<>, Method, T> static_parts(s.mesh, s.layout, parts);
+    gpu::CcdPipeline<Aabbf, gpu::StaticTaskList, Method, T> static_parts(s.mesh, s.layout, parts);
     lwsccd_test::require_parts_agreement(static_parts.step(s.x0, s.x1), oracle, mode);
   });
 }

@@ -4,7 +4,10 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <limits>
+#include <thread>
+#include <type_traits>
 
 #include "lwsccd/features/representative.cuh"
 #include "lwsccd/io/dataset.hpp"
@@ -19,6 +22,20 @@
 using namespace lwsccd;
 
 namespace {
+
+// Scheduler policies measured or tested beside the defaults (knobs overridden by name).
+struct SmallLazy : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 128;
+  static constexpr int kSharedStack = 1024;
+  static constexpr int kDequeCapacity = 1024;
+  static constexpr int kPopSize = 256;
+  static constexpr int kPushThreshold = 512;
+  static constexpr int kBlocksPerSm = 1;
+};
+struct SmallStatic : gpu::StaticTaskList {
+  static constexpr int kGlobalStack = 2048;
+  static constexpr int kItemsPerBlock = 64;
+};
 
 template <class T>
 void require_same_contacts(const StepResult<T>& gpu, const StepResult<T>& cpu) {
@@ -161,6 +178,9 @@ TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth
                 name, g.stats.total_ms, g.stats.refit_ms, g.stats.traverse_ms, g.stats.features_ms, g.stats.narrow_ms,
                 g.stats.hits_vf, g.stats.hits_ee, g.contacts.earliest_toi, missed);
     CHECK(missed == 0);
+    // A first step sizes its lists from counts (the narrow phase counts its screen's survivors
+    // first): nothing runs twice for want of room.
+    CHECK(g.stats.reruns == 0);
     // A second, identical step restarts from the front and gives the same answer.
     const auto g2 = gpu_pipeline.step(scene.step.x0, scene.step.x1);
     CHECK_FALSE(g2.stats.restarted_from_root);
@@ -194,8 +214,17 @@ namespace {
 // A flat start for any front of at least one item per block (the default asks 512): the small
 // cloth's steps take the path without a host round trip inside the traversal; tiny deques make
 // blocks hand items back, which collect() reports and the pipeline reruns.
-using FlatFrontLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
-using TinyFlatFrontLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
+struct FlatFrontLazy : gpu::LazyStealScheduler {
+  static constexpr int kFlatStartPerBlock = 1;
+};
+struct TinyFlatFrontLazy : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 32;
+  static constexpr int kSharedStack = 192;
+  static constexpr int kDequeCapacity = 64;
+  static constexpr int kPopSize = 32;
+  static constexpr int kPushThreshold = 64;
+  static constexpr int kFlatStartPerBlock = 1;
+};
 
 template <class Scheduler>
 void pipeline_from_fronts_equals_cpu() {
@@ -299,6 +328,7 @@ TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from devi
   require_same_contacts(g, c);
   CHECK(g.stats.hits_vf + g.stats.hits_ee > 0);
   CHECK(g.stats.bvtt_nodes == c.stats.bvtt_nodes);  // the same pruning on both sides
+  CHECK(g.stats.reruns == 0);  // a first step's lists sized from counts
   // The same step from device-resident positions, in a fresh pipeline and in this one.
   gpu::DeviceBuffer<Vec3d> x0, x1;
   x0.upload(scene.step.x0);
@@ -503,8 +533,6 @@ namespace {
 void require_budgeted_cloth_ball_agrees(std::size_t triangles, double budget_share, bool with_static) {
   // Schedulers with small lists of their own, so that what a step needs is mostly what grows with
   // its pairs (the part a budget can split).
-  using SmallLazy = gpu::LazyStealScheduler<128, 1024, 1024, 256, 512, 1>;
-  using SmallStatic = gpu::StaticTaskList<128, 1024, 2048, 64>;
   const MultiBodyStep scene = make_cloth_ball_scene(triangles);
   // The same positions three times: the first step starts from the root, the others from the
   // kept front.
@@ -622,5 +650,157 @@ TEST_CASE("GPU pipeline: a budget that leaves the parts no room is an error nami
   } catch (const Error& e) {
     INFO(e.what());
     CHECK(std::string(e.what()).find("device memory budget") != std::string::npos);
+  }
+}
+
+// ---- A guest in another program's CUDA code: streams and moves ----
+
+static_assert(std::is_move_constructible_v<gpu::CcdPipeline<>> && std::is_move_assignable_v<gpu::CcdPipeline<>> &&
+                  !std::is_copy_constructible_v<gpu::CcdPipeline<>>,
+              "gpu::CcdPipeline: movable, not copyable");
+static_assert(std::is_move_constructible_v<gpu::NarrowPhase<CertifiedCcd, double>> &&
+                  std::is_move_assignable_v<gpu::NarrowPhase<CertifiedCcd, double>>,
+              "gpu::NarrowPhase: movable");
+
+namespace {
+
+// Writes `n` positions on `stream` after a wait of about `spin` clock cycles per block: a step
+// that did not follow the stream's order would read the buffer's old (non-finite) contents.
+__global__ void write_positions_late_kernel(const Vec3d* from, Vec3d* to, std::size_t n, long long spin) {
+  const long long start = clock64();
+  while (clock64() - start < spin) {
+  }
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += static_cast<std::size_t>(gridDim.x) * blockDim.x)
+    to[i] = from[i];
+}
+
+}  // namespace
+
+TEST_CASE("GPU pipelines on two non-blocking streams at once, from two host threads, each equal the CPU pipeline",
+          "[gpu][pipeline][streams]") {
+  // Two scenes of different sizes, three steps each (the first from the root, then fronts).
+  const auto cloth = [](int s) { return lwsccd_test::folded_cloth(40, 1 + s); };
+  const MultiBodyStep ball = make_cloth_ball_scene(20000);
+  auto cloth_mesh = std::make_shared<const TriangleMesh>(cloth(0).mesh);
+  std::vector<StepResult<double>> cpu_cloth, cpu_ball;
+  {
+    cpu::CcdPipeline<> a(cloth_mesh);
+    cpu::CcdPipeline<> b(ball.step.mesh, ball.layout);
+    for (int s = 0; s < 3; ++s) {
+      const auto m = cloth(s);
+      cpu_cloth.push_back(a.step(m.x0, m.x1));
+      cpu_ball.push_back(b.step(ball.step.x0, ball.step.x1));
+    }
+  }
+  gpu::CudaStream stream_a(cudaStreamNonBlocking), stream_b(cudaStreamNonBlocking);
+  gpu::CcdPipeline<> pipeline_a(cloth_mesh, PipelineParams{}, stream_a);
+  gpu::CcdPipeline<> pipeline_b(ball.step.mesh, ball.layout, PipelineParams{}, stream_b);
+  std::vector<StepResult<double>> gpu_cloth(3), gpu_ball(3);
+  std::exception_ptr failed_a, failed_b;
+  std::thread thread_a([&] {
+    try {
+      for (int s = 0; s < 3; ++s) {
+        const auto m = cloth(s);
+        gpu_cloth[s] = pipeline_a.step(m.x0, m.x1, stream_a);
+      }
+    } catch (...) {
+      failed_a = std::current_exception();
+    }
+  });
+  std::thread thread_b([&] {
+    try {
+      gpu::DeviceBuffer<Vec3d> x0, x1;
+      x0.upload(ball.step.x0, stream_b);
+      x1.upload(ball.step.x1, stream_b);
+      for (int s = 0; s < 3; ++s) gpu_ball[s] = pipeline_b.step_from_device(x0.data(), x1.data(), stream_b);
+    } catch (...) {
+      failed_b = std::current_exception();
+    }
+  });
+  thread_a.join();
+  thread_b.join();
+  if (failed_a) std::rethrow_exception(failed_a);
+  if (failed_b) std::rethrow_exception(failed_b);
+  for (int s = 0; s < 3; ++s) {
+    INFO("step " << s);
+    require_same_contacts(gpu_cloth[s], cpu_cloth[s]);
+    require_same_contacts(gpu_ball[s], cpu_ball[s]);
+    CHECK(gpu_ball[s].stats.hits_vf + gpu_ball[s].stats.hits_ee > 0);
+  }
+  CHECK_FALSE(gpu_ball[2].stats.restarted_from_root);  // the later steps ran from their fronts
+}
+
+TEST_CASE("GPU pipeline reads positions a kernel wrote on the caller's stream, without a host synchronisation between",
+          "[gpu][pipeline][streams]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(20000);
+  cpu::CcdPipeline<> cpu_pipeline(scene.step.mesh, scene.layout);
+  const auto c = cpu_pipeline.step(scene.step.x0, scene.step.x1);
+  REQUIRE(c.stats.hits_vf + c.stats.hits_ee > 0);
+  const std::size_t n = scene.step.x0.size();
+  gpu::DeviceBuffer<Vec3d> source0, source1, x0, x1;
+  source0.upload(scene.step.x0);
+  source1.upload(scene.step.x1);
+  // The step's buffers hold NaN until the late kernel overwrites them.
+  const double q = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Vec3d> nan(n, Vec3d{q, q, q});
+  x0.upload(nan);
+  x1.upload(nan);
+  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  gpu::CudaStream stream(cudaStreamNonBlocking);
+  gpu::CcdPipeline<> pipeline(scene.step.mesh, scene.layout, PipelineParams{}, stream);
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    INFO("step " << repeat);
+    // Each step first sees NaN again, then the positions, written late on the same stream.
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x0.data(), nan.data(), n * sizeof(Vec3d), cudaMemcpyHostToDevice, stream));
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(x1.data(), nan.data(), n * sizeof(Vec3d), cudaMemcpyHostToDevice, stream));
+    write_positions_late_kernel<<<64, 256, 0, stream>>>(source0.data(), x0.data(), n, 2000000);
+    write_positions_late_kernel<<<64, 256, 0, stream>>>(source1.data(), x1.data(), n, 2000000);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    if (repeat < 2) {
+      require_same_contacts(pipeline.step_from_device(x0.data(), x1.data(), stream), c);
+    } else {
+      // Contacts left on the device, copied on the same stream.
+      const DeviceStepResult<double> d = pipeline.step_on_device(x0.data(), x1.data(), stream);
+      std::vector<FeatureHit<double>> vf(d.contacts.num_vf);
+      LWSCCD_CUDA_CHECK(
+          cudaMemcpyAsync(vf.data(), d.contacts.vf, vf.size() * sizeof(FeatureHit<double>), cudaMemcpyDeviceToHost, stream));
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+      REQUIRE(vf.size() == c.contacts.vf.size());
+      for (std::size_t k = 0; k < vf.size(); ++k) {
+        REQUIRE(vf[k].first == c.contacts.vf[k].first);
+        REQUIRE(vf[k].second == c.contacts.vf[k].second);
+        REQUIRE(vf[k].toi == c.contacts.vf[k].toi);
+      }
+    }
+  }
+}
+
+TEST_CASE("GPU pipeline moved mid-sequence keeps stepping as the pipeline it was (front, buffers, answers)",
+          "[gpu][pipeline][streams][move]") {
+  const auto first = lwsccd_test::folded_cloth(50, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  gpu::CcdPipeline<> unmoved(mesh);
+  cpu::CcdPipeline<> cpu_pipeline(mesh);
+  gpu::CcdPipeline<> moving(mesh);
+  for (int s = 0; s < 6; ++s) {
+    INFO("step " << s);
+    if (s == 2) {
+      gpu::CcdPipeline<> constructed(std::move(moving));  // move construction mid-sequence
+      const auto m = lwsccd_test::folded_cloth(50, 1 + s);
+      const auto g = constructed.step(m.x0, m.x1);
+      const auto u = unmoved.step(m.x0, m.x1);
+      require_same_contacts(g, cpu_pipeline.step(m.x0, m.x1));
+      CHECK(g.stats.restarted_from_root == u.stats.restarted_from_root);  // the front moved with it
+      CHECK(g.stats.bvtt_nodes == u.stats.bvtt_nodes);
+      moving = std::move(constructed);  // and back by move assignment
+      continue;
+    }
+    const auto m = lwsccd_test::folded_cloth(50, 1 + s);
+    const auto g = moving.step(m.x0, m.x1);
+    const auto u = unmoved.step(m.x0, m.x1);
+    require_same_contacts(g, cpu_pipeline.step(m.x0, m.x1));
+    CHECK(g.stats.restarted_from_root == u.stats.restarted_from_root);
+    CHECK(g.stats.bvtt_nodes == u.stats.bvtt_nodes);
+    CHECK(g.stats.rebuilt == u.stats.rebuilt);
   }
 }

@@ -13,6 +13,14 @@ using namespace lwsccd;
 
 namespace {
 
+// Scheduler policies measured or tested beside the defaults (knobs overridden by name).
+struct StaticDeepStack : gpu::StaticTaskList {
+  static constexpr int kSharedStack = 4096;
+};
+struct BalancedDeepStack : gpu::GProximityBalancer {
+  static constexpr int kSharedStack = 4096;
+};
+
 // The rays on the device, every ray's best hit at kNoHit, one seed {ray, root} per ray.
 struct UploadedRays {
   gpu::DeviceBuffer<Ray> rays;
@@ -57,7 +65,14 @@ std::vector<std::uint64_t> walked(const gpu::Bvh<Aabbf>& bvh, const gpu::DeviceB
 }
 
 // Small pops and deques, no flat start: walks handed back are stolen and spilled often.
-using WalkLazyTight = gpu::LazyStealScheduler<32, 1024, 512, 16, 512, 2, 8, 256, 16, true, true, 0>;
+struct WalkLazyTight : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 32;
+  static constexpr int kSharedStack = 1024;
+  static constexpr int kDequeCapacity = 512;
+  static constexpr int kPopSize = 16;
+  static constexpr int kPushThreshold = 512;
+  static constexpr int kFlatStartPerBlock = 0;
+};
 
 void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, int grid, int random_rays) {
   std::vector<Vec3f> x(x0.size());
@@ -71,22 +86,22 @@ void check_mesh(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, int grid
   dx.upload(x);
   const auto rays = lwsccd_test::test_rays(x, grid, random_rays);
   const auto reference = lwsccd_test::brute_force_hits(rays, mesh.faces(), x);
-  REQUIRE(traced<gpu::StaticTaskList<>>(bvh, faces, dx, rays, false) == reference);
-  REQUIRE(traced<gpu::GProximityBalancer<>>(bvh, faces, dx, rays, false) == reference);
-  REQUIRE(traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, false) == reference);
-  REQUIRE(traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, false, true) == reference);  // stored inverses
-  const auto any = traced<gpu::LazyStealScheduler<>>(bvh, faces, dx, rays, true);
+  REQUIRE(traced<gpu::StaticTaskList>(bvh, faces, dx, rays, false) == reference);
+  REQUIRE(traced<gpu::GProximityBalancer>(bvh, faces, dx, rays, false) == reference);
+  REQUIRE(traced<gpu::LazyStealScheduler>(bvh, faces, dx, rays, false) == reference);
+  REQUIRE(traced<gpu::LazyStealScheduler>(bvh, faces, dx, rays, false, true) == reference);  // stored inverses
+  const auto any = traced<gpu::LazyStealScheduler>(bvh, faces, dx, rays, true);
   for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any[r] == kNoHit) == (reference[r] == kNoHit));
   // Walks (RayWalkTask): whole rays, budgets that split them, a one-node stack, each scheduler.
   for (const int budget : {0, 3, 32}) {
     INFO("visit budget " << budget);
     REQUIRE(walked<gpu::RayWalkLazySteal>(bvh, faces, dx, rays, false, budget) == reference);
     REQUIRE(walked<WalkLazyTight>(bvh, faces, dx, rays, false, budget) == reference);
-    REQUIRE(walked<gpu::StaticTaskList<128, 4096>>(bvh, faces, dx, rays, false, budget) == reference);
-    REQUIRE(walked<gpu::GProximityBalancer<128, 4096>>(bvh, faces, dx, rays, false, budget) == reference);
-    REQUIRE(walked<gpu::LazyStealScheduler<>, 4>(bvh, faces, dx, rays, false, budget) == reference);  // 6 children: the default fits
+    REQUIRE(walked<StaticDeepStack>(bvh, faces, dx, rays, false, budget) == reference);
+    REQUIRE(walked<BalancedDeepStack>(bvh, faces, dx, rays, false, budget) == reference);
+    REQUIRE(walked<gpu::LazyStealScheduler, 4>(bvh, faces, dx, rays, false, budget) == reference);  // 6 children: the default fits
   }
-  REQUIRE(walked<gpu::LazyStealScheduler<>, 1>(bvh, faces, dx, rays, false, 0) == reference);
+  REQUIRE(walked<gpu::LazyStealScheduler, 1>(bvh, faces, dx, rays, false, 0) == reference);
   const auto any_walked = walked<gpu::RayWalkLazySteal>(bvh, faces, dx, rays, true, 5);
   for (std::size_t r = 0; r < rays.size(); ++r) REQUIRE((any_walked[r] == kNoHit) == (reference[r] == kNoHit));
 }

@@ -19,19 +19,52 @@ using lwsccd_test::MovingMesh;
 
 namespace {
 
+// Scheduler policies measured or tested beside the defaults (knobs overridden by name).
+struct NoFitLazy : gpu::LazyStealScheduler {
+  static constexpr bool kFitBlocksPerSm = false;
+};
+
 // Tiny capacities: spills, hand-backs and relaunches on every run.
-using TinyStatic = gpu::StaticTaskList<32, 192, 64, 8>;
-using TinyBalanced = gpu::GProximityBalancer<32, 192, 64, 30>;
-using TinyLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64>;
+struct TinyStatic : gpu::StaticTaskList {
+  static constexpr int kBlockThreads = 32;
+  static constexpr int kSharedStack = 192;
+  static constexpr int kGlobalStack = 64;
+  static constexpr int kItemsPerBlock = 8;
+};
+struct TinyBalanced : gpu::GProximityBalancer {
+  static constexpr int kBlockThreads = 32;
+  static constexpr int kSharedStack = 192;
+  static constexpr int kGlobalStack = 64;
+  static constexpr int kIdlePercent = 30;
+};
+struct TinyLazy : gpu::LazyStealScheduler {
+  static constexpr int kBlockThreads = 32;
+  static constexpr int kSharedStack = 192;
+  static constexpr int kDequeCapacity = 64;
+  static constexpr int kPopSize = 32;
+  static constexpr int kPushThreshold = 64;
+};
 // A flat first launch for any start of at least one item per block (the default asks 512).
-using FlatLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 1>;
-using TinyFlatLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 1>;
+struct FlatLazy : gpu::LazyStealScheduler {
+  static constexpr int kFlatStartPerBlock = 1;
+};
+struct TinyFlatLazy : TinyLazy {
+  static constexpr int kFlatStartPerBlock = 1;
+};
 // Sharing on demand (kShareWhenHungry; the defaults share above half of kPushThreshold): eagerly
 // in the default's shape and with tiny deques that overflow, and never (0: sharing off).
-using NeverHungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 0>;
-using TinyNeverHungryLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 512, 0>;
-using HungryLazy = gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, true, 512, 128>;
-using TinyHungryLazy = gpu::LazyStealScheduler<32, 192, 64, 32, 64, 2, 8, 256, 16, true, true, 512, 8>;
+struct NeverHungryLazy : gpu::LazyStealScheduler {
+  static constexpr int kShareWhenHungry = 0;
+};
+struct TinyNeverHungryLazy : TinyLazy {
+  static constexpr int kShareWhenHungry = 0;
+};
+struct HungryLazy : gpu::LazyStealScheduler {
+  static constexpr int kShareWhenHungry = 128;
+};
+struct TinyHungryLazy : TinyLazy {
+  static constexpr int kShareWhenHungry = 8;
+};
 
 template <class V>
 V sorted(V v) {
@@ -85,11 +118,11 @@ void self_matches_cpu(const MovingMesh& m, bool tiny_outputs) {
   SelfCollisionTask<BV> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, m.mesh.faces().data(), false}};
   const auto expected = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
   gpu::TraversalOutput<SelfCollisionTask<BV>> out;
-  if (tiny_outputs) out.results_.resize_discard(1);  // forces growth and a rerun
+  if (tiny_outputs) gpu::detail::storage_of(out).results_.resize_discard(1);  // forces growth and a rerun
   REQUIRE(gpu_pairs<Scheduler>(gtask, {NodePair{0, 0}}, out) == expected);
   // Karras's independent traversal (the baseline) finds the same pairs.
   gpu::TraversalOutput<SelfCollisionTask<BV>> independent;
-  if (tiny_outputs) independent.results_.resize_discard(1);
+  if (tiny_outputs) gpu::detail::storage_of(independent).results_.resize_discard(1);
   gpu::independent_self_traversal(gtask, independent);
   REQUIRE(sorted(independent.download_results()) == expected);
   if (tiny_outputs && !expected.empty()) CHECK(out.stats().relaunches > 0);
@@ -107,9 +140,9 @@ void every_scheduler_matches(const TriangleMesh& mesh, const std::vector<Vec3d>&
   faces.upload(mesh.faces());
   SelfCollisionTask<BV> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
   gpu::TraversalOutput<SelfCollisionTask<BV>> out;
-  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out) == oracle);
-  REQUIRE(gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, out) == oracle);
-  REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out) == oracle);
+  REQUIRE(gpu_pairs<gpu::StaticTaskList>(task, {NodePair{0, 0}}, out) == oracle);
+  REQUIRE(gpu_pairs<gpu::GProximityBalancer>(task, {NodePair{0, 0}}, out) == oracle);
+  REQUIRE(gpu_pairs<gpu::LazyStealScheduler>(task, {NodePair{0, 0}}, out) == oracle);
   gpu::independent_self_traversal(task, out);
   REQUIRE(sorted(out.download_results()) == oracle);
   std::printf("%s: %zu pairs, %zu BVTT nodes (Karras)\n", name, oracle.size(), out.stats().items_processed);
@@ -123,11 +156,11 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
                               lwsccd_test::coincident_triangles(50), lwsccd_test::random_soup(1, 3),
                               lwsccd_test::random_soup(2, 4)}) {
     INFO("faces " << m.mesh.num_faces());
-    self_matches_cpu<BV, gpu::StaticTaskList<>>(m, false);
-    self_matches_cpu<BV, gpu::GProximityBalancer<>>(m, false);
+    self_matches_cpu<BV, gpu::StaticTaskList>(m, false);
+    self_matches_cpu<BV, gpu::GProximityBalancer>(m, false);
     self_matches_cpu<BV, TinyStatic>(m, true);
     self_matches_cpu<BV, TinyBalanced>(m, true);
-    self_matches_cpu<BV, gpu::LazyStealScheduler<>>(m, false);
+    self_matches_cpu<BV, gpu::LazyStealScheduler>(m, false);
     self_matches_cpu<BV, TinyLazy>(m, true);
     self_matches_cpu<BV, HungryLazy>(m, false);
     self_matches_cpu<BV, TinyHungryLazy>(m, true);
@@ -146,11 +179,11 @@ TEST_CASE("device memory budget: exceeding it is a clear error, not a crash", "[
   CHECK_THROWS_WITH(root.upload(std::vector<NodePair>(1000, NodePair{0, 0})), Catch::Contains("memory budget exceeded"));
   gpu::set_memory_budget(gpu::memory_stats().in_use + (1 << 20));  // enough for the seeds only
   root.upload(std::vector<NodePair>{NodePair{0, 0}});
-  CHECK_THROWS_WITH(gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, out, true),
+  CHECK_THROWS_WITH(gpu::traverse<gpu::LazyStealScheduler>(task, root.data(), 1, out, true),
                     Catch::Contains("memory budget exceeded"));
   gpu::set_memory_budget(previous);
   // With the budget lifted the same objects work.
-  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, out, true);
+  gpu::traverse<gpu::LazyStealScheduler>(task, root.data(), 1, out, true);
   CHECK(out.num_results() > 0);
 }
 
@@ -162,7 +195,7 @@ TEST_CASE("GPU traversal split into parts: a cut below the root, traversed a par
   gpu::DeviceBuffer<NodePair> root;
   root.upload(std::vector<NodePair>{NodePair{0, 0}});
   gpu::TraversalOutput<Task> whole;
-  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, whole, true);
+  gpu::traverse<gpu::LazyStealScheduler>(task, root.data(), 1, whole, true);
   std::vector<TrianglePair> expected_results = whole.download_results();
   const auto expected_front = as_pairs(whole.download_front());
   std::sort(expected_results.begin(), expected_results.end());
@@ -179,7 +212,7 @@ TEST_CASE("GPU traversal split into parts: a cut below the root, traversed a par
     LWSCCD_CUDA_CHECK(cudaMemcpy(cut.data(), out.expanded(), n * sizeof(NodePair), cudaMemcpyDeviceToDevice));
     const std::size_t part = std::max<std::size_t>(1, n / 7);
     for (std::size_t first = 0; first < n; first += part) {
-      gpu::traverse<gpu::StaticTaskList<>>(task, cut.data() + first, std::min(part, n - first), out, true);
+      gpu::traverse<gpu::StaticTaskList>(task, cut.data() + first, std::min(part, n - first), out, true);
       REQUIRE(out.complete());
       const auto r = out.download_results();
       const auto f = out.download_front();
@@ -193,10 +226,10 @@ TEST_CASE("GPU traversal split into parts: a cut below the root, traversed a par
   // An output limit below what the traversal yields: it stops, says so, and grows nothing.
   gpu::TraversalOutput<Task> limited;
   limited.set_output_limit(1024);
-  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, limited, true);
+  gpu::traverse<gpu::LazyStealScheduler>(task, root.data(), 1, limited, true);
   CHECK_FALSE(limited.complete());
   limited.set_output_limit(0);
-  gpu::traverse<gpu::LazyStealScheduler<>>(task, root.data(), 1, limited, true);
+  gpu::traverse<gpu::LazyStealScheduler>(task, root.data(), 1, limited, true);
   CHECK(limited.complete());
   CHECK(limited.num_results() == expected_results.size());
 }
@@ -210,9 +243,9 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   const cpu::Bvh<Aabbf> ca(a.mesh, a.x0, a.x1), cb(b.mesh, b.x0, b.x1);
   const auto expected = sorted(cpu::traverse(InterCollisionTask<Aabbf>{ca.view(), cb.view()}, {NodePair{0, 0}}).results);
   gpu::TraversalOutput<InterCollisionTask<Aabbf>> out;
-  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
+  REQUIRE(gpu_pairs<gpu::StaticTaskList>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
   REQUIRE(gpu_pairs<TinyBalanced>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
-  REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
+  REQUIRE(gpu_pairs<gpu::LazyStealScheduler>(InterCollisionTask<Aabbf>{ta.view(), tb.view()}, {NodePair{0, 0}}, out) == expected);
   REQUIRE(expected.size() > 10);
 
   // Front: record on the GPU, refit, restart from it; equals a fresh CPU traversal.
@@ -224,7 +257,7 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   faces.upload(m0.mesh.faces());
   SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
   gpu::TraversalOutput<SelfCollisionTask<Aabbf>> self_out;
-  gpu_pairs<gpu::GProximityBalancer<>>(task, {NodePair{0, 0}}, self_out, true);
+  gpu_pairs<gpu::GProximityBalancer>(task, {NodePair{0, 0}}, self_out, true);
   const auto front = self_out.download_front();
   REQUIRE(front.size() > 0);
   step.set_positions(m1.x0, m1.x1);
@@ -233,7 +266,7 @@ TEST_CASE("GPU schedulers: inter-object task and restarting from a front", "[gpu
   cbvh.refit(m1.x0, m1.x1);
   SelfCollisionTask<Aabbf> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, m0.mesh.faces().data(), false}};
   const auto fresh = sorted(cpu::traverse(ctask, {NodePair{0, 0}}).results);
-  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, front, self_out, true) == fresh);
+  REQUIRE(gpu_pairs<gpu::StaticTaskList>(task, front, self_out, true) == fresh);
   const auto next_front = as_pairs(self_out.download_front());
   REQUIRE(gpu_pairs<TinyStatic>(task, front, self_out, true) == fresh);
   REQUIRE(gpu_pairs<TinyLazy>(task, front, self_out, true) == fresh);
@@ -277,12 +310,12 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   DeviceFoldedCloth<Aabbf> cloth(40, 1);
   const SelfCollisionTask<Aabbf> task = cloth.task();
   gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
-  gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out, true);
+  gpu_pairs<gpu::LazyStealScheduler>(task, {NodePair{0, 0}}, out, true);
   const std::vector<NodePair> front = out.download_front();
   REQUIRE(front.size() > 0);
   cloth.step.set_positions(m1.x0, m1.x1);
   cloth.bvh.refit(cloth.step);
-  const auto fresh = gpu_pairs<gpu::LazyStealScheduler<>>(task, front, out, true);
+  const auto fresh = gpu_pairs<gpu::LazyStealScheduler>(task, front, out, true);
   const auto next_front = as_pairs(out.download_front());
   const std::size_t processed = out.stats().items_processed;
   REQUIRE(fresh.size() > 10);
@@ -311,8 +344,8 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   CHECK(as_pairs(out.download_front()) == next_front);
   // Outputs too small: the device's count stops at their room, collect() grows them and asks for
   // traverse(), which then fits them without growing again.
-  out.results_.resize_discard(3);
-  out.front_.resize_discard(5);
+  gpu::detail::storage_of(out).results_.resize_discard(3);
+  gpu::detail::storage_of(out).front_.resize_discard(5);
   REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
   CHECK_FALSE(complete);
   CHECK(on_device == 3);
@@ -322,14 +355,14 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   // Only the front too small: the results are complete (no traverse() asked for), the front is
   // not (none kept), and its output is grown so that the next traversal's fits.
   REQUIRE(next_front.size() > 5);
-  out.front_.resize_discard(5);
+  gpu::detail::storage_of(out).front_.resize_discard(5);
   gpu::traverse_async<FlatLazy>(task, seeds.data(), front.size(), out, true);
   CHECK(device_result_count(out) == fresh.size());
   CHECK(out.collect());
   CHECK_FALSE(out.front_complete());
   CHECK(out.num_front() == 0);
   CHECK(sorted(out.download_results()) == fresh);
-  CHECK(out.front_.size() >= next_front.size());
+  CHECK(gpu::detail::storage_of(out).front_.size() >= next_front.size());
   REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
   CHECK(complete);
   CHECK(out.front_complete());
@@ -338,20 +371,20 @@ TEST_CASE("GPU lazy stealing from a front without a host round trip: traverse_as
   // asks for traverse(), which grows them until a pass fits; the same with tiny deques, whose
   // hand-backs overflow too, and with traverse() alone.
   REQUIRE(processed > front.size() + 1);  // the flat start leaves children
-  out.list_room_ = 1;
+  gpu::detail::storage_of(out).list_room_ = 1;
   REQUIRE(run_async(FlatLazy{}, complete, on_device) == fresh);
   CHECK_FALSE(complete);
-  CHECK(out.list_room_ > 1);
+  CHECK(gpu::detail::storage_of(out).list_room_ > 1);
   CHECK(as_pairs(out.download_front()) == next_front);
-  out.list_room_ = 1;
+  gpu::detail::storage_of(out).list_room_ = 1;
   REQUIRE(run_async(TinyFlatLazy{}, complete, on_device) == fresh);
   CHECK(as_pairs(out.download_front()) == next_front);
-  out.list_room_ = 1;
+  gpu::detail::storage_of(out).list_room_ = 1;
   REQUIRE(gpu_pairs<TinyFlatLazy>(task, front, out, true) == fresh);
   CHECK(out.stats().relaunches > 0);
   CHECK(as_pairs(out.download_front()) == next_front);
-  const auto from_root = gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out, true);
-  out.list_room_ = 1;  // from the root: tiny deques hand items back into a list of one
+  const auto from_root = gpu_pairs<gpu::LazyStealScheduler>(task, {NodePair{0, 0}}, out, true);
+  gpu::detail::storage_of(out).list_room_ = 1;  // from the root: tiny deques hand items back into a list of one
   REQUIRE(gpu_pairs<TinyLazy>(task, {NodePair{0, 0}}, out, true) == from_root);
   // A start the flat launch does not take (the root) runs as traverse() does: nothing to collect.
   gpu::DeviceBuffer<NodePair> root;
@@ -383,9 +416,9 @@ TEST_CASE("GPU lazy stealing: a start the flat launch ends reports no lazy launc
   CHECK(out.download_block_activity().empty());
   CHECK(out.download_timeline().empty());
   // Another scheduler on the same output reports none either.
-  REQUIRE(gpu_pairs<gpu::LazyStealScheduler<>>(task, {NodePair{0, 0}}, out, true) == from_root);
+  REQUIRE(gpu_pairs<gpu::LazyStealScheduler>(task, {NodePair{0, 0}}, out, true) == from_root);
   REQUIRE(out.launched_blocks() > 0);
-  REQUIRE(gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out, true) == from_root);
+  REQUIRE(gpu_pairs<gpu::StaticTaskList>(task, {NodePair{0, 0}}, out, true) == from_root);
   CHECK(out.launched_blocks() == 0);
   CHECK(out.download_block_activity().empty());
 }
@@ -485,9 +518,9 @@ TEMPLATE_TEST_CASE("GPU lazy stealing launches only blocks that are resident at 
     CHECK(last_start <= first_end);
   };
   // The defaults are compiled to fit their two blocks per SM: all of them are launched.
-  require_co_resident(gpu::LazyStealScheduler<>{}, "defaults", true);
+  require_co_resident(gpu::LazyStealScheduler{}, "defaults", true);
   // Left to the compiler's register choice (OBB: 113): fewer blocks, all resident.
-  require_co_resident(gpu::LazyStealScheduler<512, 4096, 8192, 512, 1024, 2, 8, 256, 16, true, false>{}, "no fit", false);
+  require_co_resident(NoFitLazy{}, "no fit", false);
 }
 
 TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with front tracking", "[gpu][traverse][data]") {
@@ -527,7 +560,7 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     SelfCollisionTask<Obbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
     SelfCollisionTask<Obbf> ctask{cbvh.view(), LeafFilter{nullptr, nullptr, mesh.faces().data(), false}};
     gpu::TraversalOutput<SelfCollisionTask<Obbf>> out;
-    out.front_.resize_discard(1);  // a one-entry front output: grows and reruns
+    gpu::detail::storage_of(out).front_.resize_discard(1);  // a one-entry front output: grows and reruns
     FrontTracker tracker;
     for (std::size_t s = 0; s < horse.num_steps(); ++s) {
       INFO("horse OBB step " << s);
@@ -539,9 +572,9 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
       }
       const auto expected = sorted(cpu::traverse(ctask, {NodePair{0, 0}}, false, cpu::WorkStealingScheduler{}).results);
       const auto& seeds = tracker.seeds(bvh.generation());
-      const auto got = s % 3 == 0   ? gpu_pairs<gpu::LazyStealScheduler<>>(task, seeds, out, true)
-                       : s % 3 == 1 ? gpu_pairs<gpu::GProximityBalancer<>>(task, seeds, out, true)
-                                    : gpu_pairs<gpu::StaticTaskList<>>(task, seeds, out, true);
+      const auto got = s % 3 == 0   ? gpu_pairs<gpu::LazyStealScheduler>(task, seeds, out, true)
+                       : s % 3 == 1 ? gpu_pairs<gpu::GProximityBalancer>(task, seeds, out, true)
+                                    : gpu_pairs<gpu::StaticTaskList>(task, seeds, out, true);
       REQUIRE(got == expected);
       tracker.update(out.download_front());
     }
@@ -553,7 +586,7 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
   faces.upload(mesh.faces());
   SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, faces.data(), false}};
   gpu::TraversalOutput<SelfCollisionTask<Aabbf>> out;
-  gpu_pairs<gpu::StaticTaskList<>>(task, {NodePair{0, 0}}, out, true);
+  gpu_pairs<gpu::StaticTaskList>(task, {NodePair{0, 0}}, out, true);
   FrontTracker tracker;
   tracker.update(out.download_front());
   for (std::size_t s = 1; s < horse.num_steps(); ++s) {
@@ -564,9 +597,9 @@ TEST_CASE("GPU schedulers on the real scenes and every horse-gallop step with fr
     for (std::size_t v = 0; v < f0.size(); ++v) f0[v] = horse.frame(s)[v].cast<float>(), f1[v] = horse.frame(s + 1)[v].cast<float>();
     const auto oracle = sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, f0, f1));
     const auto& seeds = tracker.seeds(bvh.generation());
-    const auto got = s % 3 == 0   ? gpu_pairs<gpu::LazyStealScheduler<>>(task, seeds, out, true)
-                     : s % 3 == 1 ? gpu_pairs<gpu::GProximityBalancer<>>(task, seeds, out, true)
-                                  : gpu_pairs<gpu::StaticTaskList<>>(task, seeds, out, true);
+    const auto got = s % 3 == 0   ? gpu_pairs<gpu::LazyStealScheduler>(task, seeds, out, true)
+                     : s % 3 == 1 ? gpu_pairs<gpu::GProximityBalancer>(task, seeds, out, true)
+                                  : gpu_pairs<gpu::StaticTaskList>(task, seeds, out, true);
     REQUIRE(got == oracle);
     tracker.update(out.download_front());
   }

@@ -2,7 +2,7 @@
 //
 //   #include <lwsccd/traverse.cuh>
 //   lwsccd::gpu::TraversalOutput<Task> out;
-//   lwsccd::gpu::traverse<lwsccd::gpu::LazyStealScheduler<>>(task, seeds, num_seeds, out, record_front, stream);
+//   lwsccd::gpu::traverse<lwsccd::gpu::LazyStealScheduler>(task, seeds, num_seeds, out, record_front, stream);
 //
 // The engine and its scheduler policies (traversal/gpu_traverse.cuh), the library's tasks (BVTT
 // self and inter collision: traversal/bvtt.hpp; rays: traversal/ray_task.hpp) and Karras's

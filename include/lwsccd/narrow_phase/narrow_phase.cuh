@@ -82,6 +82,12 @@ struct NarrowPhasePolicy {
   /// Kernels whose input length is read on the device loop over it (grid-stride) in a grid of
   /// this many blocks per SM (or fewer, where the input's room is smaller).
   static constexpr int kGridBlocksPerSm = 16;
+  /// A first run counts its screen's survivors before it runs (no rerun for want of room) and
+  /// gives the hits room for one in this many of them (on cloth-ball 1 in 20 is a contact). A run
+  /// with more hits grows the room and runs again. False: a first run starts from the initial
+  /// capacity and grows where it overflowed (a run again).
+  static constexpr bool kCountFirstRun = true;
+  static constexpr int kFirstRunHitsPerSurvivors = 8;
 };
 
 /// Sorts device hits by (first, second), the order of the CPU backend's results (CUB radix sort
@@ -162,6 +168,10 @@ class NarrowPhase {
 
   NarrowPhase(const NarrowPhase&) = delete;
   NarrowPhase& operator=(const NarrowPhase&) = delete;
+  /// Movable (its streams, events and buffers move with it); the moved-from one may only be
+  /// destroyed or assigned to.
+  NarrowPhase(NarrowPhase&&) = default;
+  NarrowPhase& operator=(NarrowPhase&&) = default;
 
   /// The method that runs on the first pass's survivors: CertifiedCcd's fallback, or Method.
   using FullTest = typename lwsccd::detail::full_test_of<Method>::type;
@@ -240,6 +250,9 @@ class NarrowPhase {
     if constexpr (kSingleFirst) return Policy::kRefineFilter && mode != CcdMode::set && Method::policy_type::kSingleSecondRound;
     else return false;
   }
+  template <class P>
+  void count_survivors(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& vf, const PairList& ee,
+                       const CcdParams<T>& params, cudaStream_t stream);
   template <class P, bool kVertexFace>
   void enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
                           const CcdParams<T>& params, List& list);
@@ -259,6 +272,7 @@ class NarrowPhase {
   T earliest_ = T(1);
   int sms_ = 1;
   bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
+  bool rooms_learned_ = false;  ///< a run has sized the lists (count_survivors on the first)
 };
 
 }  // namespace lwsccd::gpu

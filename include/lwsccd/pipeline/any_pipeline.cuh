@@ -67,9 +67,9 @@ inline std::unique_ptr<AnyPipeline> make_any_pipeline(std::shared_ptr<const Tria
       using Pipeline = CcdPipeline<BV, typename decltype(scheduler)::type, Method, T>;
       return std::make_unique<AnyPipelineAdapter<Pipeline>>(mesh, layout, params);
     };
-    if (choice.scheduler == "static") return make(PolicyTag<StaticTaskList<>>{});
-    if (choice.scheduler == "gproximity") return make(PolicyTag<GProximityBalancer<>>{});
-    return make(PolicyTag<LazyStealScheduler<>>{});
+    if (choice.scheduler == "static") return make(PolicyTag<StaticTaskList>{});
+    if (choice.scheduler == "gproximity") return make(PolicyTag<GProximityBalancer>{});
+    return make(PolicyTag<LazyStealScheduler>{});
   });
 }
 

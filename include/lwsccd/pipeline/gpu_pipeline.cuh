@@ -28,47 +28,80 @@
 
 namespace lwsccd::gpu {
 
-template <class BV = Aabbf, class Scheduler = LazyStealScheduler<>, class Method = CertifiedCcd, class T = double>
+template <class BV = Aabbf, class Scheduler = LazyStealScheduler, class Method = CertifiedCcd, class T = double>
 class CcdPipeline {
  public:
   using Task = SelfCollisionTask<BV>;
 
-  /// One self-colliding body.
-  explicit CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, PipelineParams params = {})
-      : CcdPipeline(std::move(mesh), BodyLayout{}, params) {}
+  /// One self-colliding body. The topology is uploaded on `stream`, which the constructor
+  /// synchronizes (so that a step on any stream finds it on the device).
+  explicit CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, PipelineParams params = {}, cudaStream_t stream = nullptr)
+      : CcdPipeline(std::move(mesh), BodyLayout{}, params, stream) {}
   /// Several bodies (as cpu::CcdPipeline: a body that does not self-collide costs no traversal).
-  CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
+  CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {},
+              cudaStream_t stream = nullptr)
       : mesh_(lwsccd::detail::checked_mesh(std::move(mesh), "gpu::CcdPipeline")), layout_(std::move(layout)),
-        params_(lwsccd::detail::validated(params)), features_(*mesh_), emitter_(RepresentativeTriangles(*mesh_, layout_)) {
+        params_(lwsccd::detail::validated(params)), features_(*mesh_, stream),
+        emitter_(RepresentativeTriangles(*mesh_, layout_), stream) {
     // Features that come within min_separation: their boxes, each grown by half of it, overlap.
     bvh_.set_leaf_margin(params_.min_separation / 2);
     emitter_.set_box_margin(params_.min_separation / 2);
     const std::vector<unsigned char> self_collides = lwsccd::detail::self_collision_flags(layout_);
     if (!self_collides.empty()) {
-      face_body_.upload(layout_.face_body);
-      self_collides_.upload(self_collides);
+      face_body_.upload(layout_.face_body, stream);
+      self_collides_.upload(self_collides, stream);
     }
     for (auto& e : mark_) e = CudaEvent(cudaEventDefault);
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
   }
   CcdPipeline(const CcdPipeline&) = delete;
   CcdPipeline& operator=(const CcdPipeline&) = delete;
+  /// Movable: the moved-to pipeline keeps the moved-from one's device data, front and buffers, and
+  /// steps on as it would have; the moved-from one may only be destroyed or assigned to.
+  CcdPipeline(CcdPipeline&&) = default;
+  CcdPipeline& operator=(CcdPipeline&&) = default;
+
+  // Streams: every step takes the stream its work is ordered on (default: the default stream).
+  // The step's work runs on `stream` (the narrow phase's two lists on streams of their own, forked
+  // from it and joined back), so positions written on `stream` before the call are read in order,
+  // and nothing else of the program is waited for. Each step synchronizes `stream`, not the device,
+  // once at its end (to read its counts), and more often on a first step (to size its buffers) and
+  // in a step in parts (a part at a time); growing a buffer (cudaMalloc / cudaFree) may
+  // synchronize the device, which a warm step does not do.
 
   /// One step from host positions (validated, uploaded). Positions are double (Vec3d) or float
   /// (Vec3f): float input crosses as float and is widened on the device, exactly, so the answers
   /// are certified for the float positions as given.
-  StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) { return step_from_host(x0, x1); }
-  StepResult<T> step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) { return step_from_host(x0, x1); }
+  /// @note Synchronizes `stream`.
+  StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1, cudaStream_t stream = nullptr) {
+    return step_from_host(x0, x1, stream);
+  }
+  StepResult<T> step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1, cudaStream_t stream = nullptr) {
+    return step_from_host(x0, x1, stream);
+  }
 
   /// One step from positions already in device memory (mesh().num_vertices() points each, e.g.
-  /// a simulation's own arrays; double, or float widened on the device): no host round trip.
-  /// Throws InputError for host pointers.
-  StepResult<T> step_from_device(const Vec3d* device_x0, const Vec3d* device_x1) { return from_device(device_x0, device_x1); }
-  StepResult<T> step_from_device(const Vec3f* device_x0, const Vec3f* device_x1) { return from_device(device_x0, device_x1); }
+  /// a simulation's own arrays; double, or float widened on the device): no host round trip for
+  /// them. They are read in `stream`'s order: a kernel that wrote them on `stream` needs no host
+  /// synchronisation before the call. Throws InputError for host pointers.
+  /// @note Synchronizes `stream`.
+  StepResult<T> step_from_device(const Vec3d* device_x0, const Vec3d* device_x1, cudaStream_t stream = nullptr) {
+    return from_device(device_x0, device_x1, stream);
+  }
+  StepResult<T> step_from_device(const Vec3f* device_x0, const Vec3f* device_x1, cudaStream_t stream = nullptr) {
+    return from_device(device_x0, device_x1, stream);
+  }
 
   /// As step_from_device, with the contacts left in device memory (sorted by pair, valid until the
-  /// next step): nothing crosses to the host but the counters the step reads once.
-  DeviceStepResult<T> step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) { return on_device(device_x0, device_x1); }
-  DeviceStepResult<T> step_on_device(const Vec3f* device_x0, const Vec3f* device_x1) { return on_device(device_x0, device_x1); }
+  /// next step): nothing crosses to the host but the counters the step reads once. Work enqueued
+  /// on `stream` after the call reads the contacts in order.
+  /// @note Synchronizes `stream`.
+  DeviceStepResult<T> step_on_device(const Vec3d* device_x0, const Vec3d* device_x1, cudaStream_t stream = nullptr) {
+    return on_device(device_x0, device_x1, stream);
+  }
+  DeviceStepResult<T> step_on_device(const Vec3f* device_x0, const Vec3f* device_x1, cudaStream_t stream = nullptr) {
+    return on_device(device_x0, device_x1, stream);
+  }
 
   const TriangleMesh& mesh() const { return *mesh_; }
   const BodyLayout& layout() const { return layout_; }
@@ -94,27 +127,30 @@ class CcdPipeline {
 
  private:
   template <class Q>
-  StepResult<T> step_from_host(const std::vector<Vec3<Q>>& x0, const std::vector<Vec3<Q>>& x1) {
+  StepResult<T> step_from_host(const std::vector<Vec3<Q>>& x0, const std::vector<Vec3<Q>>& x1, cudaStream_t stream) {
     reset_peak_memory();
     const auto start = std::chrono::steady_clock::now();
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1);
-    else step_->set_positions(x0, x1);
+    stream_ = stream;
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1, stream_);
+    else step_->set_positions(x0, x1, stream_);
     return run_step(start);
   }
   template <class Q>
-  StepResult<T> from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
+  StepResult<T> from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1, cudaStream_t stream) {
     reset_peak_memory();
     const auto start = std::chrono::steady_clock::now();
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
-    step_->set_positions_from_device(device_x0, device_x1);
+    stream_ = stream;
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
+    step_->set_positions_from_device(device_x0, device_x1, stream_);
     return run_step(start);
   }
   template <class Q>
-  DeviceStepResult<T> on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
+  DeviceStepResult<T> on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1, cudaStream_t stream) {
     reset_peak_memory();
     const auto start = std::chrono::steady_clock::now();
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_);
-    step_->set_positions_from_device(device_x0, device_x1);
+    stream_ = stream;
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
+    step_->set_positions_from_device(device_x0, device_x1, stream_);
     DeviceStepResult<T> r;
     run_stages(r.stats);
     const Outcome o = outcome();
@@ -127,7 +163,7 @@ class CcdPipeline {
     r.contacts.gave_up = o.gave_up;
     r.contacts.vf_counts = o.counts[0];
     r.contacts.ee_counts = o.counts[1];
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));  // the hits' sort is done
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));  // the hits' sort is done
     finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, start);
     return r;
   }
@@ -150,12 +186,12 @@ class CcdPipeline {
     StepResult<T> r;
     run_stages(r.stats);
     if (!streamed_) {
-      r.contacts = narrow_.download();
+      r.contacts = narrow_.download(stream_);
     } else {
       const Outcome& o = gathered_outcome_;
       const bool pairs = params_.mode != CcdMode::earliest;
-      r.contacts.vf = gathered_[0].download_prefix(pairs ? o.num_hits[0] : 0);
-      r.contacts.ee = gathered_[1].download_prefix(pairs ? o.num_hits[1] : 0);
+      r.contacts.vf = gathered_[0].download_prefix(pairs ? o.num_hits[0] : 0, stream_);
+      r.contacts.ee = gathered_[1].download_prefix(pairs ? o.num_hits[1] : 0, stream_);
       r.contacts.earliest_toi = o.earliest;
       r.contacts.gave_up = o.gave_up;
       r.contacts.vf_counts = o.counts[0];
@@ -225,13 +261,13 @@ class CcdPipeline {
 
   // Every stage of a step on the device (lwsccd::detail::run_stage_sequence). A whole step makes
   // one host round trip at its end (the refit's reads, the traversal's, the feature pairs' and the
-  // narrow phase's counters); its narrow phase's hits stay there (sorted on the default stream
+  // narrow phase's counters); its narrow phase's hits stay there (sorted on the step's stream
   // once collected). A step in parts (a memory budget, or part_pairs) waits for each part.
   void run_stages(StepStats& stats) {
     streamed_ = params_.device_memory_budget > 0 || params_.part_pairs > 0;
     StepInProgress step(stats);
     step.in_parts = streamed_;
-    if (!streamed_) LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0]));
+    if (!streamed_) LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0], stream_));
     lwsccd::detail::run_stage_sequence(*this, step);
   }
 
@@ -269,7 +305,7 @@ class CcdPipeline {
   }
   void stage_done(lwsccd::detail::PipelineStage stage, StepInProgress& step) {
     if (!step.in_parts) {
-      LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[static_cast<int>(stage) + 1]));
+      LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[static_cast<int>(stage) + 1], stream_));
       return;
     }
     using clock = std::chrono::steady_clock;
@@ -287,7 +323,7 @@ class CcdPipeline {
   friend void lwsccd::detail::run_stage_sequence<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
   friend void lwsccd::detail::run_narrow_parts<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
   void enqueue_narrow_phase() {
-    narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd_params());
+    narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd_params(), stream_);
   }
 
   // LeafFilter::node_body for the current tree (after a build: topology only).
@@ -387,6 +423,7 @@ class CcdPipeline {
   bool reset_next_ = false;
   bool emitter_sized_ = false;  ///< the emitter's buffers have been sized by a step
   NarrowPhase<Method, T> narrow_;
+  cudaStream_t stream_ = nullptr;  ///< the current (or last) step's stream, the caller's
   CudaEvent mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
   // Streaming under a budget:
   bool streamed_ = false;                        ///< the last step was streamed

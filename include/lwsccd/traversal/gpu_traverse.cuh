@@ -3,7 +3,7 @@
 // ray casting, ...) and a scheduler policy:
 //
 //   lwsccd::gpu::TraversalOutput<Task> out;
-//   lwsccd::gpu::traverse<lwsccd::gpu::StaticTaskList<>>(task, seeds, num_seeds, out, record_front, stream);
+//   lwsccd::gpu::traverse<lwsccd::gpu::StaticTaskList>(task, seeds, num_seeds, out, record_front, stream);
 //
 // Schedulers (tuning knobs are static constexpr members of their policy structs):
 // - StaticTaskList: the seeds are expanded breadth first into a cut of the BVTT, split evenly
@@ -30,108 +30,14 @@
 #include <algorithm>
 #include <cstdint>
 #include <stdexcept>
+#include <type_traits>
 #include <vector>
 
 #include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/traversal/scheduler_policies.hpp"
 #include "lwsccd/traversal/traversal_task.hpp"
 
 namespace lwsccd::gpu {
-
-/// Static split of a BVTT cut over the blocks, no balancing.
-template <int BlockThreads = 128, int SharedStack = 1024, int GlobalStack = 16384, int ItemsPerBlock = 256>
-struct StaticTaskList {
-  static constexpr int kBlockThreads = BlockThreads;
-  static constexpr int kSharedStack = SharedStack;  ///< items per block in shared memory
-  static constexpr int kGlobalStack = GlobalStack;  ///< items per block in global memory (spill)
-  static constexpr int kItemsPerBlock = ItemsPerBlock;  ///< size of the initial cut per block
-  static constexpr int kBlocksPerSm = 2;
-  static constexpr bool kIsStatic = true;
-};
-
-/// gProximity-style balancing: traverse until too many blocks idle, then rebalance.
-template <int BlockThreads = 128, int SharedStack = 1024, int GlobalStack = 16384, int IdlePercent = 50>
-struct GProximityBalancer {
-  static constexpr int kBlockThreads = BlockThreads;
-  static constexpr int kSharedStack = SharedStack;
-  static constexpr int kGlobalStack = GlobalStack;
-  static constexpr int kIdlePercent = IdlePercent;  ///< stop the traversal kernel when this share of blocks idles
-  static constexpr int kBlocksPerSm = 2;
-  static constexpr bool kIsStatic = false;
-};
-
-/// Lazy work stealing (dissertation Algorithms 3.7-3.13): persistent blocks, a shared-memory
-/// stack per block, a deque per block in global memory that the owner fills and drains in
-/// batches, and, when a block runs dry, a lazy steal: it reads every deque's size at once and
-/// takes half of the fullest one's oldest items.
-///
-/// Defaults measured on an H100 (lwsccd-bench-traverse, docs/TRAVERSAL.md): 512-thread blocks, two
-/// per SM, batches of 512, a start from the root expanded to only 8 items per block. Blocks of 128
-/// threads left most of each SM's latency unhidden (busy 16-35%, 4-6x slower from the root).
-template <int BlockThreads = 512, int SharedStack = 4096, int DequeCapacity = 8192, int PopSize = 512,
-          int PushThreshold = 1024, int BlocksPerSm = 2, int SeedsPerBlock = 8, int MaxBackoffNs = 256,
-          int StealLockAttempts = 16, bool RandomVictim = true, bool FitBlocksPerSm = true, int FlatStartPerBlock = 512,
-          int ShareWhenHungry = -1>
-struct LazyStealScheduler {
-  static constexpr int kBlockThreads = BlockThreads;
-  static constexpr int kSharedStack = SharedStack;
-  static constexpr int kDequeCapacity = DequeCapacity;  ///< items per block deque (global memory)
-  static constexpr int kPopSize = PopSize;              ///< items moved from a deque into shared memory at once
-  static constexpr int kPushThreshold = PushThreshold;  ///< shared stack size above which a batch goes to the deque
-  static constexpr int kBlocksPerSm = BlocksPerSm;      ///< persistent blocks per SM (occupancy hides memory latency)
-  /// A start from few seeds (the root) first expands them breadth first to about this many items
-  /// per block (levels under 2,048 items in one single-block launch, larger ones a launch and a
-  /// host sync each); stealing spreads the rest.
-  static constexpr int kSeedsPerBlock = SeedsPerBlock;
-  /// A block that found nothing to steal sleeps before it looks again, from 256 ns, doubling up
-  /// to this (ns). Doubling up to 4 or 16 us was no faster on an H100 (docs/TRAVERSAL.md), so
-  /// the default keeps a fixed 256 ns.
-  static constexpr int kMaxBackoffNs = MaxBackoffNs;
-  /// A thief tries its victim's lock this many times (64 ns apart) before it looks again (0: it
-  /// waits for the lock). With kRandomVictim, 16 tries removed the
-  /// end-of-traversal convoy and made every traversal of the benchmark as fast or faster on an
-  /// H100 (fronts 1.2-1.8x); alone it made OBB fronts slower (docs/TRAVERSAL.md).
-  static constexpr int kStealLockAttempts = StealLockAttempts;
-  /// A thief picks its victim at random among the deques within a factor of two of the fullest
-  /// (false: the fullest, ties to the nearest after it), so that thieves
-  /// that all saw the same fullest deque do not all contend for its lock.
-  static constexpr bool kRandomVictim = RandomVictim;
-  /// Whether the kernel is compiled to fit kBlocksPerSm blocks per SM (__launch_bounds__ with that
-  /// minimum: registers capped, spilled if need be; false: the compiler's choice). Either way the
-  /// launch has only as many blocks as can be resident at once (at most kBlocksPerSm per SM, by
-  /// cudaOccupancyMaxActiveBlocksPerMultiprocessor): a persistent block waiting for a slot would
-  /// start only when the others were done: without either, the kernels that take more than 64
-  /// registers (OBB: 113, rays: 88-94) ran half their blocks after the others.
-  /// Fitting (OBB: 64 registers, 104 bytes spilled) was faster than one block per SM on every
-  /// OBB traversal and ray set on an H100 (docs/TRAVERSAL.md); AABB takes 64 either way.
-  static constexpr bool kFitBlocksPerSm = FitBlocksPerSm;
-  /// A start of at least this many items per launched block (a front kept from the last step)
-  /// is processed first by one flat launch, a thread per item, and the blocks share only the
-  /// children it leaves (0: never). From a front most items end at once
-  /// (leaf pairs, or boxes that no longer overlap: horse-gallop processes ~1.06 items per front
-  /// item), so the persistent blocks' rounds of kPopSize items were the cost. On an H100 (AABB
-  /// fronts): cloth-ball 0.56 -> 0.21 ms, cloth-funnel 0.058 -> 0.030 (512 per block; 2,048
-  /// left it out), horse-gallop 0.32 -> 0.23 (docs/TRAVERSAL.md).
-  static constexpr int kFlatStartPerBlock = FlatStartPerBlock;
-  /// A block holding more than this many items (and at most kPushThreshold) moves the older half
-  /// to its deque when its deque is empty and some block is looking for work (a count of the
-  /// blocks in a search, read once a round), instead of only above kPushThreshold: the CPU
-  /// scheduler's rule (share when the deque is empty) asked for by demand. 0: never; negative
-  /// (the default): half of kPushThreshold. On an H100 (docs/TRAVERSAL.md, "Sharing on demand",
-  /// five runs) half of the default's 1,024 took cloth-funnel from the root below Karras's
-  /// per-leaf traversal (AABB 0.32-0.35 -> 0.28-0.29 ms, Karras 0.29-0.31; OBB 0.57-0.62 ->
-  /// 0.53-0.54) and was as fast or faster on the other OBB traversals and every front; AABB from
-  /// the root paid 8% on armadillo-rollers and 0-11% on cloth-ball. A quarter or an eighth was
-  /// slower than half everywhere; three quarters (AABB only) cost nothing there but only tied
-  /// Karras on cloth-funnel.
-  static constexpr int kShareWhenHungry = ShareWhenHungry < 0 ? PushThreshold / 2 : ShareWhenHungry;
-  static constexpr bool kIsStatic = false;
-  static constexpr bool kIsLazySteal = true;
-};
-
-/// LazyStealScheduler with room for 16 children per thread and round (RayWalkTask<>'s items):
-/// 128-thread blocks, six per SM, a shared stack of 4,096 items. The fastest shape for ray walks
-/// on an H100 among those lwsccd-bench-rays --walks weighs (docs/RAYTRACING.md).
-using RayWalkLazySteal = LazyStealScheduler<128, 4096, 8192, 512, 2048, 6>;
 
 /// LazyStealScheduler: what one persistent block did in a launch (clock64 cycles of its SM).
 struct BlockActivity {
@@ -177,86 +83,18 @@ struct TimelineSink {
 };
 }  // namespace detail
 
-/// Owning device outputs of a traversal (reused across calls; they only grow).
 template <class Task>
-class TraversalOutput {
- public:
+class TraversalOutput;
+
+namespace detail {
+/// A traversal's device storage: the outputs and the schedulers' own lists, which the scheduler
+/// files (detail/) fill. TraversalOutput owns one privately; the schedulers reach it through
+/// storage_of(), and their kernels get trivially copyable views of it (Outputs, raw pointers).
+template <class Task>
+struct TraversalStorage {
   using item_type = typename Task::item_type;
   using result_type = typename Task::result_type;
 
-  std::size_t num_results() const { return num_results_; }
-  std::size_t num_front() const { return num_front_; }
-  const result_type* results() const { return results_.data(); }
-  const item_type* front() const { return front_.data(); }
-  const TraversalStats& stats() const { return stats_; }
-  /// LazyStealScheduler: what each persistent block did in the last launch of the lazy kernel in
-  /// the last traversal (empty when it launched none: a start that the flat launch ended, as a
-  /// front restarted on unchanged positions is, or another scheduler).
-  std::vector<BlockActivity> download_block_activity(cudaStream_t stream = nullptr) const {
-    return prefix(block_activity_, std::min<std::size_t>(launched_blocks_, block_activity_.size()), stream);
-  }
-  /// LazyStealScheduler: the persistent blocks of the last launch in the last traversal (SMs x the
-  /// blocks per SM that its kernel can keep resident, at most the policy's kBlocksPerSm; 0 when
-  /// that traversal launched the lazy kernel not at all).
-  int launched_blocks() const { return launched_blocks_; }
-  /// LazyStealScheduler: record every block's timeline in the following traversals, up to
-  /// `events_per_block` events per block (0, the default: off). Costs a global-timer read and a
-  /// store per phase change; for measuring, not for production runs.
-  void record_timeline(int events_per_block) {
-    if (events_per_block < 0) throw std::invalid_argument("lwsccd: record_timeline: events_per_block must be >= 0");
-    timeline_capacity_ = events_per_block;
-  }
-  /// The timelines of the last launch of the lazy kernel in the last traversal (empty when not
-  /// recorded, or when that traversal launched none).
-  std::vector<BlockTimeline> download_timeline(cudaStream_t stream = nullptr) const {
-    std::vector<BlockTimeline> blocks;
-    if (timeline_capacity_ == 0 || timeline_counts_.size() == 0 || launched_blocks_ == 0) return blocks;
-    const std::vector<unsigned> counts =
-        prefix(timeline_counts_, std::min<std::size_t>(launched_blocks_, timeline_counts_.size()), stream);
-    const std::vector<TimelineEvent> events = prefix(timeline_, timeline_.size(), stream);
-    const auto room = static_cast<std::size_t>(timeline_capacity_);
-    blocks.resize(counts.size());
-    for (std::size_t b = 0; b < counts.size(); ++b) {
-      blocks[b].recorded = counts[b];
-      const std::size_t kept = std::min<std::size_t>(counts[b], room);
-      blocks[b].events.assign(events.begin() + static_cast<std::ptrdiff_t>(b * room),
-                              events.begin() + static_cast<std::ptrdiff_t>(b * room + kept));
-    }
-    return blocks;
-  }
-  std::vector<result_type> download_results(cudaStream_t stream = nullptr) const { return prefix(results_, num_results_, stream); }
-  std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(front_, num_front_, stream); }
-  std::size_t device_bytes() const {
-    return results_.capacity_bytes() + front_.capacity_bytes() + work_.capacity_bytes() + next_.capacity_bytes() +
-           stacks_.capacity_bytes() + stacks_alt_.capacity_bytes() + sizes_.capacity_bytes() + sizes_alt_.capacity_bytes() +
-           locks_.capacity_bytes() + deque_ends_.capacity_bytes() + block_activity_.capacity_bytes() +
-           timeline_.capacity_bytes() + timeline_counts_.capacity_bytes() + counters_.capacity_bytes();
-  }
-  /// Caps the bytes the results and front outputs may grow to (0: no cap). A traversal whose
-  /// outputs would need more stops without growing them and reports complete() == false; the
-  /// caller runs fewer seeds at a time (gpu::CcdPipeline streams its seeds so under a budget).
-  void set_output_limit(std::size_t bytes) { output_limit_ = bytes; }
-  std::size_t output_limit() const { return output_limit_; }
-  /// False when the last traversal stopped at the output limit (its outputs are then incomplete).
-  bool complete() const { return complete_; }
-  /// gpu::expand: the items of the cut it produced (valid until the next traversal).
-  const item_type* expanded() const { return work_.data(); }
-
-  /// The number of results as the device holds it (capped at the output's room): what a later
-  /// stage on the same stream reads where traverse_async() left the count on the device.
-  DeviceCount result_count() const;
-  /// After traverse_async() and a synchronisation of its stream: reads the counts (num_results(),
-  /// num_front(), stats()). Returns whether the results are complete: false when the results'
-  /// output overflowed (it is grown now) or blocks handed items back (a full deque, a full list):
-  /// run traverse() from the same seeds. A front that outgrew its output leaves the results
-  /// complete and the front unusable (front_complete() false, num_front() 0; the output is grown
-  /// for the next traversal): start the next traversal from elsewhere, e.g. this one's seeds,
-  /// which are as valid a cut. True, with nothing to do, after traverse().
-  bool collect();
-  /// False after a collect() whose front did not fit its output; true after traverse().
-  bool front_complete() const { return front_complete_; }
-
-  // Storage used by the schedulers.
   DeviceBuffer<result_type> results_;
   DeviceBuffer<item_type> front_, work_, next_, stacks_, stacks_alt_;
   DeviceBuffer<int> sizes_, sizes_alt_, locks_;
@@ -278,6 +116,123 @@ class TraversalOutput {
   bool awaiting_front_ = false;    ///< and recorded a front
   TraversalStats stats_;
 
+  std::size_t device_bytes() const {
+    return results_.capacity_bytes() + front_.capacity_bytes() + work_.capacity_bytes() + next_.capacity_bytes() +
+           stacks_.capacity_bytes() + stacks_alt_.capacity_bytes() + sizes_.capacity_bytes() + sizes_alt_.capacity_bytes() +
+           locks_.capacity_bytes() + deque_ends_.capacity_bytes() + block_activity_.capacity_bytes() +
+           timeline_.capacity_bytes() + timeline_counts_.capacity_bytes() + counters_.capacity_bytes();
+  }
+};
+
+/// The storage of `out`, for the scheduler files and the traversal's entry points.
+template <class Task>
+TraversalStorage<Task>& storage_of(TraversalOutput<Task>& out);
+template <class Task>
+const TraversalStorage<Task>& storage_of(const TraversalOutput<Task>& out);
+}  // namespace detail
+
+/// Owning device outputs of a traversal (reused across calls; they only grow). Its storage is
+/// private: read it through the accessors below, pass it to traverse() and its kin.
+template <class Task>
+class TraversalOutput {
+ public:
+  using item_type = typename Task::item_type;
+  using result_type = typename Task::result_type;
+
+  std::size_t num_results() const { return s_.num_results_; }
+  std::size_t num_front() const { return s_.num_front_; }
+  const result_type* results() const { return s_.results_.data(); }
+  const item_type* front() const { return s_.front_.data(); }
+  const TraversalStats& stats() const { return s_.stats_; }
+  /// LazyStealScheduler: what each persistent block did in the last launch of the lazy kernel in
+  /// the last traversal (empty when it launched none: a start that the flat launch ended, as a
+  /// front restarted on unchanged positions is, or another scheduler).
+  std::vector<BlockActivity> download_block_activity(cudaStream_t stream = nullptr) const {
+    return prefix(s_.block_activity_, std::min<std::size_t>(s_.launched_blocks_, s_.block_activity_.size()), stream);
+  }
+  /// LazyStealScheduler: the persistent blocks of the last launch in the last traversal (SMs x the
+  /// blocks per SM that its kernel can keep resident, at most the policy's kBlocksPerSm; 0 when
+  /// that traversal launched the lazy kernel not at all).
+  int launched_blocks() const { return s_.launched_blocks_; }
+  /// LazyStealScheduler: record every block's timeline in the following traversals, up to
+  /// `events_per_block` events per block (0, the default: off). Costs a global-timer read and a
+  /// store per phase change; for measuring, not for production runs.
+  void record_timeline(int events_per_block) {
+    if (events_per_block < 0) throw std::invalid_argument("lwsccd: record_timeline: events_per_block must be >= 0");
+    s_.timeline_capacity_ = events_per_block;
+  }
+  /// The timelines of the last launch of the lazy kernel in the last traversal (empty when not
+  /// recorded, or when that traversal launched none).
+  std::vector<BlockTimeline> download_timeline(cudaStream_t stream = nullptr) const {
+    std::vector<BlockTimeline> blocks;
+    if (s_.timeline_capacity_ == 0 || s_.timeline_counts_.size() == 0 || s_.launched_blocks_ == 0) return blocks;
+    const std::vector<unsigned> counts =
+        prefix(s_.timeline_counts_, std::min<std::size_t>(s_.launched_blocks_, s_.timeline_counts_.size()), stream);
+    const std::vector<TimelineEvent> events = prefix(s_.timeline_, s_.timeline_.size(), stream);
+    const auto room = static_cast<std::size_t>(s_.timeline_capacity_);
+    blocks.resize(counts.size());
+    for (std::size_t b = 0; b < counts.size(); ++b) {
+      blocks[b].recorded = counts[b];
+      const std::size_t kept = std::min<std::size_t>(counts[b], room);
+      blocks[b].events.assign(events.begin() + static_cast<std::ptrdiff_t>(b * room),
+                              events.begin() + static_cast<std::ptrdiff_t>(b * room + kept));
+    }
+    return blocks;
+  }
+  std::vector<result_type> download_results(cudaStream_t stream = nullptr) const {
+    return prefix(s_.results_, s_.num_results_, stream);
+  }
+  std::vector<item_type> download_front(cudaStream_t stream = nullptr) const { return prefix(s_.front_, s_.num_front_, stream); }
+  /// Device bytes held (every buffer's capacity).
+  std::size_t device_bytes() const { return s_.device_bytes(); }
+  /// Of those, the results' and the front's outputs; the lists the seeds are expanded into.
+  std::size_t output_bytes() const { return s_.results_.capacity_bytes() + s_.front_.capacity_bytes(); }
+  std::size_t seed_list_bytes() const { return s_.work_.capacity_bytes() + s_.next_.capacity_bytes(); }
+
+  /// Trades the front's buffer for `buffer` (its contents become the caller's: num_front() items;
+  /// the output then has `buffer`'s old storage, resized to `room` items): keeps a front, e.g. as
+  /// the next traversal's seeds, without a copy.
+  void exchange_front(DeviceBuffer<item_type>& buffer, std::size_t room) {
+    std::swap(buffer, s_.front_);
+    s_.front_.resize_discard(room);
+  }
+  /// Frees the front's output (a traversal that records one allocates it again).
+  void release_front() { s_.front_ = DeviceBuffer<item_type>(); }
+  /// Frees the schedulers' own lists and stacks (scratch between traversals; the next traversal
+  /// allocates them again at the sizes they had reached). The outputs stay.
+  void release_scratch() {
+    s_.work_ = DeviceBuffer<item_type>();
+    s_.next_ = DeviceBuffer<item_type>();
+    s_.stacks_ = DeviceBuffer<item_type>();
+    s_.stacks_alt_ = DeviceBuffer<item_type>();
+    s_.sizes_ = DeviceBuffer<int>();
+    s_.sizes_alt_ = DeviceBuffer<int>();
+  }
+
+  /// Caps the bytes the results and front outputs may grow to (0: no cap). A traversal whose
+  /// outputs would need more stops without growing them and reports complete() == false; the
+  /// caller runs fewer seeds at a time (gpu::CcdPipeline streams its seeds so under a budget).
+  void set_output_limit(std::size_t bytes) { s_.output_limit_ = bytes; }
+  std::size_t output_limit() const { return s_.output_limit_; }
+  /// False when the last traversal stopped at the output limit (its outputs are then incomplete).
+  bool complete() const { return s_.complete_; }
+  /// gpu::expand: the items of the cut it produced (valid until the next traversal).
+  const item_type* expanded() const { return s_.work_.data(); }
+
+  /// The number of results as the device holds it (capped at the output's room): what a later
+  /// stage on the same stream reads where traverse_async() left the count on the device.
+  DeviceCount result_count() const;
+  /// After traverse_async() and a synchronisation of its stream: reads the counts (num_results(),
+  /// num_front(), stats()). Returns whether the results are complete: false when the results'
+  /// output overflowed (it is grown now) or blocks handed items back (a full deque, a full list):
+  /// run traverse() from the same seeds. A front that outgrew its output leaves the results
+  /// complete and the front unusable (front_complete() false, num_front() 0; the output is grown
+  /// for the next traversal): start the next traversal from elsewhere, e.g. this one's seeds,
+  /// which are as valid a cut. True, with nothing to do, after traverse().
+  bool collect();
+  /// False after a collect() whose front did not fit its output; true after traverse().
+  bool front_complete() const { return s_.front_complete_; }
+
  private:
   template <class T>
   static std::vector<T> prefix(const DeviceBuffer<T>& b, std::size_t n, cudaStream_t stream) {
@@ -288,7 +243,22 @@ class TraversalOutput {
     }
     return out;
   }
+
+  detail::TraversalStorage<Task> s_;
+  friend detail::TraversalStorage<Task>& detail::storage_of<Task>(TraversalOutput<Task>&);
+  friend const detail::TraversalStorage<Task>& detail::storage_of<Task>(const TraversalOutput<Task>&);
 };
+
+namespace detail {
+template <class Task>
+TraversalStorage<Task>& storage_of(TraversalOutput<Task>& out) {
+  return out.s_;
+}
+template <class Task>
+const TraversalStorage<Task>& storage_of(const TraversalOutput<Task>& out) {
+  return out.s_;
+}
+}  // namespace detail
 
 /// Runs `task` from the device array of seeds to completion with Scheduler. Synchronizes.
 template <class Scheduler, class Task>

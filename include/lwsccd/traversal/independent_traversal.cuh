@@ -76,8 +76,9 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
 /// All self-collision candidate pairs by independent per-leaf traversals. Uses `out` like
 /// traverse() does (results grow and the launch reruns when they overflow); records no front.
 template <class BV, class Policy = IndependentTraversalPolicy>
-void independent_self_traversal(const SelfCollisionTask<BV>& task, TraversalOutput<SelfCollisionTask<BV>>& out,
+void independent_self_traversal(const SelfCollisionTask<BV>& task, TraversalOutput<SelfCollisionTask<BV>>& output,
                                 cudaStream_t stream = nullptr) {
+  detail::TraversalStorage<SelfCollisionTask<BV>>& out = detail::storage_of(output);
   detail::ensure(out.counters_, detail::kCounters);
   if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
   if (out.front_.size() == 0) out.front_.resize_discard(1);

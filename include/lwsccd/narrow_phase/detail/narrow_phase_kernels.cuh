@@ -62,6 +62,23 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   id_limit_ = mesh.num_features();
   const MeshFeatures view = mesh.view();
   const PairList inputs[2] = {vf, ee};
+  if constexpr (kSingleFirst) {  // the single-precision passes' positions, once for every window and the count below
+    const std::size_t vertices = static_cast<std::size_t>(mesh.num_vertices);
+    single_.resize_discard(std::max<std::size_t>(vertices, 1));
+    const unsigned blocks = grid_for(vertices, 256, 8);
+    if (blocks > 0) {
+      detail::single_vertices_kernel<P><<<blocks, 256, 0, stream>>>(x0, x1, vertices, single_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
+  }
+  // A first run has no rooms learned yet: it counts the screen's survivors first (one more
+  // screen and one synchronisation of `stream`), so that its lists fit and it runs once.
+  if constexpr (kTwoPass && Policy::kCountFirstRun) {
+    if (!rooms_learned_) {
+      rooms_learned_ = true;
+      count_survivors(view, x0, x1, vf, ee, params, stream);
+    }
+  }
   for (int k = 0; k < 2; ++k) {
     List& l = lists_[k];
     const std::size_t room = inputs[k].count.room;
@@ -108,15 +125,6 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   // Other modes and methods: one window, the caller's.
   const bool windows = kCertified && params.mode == CcdMode::earliest;
   unsigned long long* control = control_.data();
-  if constexpr (kSingleFirst) {  // the single-precision passes' positions, once for every window
-    const std::size_t vertices = static_cast<std::size_t>(mesh.num_vertices);
-    single_.resize_discard(std::max<std::size_t>(vertices, 1));
-    const unsigned blocks = grid_for(vertices, 256, 8);
-    if (blocks > 0) {
-      detail::single_vertices_kernel<P><<<blocks, 256, 0, stream>>>(x0, x1, vertices, single_.data());
-      LWSCCD_CUDA_CHECK_LAUNCH();
-    }
-  }
   for (int round = 0;; ++round) {
     CcdParams<T> limited = params;
     if constexpr (kCertified)
@@ -148,6 +156,49 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counters.data(), l.counters.data(), detail::kNarrowCounters * sizeof(unsigned long long),
                                       cudaMemcpyDeviceToHost, stream));
   earliest_only_ = params.mode == CcdMode::earliest;
+}
+
+// The first run's sizing: the screen alone over both lists (its survivors only counted: no room
+// for them yet), then their rooms from the counts, and the hits' room from a share of them (most
+// survivors are no contact: cloth-ball's 2.31 M survivors hold 114 K contacts). The screen then
+// runs again in the run proper. Mode earliest counts over the whole time limit, which holds every
+// window's survivors.
+template <class Method, class T, class Policy>
+template <class P>
+void NarrowPhase<Method, T, Policy>::count_survivors(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                     const PairList& vf, const PairList& ee, const CcdParams<T>& params,
+                                                     cudaStream_t stream) {
+  if constexpr (kTwoPass) {
+    unsigned long long* control = control_.data();
+    detail::window_begin_kernel<><<<1, 1, 0, stream>>>(control, lists_[0].counters.data(), lists_[1].counters.data(), vf.count,
+                                                     ee.count, true);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
+    const PairList inputs[2] = {vf, ee};
+    for (int k = 0; k < 2; ++k) {
+      List& l = lists_[k];
+      LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
+      const unsigned blocks = grid_for(inputs[k].count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
+      if (blocks == 0) continue;
+      if (k == 0)
+        detail::screen_kernel<Method, true, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, single_.data(), inputs[k], params, control, nullptr, 0, l.counters.data());
+      else
+        detail::screen_kernel<Method, false, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, single_.data(), inputs[k], params, control, nullptr, 0, l.counters.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
+    join_lists(stream);
+    for (auto& l : lists_)
+      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counters.data(), l.counters.data(), detail::kNarrowCounters * sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToHost, stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
+    for (auto& l : lists_) {
+      const unsigned long long survivors = l.host_counters.data()[detail::kSurvivors];
+      l.work_room = std::max(l.work_room, detail::grown_room(survivors));
+      l.hit_room = std::max(l.hit_room, detail::grown_room(survivors / Policy::kFirstRunHitsPerSurvivors));
+    }
+  }
 }
 
 // Pass 1 on the list's stream: two-pass methods' cheap first step on every pair (survivors

@@ -21,7 +21,7 @@ namespace lwsccd::gpu {
 template <class BV, class Scheduler, class Method, class T>
 void CcdPipeline<BV, Scheduler, Method, T>::refit_part(StepInProgress& step) {
   refit_stage(step.stats, true);
-  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
 }
 
 // The budget checked against what the step holds after its refit, the hits so far cleared, and
@@ -94,16 +94,16 @@ void CcdPipeline<BV, Scheduler, Method, T>::traversal_part(StepInProgress& step)
   const std::size_t budget = step.budget;
   if (step.expansion_due) {
     step.expansion_due = false;
-    root_.upload(std::vector<NodePair>{NodePair{0, 0}});
+    root_.upload(std::vector<NodePair>{NodePair{0, 0}}, stream_);
     traversal_.set_output_limit(traversal_output_limit());
-    step.num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, recording_front_);
+    step.num_seeds = expand(task, root_.data(), 1, StreamingPolicy::kCutItems, traversal_, recording_front_, stream_);
     if (!traversal_.complete())
       throw Error("gpu::CcdPipeline: the device memory budget of " + std::to_string(budget) +
                   " bytes cannot hold the first levels of the traversal; give it more");
     cut_.resize_discard(std::max<std::size_t>(step.num_seeds, 1));
     if (step.num_seeds)
       LWSCCD_CUDA_CHECK(
-          cudaMemcpyAsync(cut_.data(), traversal_.expanded(), step.num_seeds * sizeof(NodePair), cudaMemcpyDeviceToDevice));
+          cudaMemcpyAsync(cut_.data(), traversal_.expanded(), step.num_seeds * sizeof(NodePair), cudaMemcpyDeviceToDevice, stream_));
     step.seeds = cut_.data();
     stats.bvtt_nodes += traversal_.stats().items_processed;
     keep_part_front(step);
@@ -112,7 +112,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::traversal_part(StepInProgress& step)
     stats.triangle_pairs += met_size_;
     if (met_size_)
       LWSCCD_CUDA_CHECK(
-          cudaMemcpyAsync(met_.data(), traversal_.results(), met_size_ * sizeof(TrianglePair), cudaMemcpyDeviceToDevice));
+          cudaMemcpyAsync(met_.data(), traversal_.results(), met_size_ * sizeof(TrianglePair), cudaMemcpyDeviceToDevice, stream_));
     start_seed_parts(step);
     return;
   }
@@ -121,7 +121,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::traversal_part(StepInProgress& step)
   while (true) {
     n = std::min(step.seeds_per_part, step.num_seeds - step.next_seed);
     traversal_.set_output_limit(traversal_output_limit());
-    traverse<Scheduler>(task, step.seeds + step.next_seed, n, traversal_, recording_front_);
+    traverse<Scheduler>(task, step.seeds + step.next_seed, n, traversal_, recording_front_, stream_);
     if (traversal_.complete() && cap && traversal_.num_results() > cap && n > 1) {
       step.seeds_per_part = n / 2;  // more candidates than a part may have: fewer seeds
       ++stats.reruns;
@@ -163,10 +163,10 @@ void CcdPipeline<BV, Scheduler, Method, T>::keep_part_front(StepInProgress& step
     give_up_next_front();
     return;
   }
-  next_front_.resize_keep(step.next_front + n, (step.next_front + n) * 5 / 4);
+  next_front_.resize_keep(step.next_front + n, (step.next_front + n) * 5 / 4, stream_);
   if (n)
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(next_front_.data() + step.next_front, traversal_.front(), n * sizeof(NodePair),
-                                      cudaMemcpyDeviceToDevice));
+                                      cudaMemcpyDeviceToDevice, stream_));
   step.next_front += n;
 }
 
@@ -240,12 +240,12 @@ void CcdPipeline<BV, Scheduler, Method, T>::feature_pairs_part(StepInProgress& s
     const std::size_t first = step.next_candidate;
     const std::size_t count = std::min(step.part_size, step.num_candidates - first);
     if (orphans)
-      emitter_.enqueue(step_->x0.data(), step_->x1.data(), static_cast<const TrianglePair*>(nullptr), 0, nullptr,
+      emitter_.enqueue(step_->x0.data(), step_->x1.data(), static_cast<const TrianglePair*>(nullptr), 0, stream_,
                        OrphanRange{first, count}, boxes_current_);
     else
-      emitter_.enqueue(step_->x0.data(), step_->x1.data(), step.candidates + first, count, nullptr, OrphanRange{}, boxes_current_);
+      emitter_.enqueue(step_->x0.data(), step_->x1.data(), step.candidates + first, count, stream_, OrphanRange{}, boxes_current_);
     boxes_current_ = true;  // the feature boxes are this step's from the first part on
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
     const auto counted = emitter_.counted();
     const std::size_t pairs = counted.first + counted.second;
     std::size_t allowed = narrow_allowance();
@@ -270,7 +270,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::feature_pairs_part(StepInProgress& s
       continue;
     }
     if (count) step.part_size = std::min(fits, cap);
-    if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+    if (!emitter_.collect(stream_)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
     stats.feature_pairs_vf += emitter_.num_vf();
     stats.feature_pairs_ee += emitter_.num_ee();
     step.part_first = first;
@@ -285,7 +285,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::feature_pairs_part(StepInProgress& s
 template <class BV, class Scheduler, class Method, class T>
 void CcdPipeline<BV, Scheduler, Method, T>::narrow_phase_part(StepInProgress& step) {
   if (step.part_count == 0) return;
-  narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), step.ccd);
+  narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), step.ccd, stream_);
   gather_hits();
   ++step.stats.narrow_parts;
 }
@@ -299,9 +299,9 @@ void CcdPipeline<BV, Scheduler, Method, T>::gather_hits() {
   const FeatureHit<T>* hits[2] = {narrow_.vf_hits(), narrow_.ee_hits()};
   for (int k = 0; k < 2 && pairs; ++k) {
     if (!found[k]) continue;
-    gathered_[k].resize_keep(o.num_hits[k] + found[k], (o.num_hits[k] + found[k]) * 3 / 2);
+    gathered_[k].resize_keep(o.num_hits[k] + found[k], (o.num_hits[k] + found[k]) * 3 / 2, stream_);
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(gathered_[k].data() + o.num_hits[k], hits[k], found[k] * sizeof(FeatureHit<T>),
-                                      cudaMemcpyDeviceToDevice));
+                                      cudaMemcpyDeviceToDevice, stream_));
     o.num_hits[k] += found[k];
   }
   o.earliest = std::min(o.earliest, narrow_.earliest_toi());
@@ -331,9 +331,12 @@ void CcdPipeline<BV, Scheduler, Method, T>::complete_step_in_parts(StepInProgres
   using clock = std::chrono::steady_clock;
   const auto t = clock::now();
   if (params_.mode != CcdMode::earliest)
-    for (int k = 0; k < 2; ++k) gathered_sorter_.sort(gathered_[k], gathered_outcome_.num_hits[k], features_.num_features());
+    for (int k = 0; k < 2; ++k) gathered_sorter_.sort(gathered_[k], gathered_outcome_.num_hits[k], features_.num_features(), stream_);
   for (int k = 0; k < 2; ++k) gathered_outcome_.hits[k] = gathered_[k].data();
-  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
+  // The lazy scheduler's lists grow with the items its blocks hand back, which vary from run to
+  // run: where they took the step past its budget, they go (the next traversal makes them again).
+  if (params_.device_memory_budget && device_bytes() > params_.device_memory_budget) traversal_.release_scratch();
   stats.narrow_ms += std::chrono::duration<double, std::milli>(clock::now() - t).count();
 }
 
@@ -345,7 +348,7 @@ bool CcdPipeline<BV, Scheduler, Method, T>::give_up_next_front() {
   recording_front_ = false;
   front_refused_generation_ = bvh_.generation();
   next_front_ = DeviceBuffer<NodePair>();
-  traversal_.front_ = DeviceBuffer<NodePair>();  // regrown to one entry by a traversal without a front
+  traversal_.release_front();  // regrown to one entry by a traversal without a front
   return true;
 }
 
@@ -355,11 +358,11 @@ bool CcdPipeline<BV, Scheduler, Method, T>::give_up_next_front() {
 template <class BV, class Scheduler, class Method, class T>
 std::size_t CcdPipeline<BV, Scheduler, Method, T>::held_beside_parts() const {
   const std::size_t own = emitter_.list_bytes() + narrow_.device_bytes();
-  const std::size_t outputs = traversal_.results_.capacity_bytes() + traversal_.front_.capacity_bytes();
+  const std::size_t outputs = traversal_.output_bytes();
   const std::size_t limit = traversal_output_limit();
   std::size_t later = limit > outputs ? limit - outputs : 0;
   // The scheduler's lists of a part's seeds (and of what they first expand to) may still grow.
-  const std::size_t seed_lists = traversal_.work_.capacity_bytes() + traversal_.next_.capacity_bytes();
+  const std::size_t seed_lists = traversal_.seed_list_bytes();
   if (seed_list_bytes() > seed_lists) later += seed_list_bytes() - seed_lists;
   const std::size_t gathered = gathered_outcome_.num_hits[0] + gathered_outcome_.num_hits[1];
   later += gathered * (2 * sizeof(FeatureHit<T>) + 24) * 5 / 4;  // keys, sorted copy, CUB's temporary

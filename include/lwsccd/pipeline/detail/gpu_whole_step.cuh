@@ -37,13 +37,13 @@ template <class BV, class Scheduler, class Method, class T>
 bool CcdPipeline<BV, Scheduler, Method, T>::refit_stage(StepStats& stats, bool wait) {
   bool pending = false;
   if (!built_ || rebuild_due_) {
-    bvh_.build(*step_);
+    bvh_.build(*step_, stream_);
     built_ = stats.rebuilt = true;
     rebuild_due_ = false;
   } else if (wait) {
-    stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor});
+    stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor}, stream_);
   } else {
-    bvh_.refit_enqueue(*step_);
+    bvh_.refit_enqueue(*step_, stream_);
     pending = true;
   }
   if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
@@ -53,7 +53,7 @@ bool CcdPipeline<BV, Scheduler, Method, T>::refit_stage(StepStats& stats, bool w
 template <class BV, class Scheduler, class Method, class T>
 void CcdPipeline<BV, Scheduler, Method, T>::collect_refit() {
   try {
-    rebuild_due_ = bvh_.collect_refit(RebuildPolicy{params_.rebuild_factor});
+    rebuild_due_ = bvh_.collect_refit(RebuildPolicy{params_.rebuild_factor}, stream_);
   } catch (...) {
     front_size_ = 0;
     throw;
@@ -63,11 +63,11 @@ void CcdPipeline<BV, Scheduler, Method, T>::collect_refit() {
 template <class BV, class Scheduler, class Method, class T>
 void CcdPipeline<BV, Scheduler, Method, T>::enqueue_feature_pairs() {
   using OrphanRange = typename FeatureEmitter<>::OrphanRange;
-  emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.result_count(), nullptr,
+  emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.result_count(), stream_,
                    OrphanRange{0, emitter_.num_orphans()}, false);
   if (!emitter_sized_) {
-    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
-    if (!emitter_.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
+    if (!emitter_.collect(stream_)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
   }
   emitter_sized_ = true;
 }
@@ -80,10 +80,10 @@ void CcdPipeline<BV, Scheduler, Method, T>::complete_whole_step(StepInProgress& 
     if (refit_pending_) collect_refit();
     refit_pending_ = false;
     if (!traversal_.collect()) {  // an output or a deque overflowed: the traversal again, waiting
-      traverse<Scheduler>(traversal_task(), seeds_.data(), front_size_, traversal_, params_.front_tracking);
+      traverse<Scheduler>(traversal_task(), seeds_.data(), front_size_, traversal_, params_.front_tracking, stream_);
       enqueue_feature_pairs();
       ++stats.reruns;
-    } else if (emitter_.collect() && narrow_.collect()) {
+    } else if (emitter_.collect(stream_) && narrow_.collect()) {
       break;
     } else {
       ++stats.reruns;
@@ -106,14 +106,15 @@ void CcdPipeline<BV, Scheduler, Method, T>::update_node_bodies() {
   const index_t n = view.num_leaves;
   body_changes_.resize_discard(static_cast<std::size_t>(n));
   node_body_.resize_discard(static_cast<std::size_t>(view.num_nodes()));
-  detail::body_change_kernel<<<static_cast<unsigned>((n + 255) / 256), 256>>>(view.leaf_primitive, n, face_body_.data(),
-                                                                               body_changes_.data());
+  detail::body_change_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream_>>>(view.leaf_primitive, n,
+                                                                                          face_body_.data(), body_changes_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, body_changes_.data(), body_changes_.data(), n));
+  LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, body_changes_.data(), body_changes_.data(), n, stream_));
   scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
-  LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, body_changes_.data(), body_changes_.data(), n));
-  detail::node_body_kernel<<<static_cast<unsigned>((view.num_nodes() + 255) / 256), 256>>>(
+  LWSCCD_CUDA_CHECK(
+      cub::DeviceScan::InclusiveSum(scratch_.data(), bytes, body_changes_.data(), body_changes_.data(), n, stream_));
+  detail::node_body_kernel<<<static_cast<unsigned>((view.num_nodes() + 255) / 256), 256, 0, stream_>>>(
       view, body_changes_.data(), face_body_.data(), node_body_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   node_body_generation_ = bvh_.generation();
@@ -125,10 +126,10 @@ bool CcdPipeline<BV, Scheduler, Method, T>::traverse_step() {
   const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
   generation_ = bvh_.generation();
   if (restart) {
-    root_.upload(std::vector<NodePair>{NodePair{0, 0}});
-    traverse<Scheduler>(task, root_.data(), 1, traversal_, params_.front_tracking);
+    root_.upload(std::vector<NodePair>{NodePair{0, 0}}, stream_);
+    traverse<Scheduler>(task, root_.data(), 1, traversal_, params_.front_tracking, stream_);
   } else {
-    traverse_async<Scheduler>(task, seeds_.data(), front_size_, traversal_, true);
+    traverse_async<Scheduler>(task, seeds_.data(), front_size_, traversal_, true, stream_);
   }
   return restart;
 }
@@ -138,12 +139,11 @@ void CcdPipeline<BV, Scheduler, Method, T>::keep_front(bool restart, StepStats& 
   stats.front_outgrown = !traversal_.front_complete();
   if (params_.front_tracking && !stats.front_outgrown) {
     front_size_ = traversal_.num_front();
-    std::swap(seeds_, traversal_.front_);
     // Room for the next front to grow by a quarter (horse-gallop's grows by up to a fifth a
     // step): the spare buffer's whole capacity where that suffices, else half as much again.
     const std::size_t need = front_size_ + front_size_ / 4;
-    const std::size_t capacity = traversal_.front_.capacity_bytes() / sizeof(NodePair);
-    traversal_.front_.resize_discard(capacity >= need ? capacity : front_size_ + front_size_ / 2);
+    const std::size_t capacity = seeds_.capacity_bytes() / sizeof(NodePair);
+    traversal_.exchange_front(seeds_, capacity >= need ? capacity : front_size_ + front_size_ / 2);
     if (restart) size_at_restart_ = front_size_;
     reset_next_ = front_past_growth_limit();
   }

@@ -237,24 +237,36 @@ __device__ int process_round(const Task& task, typename Task::item_type* s_items
   return total_children;
 }
 
+// The shared memory of run_block_stack, declared by the kernel that calls it (CUB's TempStorage
+// habit: a kernel sees what its block holds in shared memory, and could alias it with its own).
+template <class Task, class Policy>
+struct BlockStackStorage {
+  using Scan = cub::BlockScan<unsigned long long, Policy::kBlockThreads>;
+  typename Task::item_type items[Policy::kSharedStack];  ///< the stack's hot top
+  typename Scan::TempStorage scan;
+  int size, global_size, take, refill, spill, stop;  ///< stop: 0 run, 1 done, 2 pause, 3 full
+  unsigned long long out_base[2];
+  unsigned long long hand_back_base;  ///< where a halted block's items go in the hand-back list
+};
+
 // The per-block two-level stack loop shared by the schedulers. `region` is this block's global
 // stack (capacity `global_capacity`), holding `region_size` items on entry. Returns with every
 // remaining item in the region (its new size in `region_size`) unless `hand_back` is set, in which
-// case the items left go to hand_back (when the region would overflow).
+// case the items left go to hand_back (when the region would overflow). `shared` is the block's
+// __shared__ BlockStackStorage.
 template <class Task, class Policy>
 __device__ void run_block_stack(const Task& task, typename Task::item_type* region, int& region_size, int global_capacity,
                                 const Outputs<Task>& out, const unsigned long long* idle_blocks, unsigned idle_limit,
-                                typename Task::item_type* hand_back) {
+                                typename Task::item_type* hand_back, BlockStackStorage<Task, Policy>& shared) {
   using Item = typename Task::item_type;
   constexpr int kThreads = Policy::kBlockThreads;
   constexpr int kShared = Policy::kSharedStack;
   constexpr int kK = Task::kMaxChildren;
   static_assert(kShared >= 2 * kThreads * kK, "lwsccd: kSharedStack must hold at least 2 * kBlockThreads * kMaxChildren items");
-  using Scan = cub::BlockScan<unsigned long long, kThreads>;
-  __shared__ Item s_items[kShared];
-  __shared__ typename Scan::TempStorage scan_storage;
-  __shared__ int s_size, g_size, take, refill, spill, stop;  // stop: 0 run, 1 done, 2 pause, 3 full
-  __shared__ unsigned long long out_base[2];
+  using Scan = typename BlockStackStorage<Task, Policy>::Scan;
+  Item* s_items = shared.items;
+  int &s_size = shared.size, &g_size = shared.global_size, &take = shared.take, &refill = shared.refill,
+      &spill = shared.spill, &stop = shared.stop;
   const int t = threadIdx.x;
   if (t == 0) {
     s_size = 0;
@@ -296,14 +308,14 @@ __device__ void run_block_stack(const Task& task, typename Task::item_type* regi
       if (t == 0) g_size += spill;
       __syncthreads();
     }
-    process_round<Task, Scan>(task, s_items, s_size, take, scan_storage, out_base, out);
+    process_round<Task, Scan>(task, s_items, s_size, take, shared.scan, shared.out_base, out);
   }
   // Leave every remaining item in the region, or hand everything back when it would not fit.
   if (stop == 1) {
     if (t == 0) region_size = 0;
     return;
   }
-  __shared__ unsigned long long base;
+  unsigned long long& base = shared.hand_back_base;
   if (stop == 3 || g_size + s_size > global_capacity) {
     if (t == 0) {
       base = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(g_size + s_size));

@@ -32,7 +32,9 @@ __global__ void __launch_bounds__(Policy::kBlockThreads) balanced_traverse_kerne
   __shared__ int region_size;
   if (threadIdx.x == 0) region_size = sizes[blockIdx.x];
   __syncthreads();
-  run_block_stack<Task, Policy>(task, region, region_size, queue_capacity, out, &out.counters[kIdle], idle_limit, hand_back);
+  __shared__ BlockStackStorage<Task, Policy> stack;
+  run_block_stack<Task, Policy>(task, region, region_size, queue_capacity, out, &out.counters[kIdle], idle_limit, hand_back,
+                                stack);
   __syncthreads();
   if (threadIdx.x == 0) {
     sizes[blockIdx.x] = region_size;
@@ -90,7 +92,7 @@ __global__ void balance_kernel(const Item* queues, const int* sizes, int blocks,
 
 
 template <class Task, class Policy>
-void run_balanced(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+void run_balanced(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalStorage<Task>& out,
                   bool record_front, cudaStream_t stream) {
   using Item = typename Task::item_type;
   const int blocks = resident_blocks(Policy::kBlocksPerSm);

@@ -51,7 +51,7 @@ int co_resident_blocks(Kernel kernel, int threads, int blocks_per_sm, std::atomi
 
 // Enqueues the counters' copy into host_counters_ (pinned: the copy does not block).
 template <class Task>
-void enqueue_counter_read(TraversalOutput<Task>& out, cudaStream_t stream) {
+void enqueue_counter_read(TraversalStorage<Task>& out, cudaStream_t stream) {
   if (out.host_counters_.size() < static_cast<std::size_t>(kCounters))
     out.host_counters_ = PinnedBuffer<unsigned long long>(kCounters);
   LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.host_counters_.data(), out.counters_.data(), kCounters * sizeof(unsigned long long),
@@ -61,7 +61,7 @@ void enqueue_counter_read(TraversalOutput<Task>& out, cudaStream_t stream) {
 // Reads the counters (one synchronisation). The reading stays in host_counters_, so that
 // traverse() need not read again what the scheduler's last read saw.
 template <class Task>
-std::vector<unsigned long long> read_counters(TraversalOutput<Task>& out, cudaStream_t stream) {
+std::vector<unsigned long long> read_counters(TraversalStorage<Task>& out, cudaStream_t stream) {
   enqueue_counter_read(out, stream);
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
   ++out.counter_reads_;
@@ -69,7 +69,7 @@ std::vector<unsigned long long> read_counters(TraversalOutput<Task>& out, cudaSt
 }
 
 template <class Task>
-Outputs<Task> outputs_of(TraversalOutput<Task>& out, bool record_front) {
+Outputs<Task> outputs_of(TraversalStorage<Task>& out, bool record_front) {
   return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front};
 }
 
@@ -80,7 +80,7 @@ inline constexpr int kFlatLaunchThreads = 256;
 // One breadth-first level in one launch, a thread per item: in[0, n) processed, their children
 // left in out.work_ (`in` may be out.work_ itself); returns how many (one host synchronisation).
 template <class Task>
-std::size_t expand_level(const Task& task, const typename Task::item_type* in, std::size_t n, TraversalOutput<Task>& out,
+std::size_t expand_level(const Task& task, const typename Task::item_type* in, std::size_t n, TraversalStorage<Task>& out,
                          bool record_front, cudaStream_t stream) {
   ensure(out.next_, n * Task::kMaxChildren);
   LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
@@ -98,7 +98,7 @@ std::size_t expand_level(const Task& task, const typename Task::item_type* in, s
 // items or none; returns their count (in out.work_).
 template <class Task>
 std::size_t expand_breadth_first(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
-                                 std::size_t target, TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+                                 std::size_t target, TraversalStorage<Task>& out, bool record_front, cudaStream_t stream) {
   using Item = typename Task::item_type;
   std::size_t n = num_seeds;
   const std::size_t stop_at = target / Task::kMaxChildren;

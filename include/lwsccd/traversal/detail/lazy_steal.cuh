@@ -19,7 +19,7 @@ namespace lwsccd::gpu::detail {
 // The launch shape of the lazy kernel (persistent blocks that fit at once) and its timeline's
 // storage; sizes the per-block arrays.
 template <class Task, class Policy>
-int prepare_lazy(TraversalOutput<Task>& out, TimelineSink& timeline, cudaStream_t stream) {
+int prepare_lazy(TraversalStorage<Task>& out, TimelineSink& timeline, cudaStream_t stream) {
   static std::atomic<int> fit_per_device[16];  // zero-initialized (static storage)
   const int blocks =
       co_resident_blocks(lazy_steal_kernel<Task, Policy>, Policy::kBlockThreads, Policy::kBlocksPerSm, fit_per_device);
@@ -45,7 +45,7 @@ int prepare_lazy(TraversalOutput<Task>& out, TimelineSink& timeline, cudaStream_
 // `capacity` items per block. What halted blocks hand back goes to out.next_ (count in kAppended;
 // past out.list_room_ they are counted in kLost and the pass must run again).
 template <class Task, class Policy>
-void launch_lazy(const Task& task, TraversalOutput<Task>& out, unsigned long long n, int blocks, int capacity,
+void launch_lazy(const Task& task, TraversalStorage<Task>& out, unsigned long long n, int blocks, int capacity,
                  const TimelineSink& timeline, bool record_front, cudaStream_t stream) {
   ensure(out.stacks_, static_cast<std::size_t>(blocks) * capacity);
   ensure(out.next_, out.list_room_);
@@ -73,7 +73,7 @@ bool lazy_flat_start(std::size_t num_seeds, int blocks) {
 // shared stack's worth per block, then what earlier passes needed (a front's children are few:
 // horse-gallop's 911 K front items leave ~54 K, where a bound of kMaxChildren per item took 29 MB).
 template <class Task, class Policy>
-void size_lazy_lists(TraversalOutput<Task>& out, int blocks) {
+void size_lazy_lists(TraversalStorage<Task>& out, int blocks) {
   if (out.list_room_ == 0) out.list_room_ = static_cast<std::size_t>(blocks) * Policy::kSharedStack;
 }
 
@@ -81,7 +81,7 @@ void size_lazy_lists(TraversalOutput<Task>& out, int blocks) {
 // (their count left on the device, in kAppended; past out.list_room_ only counted).
 template <class Task>
 void enqueue_flat_start(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
-                        TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+                        TraversalStorage<Task>& out, bool record_front, cudaStream_t stream) {
   ensure(out.next_, out.list_room_);
   expand_kernel<Task, kFlatLaunchThreads><<<static_cast<unsigned>((num_seeds + kFlatLaunchThreads - 1) / kFlatLaunchThreads),
                                              kFlatLaunchThreads, 0, stream>>>(
@@ -94,7 +94,7 @@ void enqueue_flat_start(const Task& task, const typename Task::item_type* seeds,
 
 template <class Task, class Policy>
 void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
-                    TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+                    TraversalStorage<Task>& out, bool record_front, cudaStream_t stream) {
   TimelineSink timeline;
   const int blocks = prepare_lazy<Task, Policy>(out, timeline, stream);
   size_lazy_lists<Task, Policy>(out, blocks);
@@ -124,7 +124,9 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     n = c[kAppended];
     if (n == 0) return;
     ++out.stats_.relaunches;  // halted blocks handed items back: they start the next launch
-    capacity *= 2;
+    // Larger deques, fewer relaunches; under an output limit (a memory budget planned around
+    // these deques) they keep their size: each launch still processes items before a block halts.
+    if (out.output_limit_ == 0) capacity *= 2;
   }
 }
 
@@ -135,7 +137,7 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
 // is left to TraversalOutput::collect(), which reports it.
 template <class Task, class Policy>
 bool enqueue_lazy_steal(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
-                        TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+                        TraversalStorage<Task>& out, bool record_front, cudaStream_t stream) {
   TimelineSink timeline;
   const int blocks = prepare_lazy<Task, Policy>(out, timeline, stream);
   if (!lazy_flat_start<Policy>(num_seeds, blocks)) return false;
@@ -148,14 +150,9 @@ bool enqueue_lazy_steal(const Task& task, const typename Task::item_type* seeds,
 // After a pass that lost `lost` items for want of list room: room for them and a quarter more
 // (at least twice the room: hand-backs vary from run to run).
 template <class Task>
-void grow_lazy_lists(TraversalOutput<Task>& out, unsigned long long lost) {
+void grow_lazy_lists(TraversalStorage<Task>& out, unsigned long long lost) {
   const std::size_t needed = out.list_room_ + static_cast<std::size_t>(lost);
   out.list_room_ = std::max(2 * out.list_room_, needed + needed / 4);
 }
-
-template <class S, class = void>
-struct is_lazy_steal : std::false_type {};
-template <class S>
-struct is_lazy_steal<S, std::void_t<decltype(S::kIsLazySteal)>> : std::bool_constant<S::kIsLazySteal> {};
 
 }  // namespace lwsccd::gpu::detail

@@ -105,7 +105,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   constexpr int kPushAbove = Policy::kPushThreshold;
   static_assert(kPushAbove + kThreads * kK <= kShared, "lwsccd: kSharedStack must hold kPushThreshold plus one round of children");
   static_assert(kPop <= kPushAbove, "lwsccd: kPopSize must not exceed kPushThreshold");
-  static_assert(Policy::kShareWhenHungry >= 0 && Policy::kShareWhenHungry < kPushAbove,
+  static_assert(share_when_hungry<Policy>() >= 0 && share_when_hungry<Policy>() < kPushAbove,
                 "lwsccd: LazyStealScheduler: kShareWhenHungry must be 0 (off) or below kPushThreshold");
   using Scan = cub::BlockScan<unsigned long long, kThreads>;
   using Reduce = cub::BlockReduce<unsigned long long, kThreads>;
@@ -143,7 +143,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
       if (t == 0) {
         if (!seeking) {
           timeline.record(me, BlockPhase::seek, 0), looks = 0;
-          if (Policy::kShareWhenHungry > 0) hungry.fetch_add(1, cuda::memory_order_relaxed);
+          if (share_when_hungry<Policy>() > 0) hungry.fetch_add(1, cuda::memory_order_relaxed);
         }
         seeking = true;
         ++looks;
@@ -238,7 +238,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
         idle += clock64() - start;
         if (t == 0) {
           timeline.record(me, BlockPhase::done, looks);
-          if (Policy::kShareWhenHungry > 0) hungry.fetch_sub(1, cuda::memory_order_relaxed);
+          if (share_when_hungry<Policy>() > 0) hungry.fetch_sub(1, cuda::memory_order_relaxed);
         }
         break;
       }
@@ -262,7 +262,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
         s_size = count;
         if (source >= 0) unlock_deque(&locks[source]);
         timeline.record(me, action == 1 ? BlockPhase::own : BlockPhase::steal, static_cast<std::uint32_t>(count));
-        if (Policy::kShareWhenHungry > 0) hungry.fetch_sub(1, cuda::memory_order_relaxed);
+        if (share_when_hungry<Policy>() > 0) hungry.fetch_sub(1, cuda::memory_order_relaxed);
         seeking = false;
         backoff = 256;
       }
@@ -311,9 +311,9 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
       // Children counted and parents retired in one update (see the termination note above).
       live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_relaxed);
     }
-    if (Policy::kShareWhenHungry > 0 && t == 0) {  // share next round? (own deque empty, a block searching)
+    if (share_when_hungry<Policy>() > 0 && t == 0) {  // share next round? (own deque empty, a block searching)
       using Word = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>;
-      share_now = s_size > Policy::kShareWhenHungry && s_size <= kPushAbove &&
+      share_now = s_size > share_when_hungry<Policy>() && s_size <= kPushAbove &&
                   Word(ends[2 * me + 1]).load(cuda::memory_order_relaxed) <= Word(ends[2 * me]).load(cuda::memory_order_relaxed) &&
                   hungry.load(cuda::memory_order_relaxed) > 0;
     }

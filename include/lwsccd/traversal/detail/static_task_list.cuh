@@ -35,13 +35,14 @@ __global__ void __launch_bounds__(Policy::kBlockThreads) static_list_kernel(Task
   for (int i = threadIdx.x; i < count; i += blockDim.x) region[count - 1 - i] = work[begin + i];
   if (threadIdx.x == 0) region_size = count;
   __syncthreads();
-  run_block_stack<Task, Policy>(task, region, region_size, global_capacity, out, nullptr, 0, hand_back);
+  __shared__ BlockStackStorage<Task, Policy> stack;
+  run_block_stack<Task, Policy>(task, region, region_size, global_capacity, out, nullptr, 0, hand_back, stack);
 }
 
 
 // One complete attempt with the current output capacities.
 template <class Task, class Policy>
-void run_static(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+void run_static(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalStorage<Task>& out,
                 bool record_front, cudaStream_t stream) {
   using Item = typename Task::item_type;
   const int max_blocks = resident_blocks(Policy::kBlocksPerSm);

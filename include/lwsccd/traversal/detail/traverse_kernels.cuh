@@ -27,7 +27,7 @@ namespace detail {
 
 // Outputs sized for a traversal (first use: room for 2^16 entries each), counters allocated.
 template <class Task>
-void prepare_outputs(TraversalOutput<Task>& out, bool record_front) {
+void prepare_outputs(TraversalStorage<Task>& out, bool record_front) {
   ensure(out.counters_, kCounters);
   if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
   if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
@@ -41,7 +41,7 @@ void prepare_outputs(TraversalOutput<Task>& out, bool record_front) {
 // Grows the outputs that `results` and `front` entries overflowed to those counts and a quarter
 // more; false (nothing grown) where that would pass out's output limit.
 template <class Task>
-bool grow_outputs(TraversalOutput<Task>& out, std::size_t results, std::size_t front) {
+bool grow_outputs(TraversalStorage<Task>& out, std::size_t results, std::size_t front) {
   using Item = typename Task::item_type;
   using Result = typename Task::result_type;
   const std::size_t results_room = results > out.results_.size() ? results + results / 4 : out.results_.size();
@@ -57,7 +57,7 @@ bool grow_outputs(TraversalOutput<Task>& out, std::size_t results, std::size_t f
 // deterministic, so a pass again from the same seeds gives the same outputs); stops without
 // growing past out's output limit (complete_ false).
 template <class Task, class Attempt>
-void run_until_outputs_fit(TraversalOutput<Task>& out, bool record_front, cudaStream_t stream, Attempt attempt) {
+void run_until_outputs_fit(TraversalStorage<Task>& out, bool record_front, cudaStream_t stream, Attempt attempt) {
   prepare_outputs(out, record_front);
   while (true) {
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, kCounters * sizeof(unsigned long long), stream));
@@ -102,22 +102,28 @@ void run_until_outputs_fit(TraversalOutput<Task>& out, bool record_front, cudaSt
 }  // namespace detail
 
 template <class Scheduler, class Task>
-void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
+void traverse(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& output,
               bool record_front, cudaStream_t stream) {
   static_assert(require_traversal_task<Task>::value, "");
+  static_assert(detail::require_scheduler_policy<Scheduler>::value, "");
+  detail::TraversalStorage<Task>& out = detail::storage_of(output);
   detail::run_until_outputs_fit(out, record_front, stream, [&] {
-    if constexpr (Scheduler::kIsStatic) detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
-    else if constexpr (detail::is_lazy_steal<Scheduler>::value)
+    using Kind = typename Scheduler::scheduler_kind;
+    if constexpr (std::is_same<Kind, static_task_list_kind>::value)
+      detail::run_static<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
+    else if constexpr (std::is_same<Kind, lazy_steal_kind>::value)
       detail::run_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
     else detail::run_balanced<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream);
   });
 }
 
 template <class Scheduler, class Task>
-void traverse_async(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, TraversalOutput<Task>& out,
-                    bool record_front, cudaStream_t stream) {
+void traverse_async(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
+                    TraversalOutput<Task>& output, bool record_front, cudaStream_t stream) {
   static_assert(require_traversal_task<Task>::value, "");
-  if constexpr (detail::is_lazy_steal<Scheduler>::value) {
+  static_assert(detail::require_scheduler_policy<Scheduler>::value, "");
+  if constexpr (std::is_same<typename Scheduler::scheduler_kind, lazy_steal_kind>::value) {
+    detail::TraversalStorage<Task>& out = detail::storage_of(output);
     if (out.output_limit_ == 0) {  // a limit needs the host between launches to keep to it
       detail::prepare_outputs(out, record_front);
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
@@ -129,38 +135,39 @@ void traverse_async(const Task& task, const typename Task::item_type* seeds, std
       }
     }
   }
-  traverse<Scheduler>(task, seeds, num_seeds, out, record_front, stream);  // (clears awaiting_collect_)
+  traverse<Scheduler>(task, seeds, num_seeds, output, record_front, stream);  // (clears awaiting_collect_)
 }
 
 template <class Task>
 bool TraversalOutput<Task>::collect() {
-  if (!awaiting_collect_) return true;
-  awaiting_collect_ = false;
-  const unsigned long long* c = host_counters_.data();
+  if (!s_.awaiting_collect_) return true;
+  s_.awaiting_collect_ = false;
+  const unsigned long long* c = s_.host_counters_.data();
   const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
-  const std::size_t front = awaiting_front_ ? static_cast<std::size_t>(c[detail::kFront]) : 0;
-  stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
-  const bool results_fit = results <= results_.size();
-  front_complete_ = front <= front_.size();
-  num_results_ = std::min(results, results_.size());
-  num_front_ = front_complete_ ? front : 0;  // (growing the output discards what it held)
-  stats_.results = num_results_;
-  stats_.front = num_front_;
-  // Grown so that traverse() from the same seeds, or the next traversal, fits.
-  if (!results_fit || !front_complete_) detail::grow_outputs(*this, results, front);
-  if (c[detail::kLost] > 0) detail::grow_lazy_lists(*this, c[detail::kLost]);
+  const std::size_t front = s_.awaiting_front_ ? static_cast<std::size_t>(c[detail::kFront]) : 0;
+  s_.stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
+  const bool results_fit = results <= s_.results_.size();
+  s_.front_complete_ = front <= s_.front_.size();
+  s_.num_results_ = std::min(results, s_.results_.size());
+  s_.num_front_ = s_.front_complete_ ? front : 0;  // (growing the output discards what it held)
+  s_.stats_.results = s_.num_results_;
+  s_.stats_.front = s_.num_front_;
+  // Outputs that overflowed grow (to the counts and a quarter); lists that lost items, likewise.
+  if (!results_fit || !s_.front_complete_) detail::grow_outputs(s_, results, front);
+  if (c[detail::kLost] > 0) detail::grow_lazy_lists(s_, c[detail::kLost]);
   return results_fit && c[detail::kHalted] == 0 && c[detail::kLost] == 0;
 }
 
 template <class Task>
 DeviceCount TraversalOutput<Task>::result_count() const {
-  return {counters_.data() + detail::kResults, DeviceCount::Part::whole, results_.size()};
+  return {s_.counters_.data() + detail::kResults, DeviceCount::Part::whole, s_.results_.size()};
 }
 
 template <class Task>
 std::size_t expand(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds, std::size_t target,
-                   TraversalOutput<Task>& out, bool record_front, cudaStream_t stream) {
+                   TraversalOutput<Task>& output, bool record_front, cudaStream_t stream) {
   static_assert(require_traversal_task<Task>::value, "");
+  detail::TraversalStorage<Task>& out = detail::storage_of(output);
   std::size_t items = 0;
   // expand_breadth_first stops once a level holds target / kMaxChildren items; asking for
   // target * kMaxChildren makes the cut at least `target` items (or the seeds' whole tree).
