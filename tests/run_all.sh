@@ -46,5 +46,7 @@ echo "== Python package: pip install . (virtual environment $build/venv) and pyt
 python3 -m venv "$build/venv"
 "$build/venv/bin/python" -m pip install -q --upgrade pip
 "$build/venv/bin/python" -m pip install -q ".[test]"
+# ipc-toolkit (PyPI ipctk) is compared beside lwsccd.ipc where pip can install it; its tests say so otherwise.
+"$build/venv/bin/python" -m pip install -q ipctk || echo "== ipctk could not be installed: its comparison tests are skipped"
 LWSCCD_CCD_PROGRAM="$PWD/$build/examples/lwsccd-ccd" "$build/venv/bin/python" -m pytest -rs -q python/tests
 echo "== all tests passed"

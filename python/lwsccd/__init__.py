@@ -16,10 +16,14 @@ and the GPU and CPU backends give the same pairs with bit-identical TOIs. Positi
 NumPy (host) or, on the GPU backend, from any CUDA array that exposes ``__cuda_array_interface__``
 or DLPack (PyTorch, CuPy, JAX, Numba) without a host copy; ``step(..., on_device=True)`` leaves
 the contacts in device memory as DLPack-capable arrays.
+
+:mod:`lwsccd.ipc` answers ipc-toolkit's CCD calls (``compute_collision_free_stepsize``,
+``is_step_collision_free``) with the same arguments.
 """
 
 from __future__ import annotations
 
+from . import ipc
 from ._device import built_with_gpu, gpu_available, gpu_name
 from .io import load_mesh, load_scene, load_sequence, load_step
 from .pipeline import Pipeline
@@ -40,6 +44,7 @@ __all__ = [
     "load_step",
     "load_scene",
     "load_sequence",
+    "ipc",
 ]
 
 __version__ = "0.1.0"

@@ -1,13 +1,13 @@
 #!/usr/bin/env python3
-"""ipc-toolkit (PyPI `ipctk`, optional) measured on the shared scenes, as a CPU peer of lwsccd's
-CPU backend: the whole `compute_collision_free_stepsize` call (its broad phase, then Tight
-Inclusion CCD at tolerance 1e-6) for each CPU broad phase, on the machine's cores or on the
-thread counts given. Prints a table and, with --json, writes one row per (scene, broad phase,
-threads): medians of --reps calls, the step it returns.
+"""ipc-toolkit (PyPI `ipctk`, optional) and lwsccd.ipc measured side by side on the shared scenes:
+the whole `compute_collision_free_stepsize` call of each. ipctk: each CPU broad phase, then Tight
+Inclusion CCD at tolerance 1e-6, on the machine's cores or on the thread counts given. lwsccd.ipc
+(when the lwsccd package is installed): the CPU backend on every core and the GPU where there is
+one, a first call (a new pipeline) and steady calls (the pipeline it keeps), and the number of
+colliding pairs lwsccd reports for the step (mode contacts). Prints a table and, with --json,
+writes one row per measurement: medians of --reps calls, the step returned.
 
-    python3 bench/ipctk_peer.py ../shared/data [--reps 3] [--threads 16,2] [--json FILE]
-
-lwsccd's side of the comparison: lwsccd-bench-pipeline --device cpu --sweep threads.
+    python3 bench/compare_ipctk.py ../shared/data [--reps 3] [--threads 16,2] [--json FILE]
 """
 import argparse
 import json
@@ -59,6 +59,33 @@ def read_ply(path):
     return v, faces["v"].astype(np.int64)
 
 
+def measure_lwsccd(lwsccd, scene, v0, v1, faces, reps):
+    """lwsccd.ipc's call on each backend: the first (a new pipeline) and steady ones (medians)."""
+    rows = []
+    edges = np.unique(np.sort(np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    mesh = (v0, edges, faces)
+    for device in ["cpu"] + (["gpu"] if lwsccd.gpu_available() else []):
+        lwsccd.ipc.clear_cache()
+        start = time.perf_counter()
+        step = lwsccd.ipc.compute_collision_free_stepsize(mesh, v0, v1, device=device)
+        first_ms = 1e3 * (time.perf_counter() - start)
+        times = []
+        for _ in range(reps):
+            start = time.perf_counter()
+            step = lwsccd.ipc.compute_collision_free_stepsize(mesh, v0, v1, device=device)
+            times.append(1e3 * (time.perf_counter() - start))
+        r = lwsccd.Pipeline(faces, device=device).step(v0, v1)
+        row = dict(scene=scene, broad_phase=f"lwsccd {device}", threads=os.cpu_count() if device == "cpu" else 0,
+                   median_ms=statistics.median(times), min_ms=min(times), times_ms=times, first_ms=first_ms, step=step,
+                   colliding_pairs=len(r.vertex_face) + len(r.edge_edge), earliest_toi=r.earliest_toi,
+                   gpu=lwsccd.gpu_name() if device == "gpu" else "", cores=os.cpu_count())
+        rows.append(row)
+        print(f"{scene:20s} {row['broad_phase']:14s} {row['threads']:7d} {row['median_ms']:10.1f} {row['min_ms']:10.1f} "
+              f"{step:12.7g}  (first call {first_ms:.1f} ms; {row['colliding_pairs']} colliding pairs, earliest "
+              f"contact {r.earliest_toi:.7g})", flush=True)
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("data", help="the shared data folder (scenes/ in it)")
@@ -69,14 +96,22 @@ def main():
     try:
         import ipctk
     except ImportError:
-        print("ipctk_peer.py: ipctk is not installed (pip install ipctk): nothing to measure", file=sys.stderr)
+        ipctk = None
+        print("compare_ipctk.py: ipctk is not installed (pip install ipctk): lwsccd only", file=sys.stderr)
+    try:
+        import lwsccd
+    except ImportError:
+        lwsccd = None
+        print("compare_ipctk.py: the lwsccd package is not installed (pip install .): ipctk only", file=sys.stderr)
+    if ipctk is None and lwsccd is None:
         return 77
-    threads = [int(t) for t in args.threads.split(",") if t] or [ipctk.get_num_threads()]
+    threads = [int(t) for t in args.threads.split(",") if t] or ([ipctk.get_num_threads()] if ipctk else [])
     broad_phases = {"LBVH": ipctk.LBVH, "SweepAndPrune": ipctk.SweepAndPrune, "HashGrid": ipctk.HashGrid,
-                    "SpatialHash": ipctk.SpatialHash}
+                    "SpatialHash": ipctk.SpatialHash} if ipctk else {}
     rows = []
-    print(f"ipctk {ipctk.__version__}, {os.cpu_count()} logical cores; whole compute_collision_free_stepsize calls, "
-          f"medians of {args.reps}")
+    print(f"ipctk {ipctk.__version__ if ipctk else '(absent)'}, {os.cpu_count()} logical cores"
+          f"{', GPU ' + lwsccd.gpu_name() if lwsccd and lwsccd.gpu_available() else ''}; whole "
+          f"compute_collision_free_stepsize calls, medians of {args.reps}")
     print(f"{'scene':20s} {'broad phase':14s} {'threads':>7s} {'ms':>10s} {'min ms':>10s} {'step':>12s}")
     for scene in SCENES:
         folder = os.path.join(args.data, "scenes", scene, "frames")
@@ -84,6 +119,10 @@ def main():
         v0, faces = read_ply(os.path.join(folder, frames[0]))
         v1, faces1 = read_ply(os.path.join(folder, frames[1]))
         assert np.array_equal(faces, faces1), "both frames have one topology"
+        if lwsccd:
+            rows += measure_lwsccd(lwsccd, scene, v0, v1, faces, args.reps)
+        if not ipctk:
+            continue
         edges = ipctk.edges(faces)
         mesh = ipctk.CollisionMesh(v0, edges, faces)
         v0, v1 = np.asfortranarray(v0), np.asfortranarray(v1)
