@@ -1,6 +1,8 @@
 // The CPU pipeline against its stages composed by hand from the oracles.
 #include <catch2/catch.hpp>
 
+#include <type_traits>
+
 #include <algorithm>
 #include <cstdio>
 #include <string>
@@ -336,6 +338,33 @@ TEST_CASE("CPU pipeline: any thread count gives the same steps, bit for bit (Pip
       lwsccd_test::require_same_counts(b.contacts.vf_counts, a.contacts.vf_counts);
       lwsccd_test::require_same_counts(b.contacts.ee_counts, a.contacts.ee_counts);
     }
+  }
+}
+
+static_assert(std::is_move_constructible_v<lwsccd::cpu::CcdPipeline<>> && std::is_move_assignable_v<lwsccd::cpu::CcdPipeline<>>,
+              "cpu::CcdPipeline: movable");
+
+TEST_CASE("CPU pipeline moved and assigned mid-sequence steps on as the pipeline it was, under its own thread limit",
+          "[pipeline][threads]") {
+  const auto first = lwsccd_test::folded_cloth(30, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  PipelineParams two_threads;
+  two_threads.threads = 2;
+  cpu::CcdPipeline<> unmoved(mesh), moving(mesh, two_threads);
+  for (int s = 0; s < 5; ++s) {
+    INFO("step " << s);
+    const auto m = lwsccd_test::folded_cloth(30, 1 + s);
+    if (s == 2) {
+      cpu::CcdPipeline<> constructed(std::move(moving));
+      moving = cpu::CcdPipeline<>(mesh);  // assigned over: a fresh pipeline for a moment
+      moving = std::move(constructed);    // and the stepped one back, its front with it
+      CHECK(moving.params().threads == 2);
+    }
+    const auto g = moving.step(m.x0, m.x1);
+    const auto u = unmoved.step(m.x0, m.x1);
+    lwsccd_test::require_same_contacts(g.contacts, u.contacts);
+    CHECK(g.stats.restarted_from_root == u.stats.restarted_from_root);
+    CHECK(g.stats.bvtt_nodes == u.stats.bvtt_nodes);
   }
 }
 

@@ -55,6 +55,17 @@ class ThreadLimit {
 #endif
   {
   }
+  ThreadLimit(const ThreadLimit&) = default;
+  /// Takes `other`'s limit (a pipeline assigned to another keeps working under the new one).
+  ThreadLimit& operator=(const ThreadLimit& other) {
+    if (this == &other) return *this;
+    threads_ = other.threads_;
+#if LWSCCD_WITH_TBB
+    arena_.terminate();
+    arena_.initialize(threads_ ? static_cast<int>(threads_) : tbb::task_arena::automatic);
+#endif
+    return *this;
+  }
   /// The limit as given (0: every core).
   unsigned threads() const { return threads_; }
   /// The threads work inside run() gets: the limit, or the machine's hardware threads.

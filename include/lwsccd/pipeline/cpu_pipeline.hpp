@@ -273,7 +273,7 @@ class CcdPipeline {
   Bvh<BV> bvh_;
   bool built_ = false;
   FrontTracker tracker_;
-  const std::vector<NodePair> root_{NodePair{0, 0}};
+  std::vector<NodePair> root_{NodePair{0, 0}};  // the root alone (never changed; not const: pipelines are assignable)
   std::vector<Vec3d> wide0_, wide1_;  ///< float input, widened (kept: the next step reuses the room)
   // Memory kept from step to step (a warm step allocates no large list): the traversal's result
   // and workers' lists, the candidates, the feature pairs and their per-thread lists.
