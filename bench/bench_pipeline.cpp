@@ -2,6 +2,9 @@
 // stage, over the real scenes, the horse-gallop sequence and the built-in simulation at several
 // sizes, for the policies a sweep names. The first step (BVH build, traversal from the root) is
 // reported apart from the steady state (refit, traversal from the front: medians of --reps steps).
+// The default sweep adds, on the GPU: a second pipeline's first step (first2), device-resident
+// steady steps (device), host-to-host steady steps into one kept result (kept), and fresh steps, device-resident, each after a step of another
+// configuration of the mesh, from that stale front (fresh) or from the root (fresh-root).
 // Scenes with ground truth also give false negatives and positives. JSON rows feed
 // bench/plot_pipeline.py (docs/BENCHMARKS.md).
 //
@@ -63,7 +66,18 @@ struct Scenario {
   std::function<lwsccd::Step(std::size_t)> step;  // step i (0: the first)
   std::size_t available_steps = 0;                // 0: unbounded
   const lwsccd::GroundTruth* truth = nullptr;
+  // Fresh steps: (another configuration of the mesh, the step measured after it), for the i-th
+  // measurement; empty: no fresh rows.
+  std::function<std::pair<lwsccd::Step, lwsccd::Step>(std::size_t)> fresh;
 };
+
+// A step of the same mesh whose motion is `factor` times the step's (x0 -> x0 + factor (x1 - x0)):
+// an overshooting line-search trial, the configuration a data scene's fresh step follows.
+lwsccd::Step longer_motion(const lwsccd::Step& s, double factor) {
+  lwsccd::Step out = s;
+  for (std::size_t v = 0; v < out.x1.size(); ++v) out.x1[v] = s.x0[v] + (s.x1[v] - s.x0[v]) * factor;
+  return out;
+}
 
 // The first step, then `reps` steady steps (the sequence's next steps, or the same step again).
 const char* mode_name(lwsccd::CcdMode m) {
@@ -158,6 +172,48 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     r.has_truth = false;  // (the contacts stayed on the device)
     rows.push_back(r);
   }
+  // Host to host into one result kept between steps (AnyPipeline::step_into, GPU: its contact
+  // lists' memory reused, no page faults for them): a fresh pipeline over the same steps.
+  if (resident && device == "gpu" && steps > 1) {
+    auto p = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+    const std::vector<ccd_app::StepOutcome> kept_outcomes = std::move(outcomes);
+    outcomes.clear();
+    lwsccd::StepOutcome kept;
+    for (std::size_t i = 0; i < steps; ++i) {
+      const lwsccd::Step step = sc.step(i);
+      p->step_into(lwsccd::Span<const lwsccd::Vec3d>(step.x0), lwsccd::Span<const lwsccd::Vec3d>(step.x1), kept);
+      ccd_app::StepOutcome o;
+      o.stats = kept.stats;
+      o.contacts.earliest_toi = kept.contacts.earliest_toi;
+      outcomes.push_back(std::move(o));
+    }
+    outcomes.back().contacts = kept.contacts;  // (scored against the ground truth)
+    rows.push_back(make_row("kept", 1, outcomes.size()));
+    outcomes = kept_outcomes;
+  }
+  // Fresh steps (GPU, device-resident): each measured step follows a step of another configuration
+  // of the same mesh (Scenario::fresh), so the front it finds was recorded elsewhere. Row "fresh"
+  // steps from that front, row "fresh-root" calls restart_from_root() first.
+  if (resident && device == "gpu" && sc.fresh) {
+    const std::vector<ccd_app::StepOutcome> kept = std::move(outcomes);
+    for (const bool restart : {false, true}) {
+      auto p = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+      outcomes.clear();
+      for (std::size_t i = 0; i <= static_cast<std::size_t>(reps); ++i) {  // (i = 0: the first step, not counted)
+        const std::pair<lwsccd::Step, lwsccd::Step> pair = sc.fresh(i);
+        ccd_app::device_resident_step(*p, pair.first.x0, pair.first.x1);
+        if (restart) p->restart_from_root();
+        const std::optional<lwsccd::StepStats> stats = ccd_app::device_resident_step(*p, pair.second.x0, pair.second.x1);
+        ccd_app::StepOutcome o;
+        if (stats) o.stats = *stats;
+        outcomes.push_back(std::move(o));
+      }
+      Row r = make_row(restart ? "fresh-root" : "fresh", 1, outcomes.size());
+      r.has_truth = false;
+      rows.push_back(r);
+    }
+    outcomes = kept;
+  }
   for (std::size_t k = first_row; k < rows.size(); ++k) {
     const Row& r = rows[k];
     std::printf("%-10s %-24s %9d %-4s %-10s %-18s %-6s %-6s %9.2f %8.3f %8.3f %8.3f %9.2f %10zu %9zu %8zu %9.3g %8.1f", r.sweep.c_str(),
@@ -235,20 +291,39 @@ int main(int argc, char** argv) {
     auto data_scenario = [&](const std::string& name) {
       scenes.push_back(std::make_unique<lwsccd::Scene>(lwsccd::load_scene(dir + "/scenes/" + name)));
       const lwsccd::Scene* s = scenes.back().get();
-      return Scenario{name, s->step.mesh, {}, [s](std::size_t) { return s->step; }, 0, s->has_ground_truth ? &s->truth : nullptr};
+      Scenario sc{name, s->step.mesh, {}, [s](std::size_t) { return s->step; }, 0, s->has_ground_truth ? &s->truth : nullptr, {}};
+      sc.fresh = [s](std::size_t) { return std::make_pair(longer_motion(s->step, 4.0), s->step); };
+      return sc;
     };
     std::unique_ptr<lwsccd::Sequence> horse;
     auto horse_scenario = [&]() {
       if (!horse) horse = std::make_unique<lwsccd::Sequence>(lwsccd::load_sequence(dir + "/sequences/horse-gallop"));
       const lwsccd::Sequence* h = horse.get();
-      return Scenario{"horse-gallop", h->mesh(), {}, [h](std::size_t i) { return h->step(i); }, h->num_steps(), nullptr};
+      Scenario sc{"horse-gallop", h->mesh(), {}, [h](std::size_t i) { return h->step(i); }, h->num_steps(), nullptr, {}};
+      // Half the gallop apart: step i after step i + 23.
+      sc.fresh = [h](std::size_t i) {
+        const std::size_t n = h->num_steps();
+        return std::make_pair(h->step((i + n / 2) % n), h->step(i % n));
+      };
+      return sc;
     };
     auto builtin_scenario = [&](std::size_t triangles, std::shared_ptr<lwsccd::ClothBallSimulation>& sim) {
       sim = std::make_shared<lwsccd::ClothBallSimulation>(triangles);
       sim->advance(30);
       lwsccd::ClothBallSimulation* s = sim.get();
-      return Scenario{"builtin-" + std::to_string(s->mesh()->num_faces()), s->mesh(), s->layout(),
-                      [s](std::size_t) { return s->next_step(); }, 0, nullptr};
+      Scenario sc{"builtin-" + std::to_string(s->mesh()->num_faces()), s->mesh(), s->layout(),
+                  [s](std::size_t) { return s->next_step(); }, 0, nullptr, {}};
+      // The steady steps' configuration after 60 frames more, then again the one before them.
+      auto early_late = std::make_shared<std::pair<lwsccd::Step, lwsccd::Step>>();
+      sc.fresh = [s, early_late](std::size_t) {
+        if (!early_late->first.mesh) {
+          early_late->first = s->next_step();
+          s->advance(60);
+          early_late->second = s->next_step();
+        }
+        return std::make_pair(early_late->second, early_late->first);
+      };
+      return sc;
     };
     const std::vector<std::string> truth_scenes = {"cloth-ball", "cloth-funnel", "armadillo-rollers"};
     const bool have_data = std::ifstream(dir + "/scenes/cloth-ball/frames/cloth_ball92.ply").good();

@@ -11,6 +11,7 @@ RESULTS_DIR holds one file per benchmark and device kind, as run_benchmarks.sh w
   bvh_<kind>.json        lwsccd-bench-bvh
   accuracy_cpu.json      lwsccd-accuracy (every method and precision on the query sets and scenes)
   pipeline_cpu.json      lwsccd-bench-pipeline --device cpu --sweep default (with machine_cpu.json)
+  ipctk.json             bench/compare_ipctk.py --json (ipc-toolkit beside lwsccd; its rows name their machine)
 The charts (<area>_<kind>.png) are written next to them. Every number on the page comes from
 these files; the few lines of prose around a table compute theirs from the same rows.
 """
@@ -215,6 +216,54 @@ def cpu_section(rows, machine):
             f"The same default sweep on the CPU backend ({cpu}, {cores} cores; `--device cpu`). It is also the oracle "
             "that every GPU test compares with, pair for pair.", "",
             table(["scene", "triangles", "first ms", "steady ms (p10-p90)", "steady stages ms", "contacts"], body), ""]
+
+
+def ipctk_section(rows):
+    """ipc-toolkit beside lwsccd (bench/compare_ipctk.py --json, ipctk.json): one machine, one run."""
+    if not rows:
+        return []
+    timed = [r for r in rows if "median_ms" in r]
+    if not timed:
+        return []
+    r0 = timed[0]
+    scenes = [s for s in ("cloth-ball", "armadillo-rollers", "cloth-funnel") if any(r["scene"] == s for r in timed)]
+    names = []
+    for r in timed:
+        if r["broad_phase"] not in names:
+            names.append(r["broad_phase"])
+    body = []
+    for name in names:
+        cells = []
+        for scene in scenes:
+            r = next((x for x in timed if x["scene"] == scene and x["broad_phase"] == name), None)
+            if r is None:
+                cells.append("-")
+            elif name.startswith("lwsccd"):
+                cells.append(f"{ms(r['first_ms'])} / {ms(r['median_ms'])}; step {r['step']:.6g}")
+            else:
+                cells.append(f"{ms(r['median_ms'])}; step {r['step']:.6g}")
+        label = f"ipctk {r0.get('ipctk', '')} {name} + Tight Inclusion" if not name.startswith("lwsccd") else \
+            (name.replace("lwsccd cpu", "lwsccd, CPU backend").replace("lwsccd gpu", "lwsccd, GPU"))
+        body.append([label] + cells)
+    pairs = []
+    for scene in scenes:
+        counted = next((x for x in rows if x["scene"] == scene and "candidates" in x), None)
+        ours = next((x for x in timed if x["scene"] == scene and x["broad_phase"].startswith("lwsccd")), None)
+        if counted and counted.get("colliding_pairs") is not None:
+            pairs.append(f"{scene}: ipctk's narrow phase calls {counted['colliding_pairs']:,} of its "
+                         f"{counted['candidates']:,} LBVH candidates colliding"
+                         + (f", lwsccd {ours['colliding_pairs']:,}" if ours else ""))
+    gpu = next((x.get("gpu") for x in timed if x.get("gpu")), "")
+    out = [f"ipc-toolkit (PyPI `ipctk`) and lwsccd on one machine ({r0.get('cpu', '?')}, {r0.get('cores', '?')} cores"
+           + (f", {gpu}" if gpu else "") + f"; commit `{r0.get('commit', '?')}`, {r0.get('date', '?')}; "
+           "`bench/compare_ipctk.py`). ipctk: the whole `compute_collision_free_stepsize` call on every core, median ms, "
+           "and the step it returns. lwsccd: the same step (mode contacts, host to host) as first step of a new pipeline / "
+           "steady step of a kept one (a line search's repeated calls), ms, and the step lwsccd.ipc returns "
+           "(0.8 x the certified earliest contact).", "",
+           table(["", *scenes], body, ["---"] + ["---:"] * len(scenes)), ""]
+    if pairs:
+        out += ["Colliding pairs (the exact ground truth: cloth-funnel 134): " + "; ".join(pairs) + ".", ""]
+    return out
 
 
 # --- speed against accuracy ----------------------------------------------------------------------
@@ -506,6 +555,9 @@ def main():
     out += cpu_section(load(os.path.join(results, "pipeline_cpu.json")), cpu_machine)
     if cpu_machine:
         out += machine_lines(cpu_machine, "CPU backend measured on") + [""]
+    ipctk_rows = ipctk_section(load(os.path.join(results, "ipctk.json")))
+    if ipctk_rows:
+        out += ["## ipc-toolkit beside lwsccd", ""] + ipctk_rows
     out += ["## Reproducing", "",
             "```sh",
             "bash bench/run_benchmarks.sh                   # build, measure on this machine (GPU if present), write this page",

@@ -76,3 +76,35 @@ TEST_CASE("AnyPipeline: float positions are certified as given (the pipeline on 
   CHECK_THROWS_AS(any->step(std::vector<Vec3f>(f0.begin(), f0.end() - 1), f1), InputError);
   CHECK_THROWS_WITH(any->step_from_device(f0.data(), f1.data()), Catch::Contains("host positions"));
 }
+
+TEST_CASE("AnyPipeline: step_into from host arrays equals step, double and float, outcome after outcome",
+          "[any_pipeline][step_into]") {
+  const auto first = lwsccd_test::folded_cloth(14, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  auto stepped = cpu::make_any_pipeline(mesh, BodyLayout{}, PipelineParams{}, PolicyChoice{});
+  auto into = cpu::make_any_pipeline(mesh, BodyLayout{}, PipelineParams{}, PolicyChoice{});
+  StepOutcome kept;
+  std::size_t contacts = 0;
+  for (const int s : {1, 4, 2}) {  // (the counts change from step to step)
+    INFO("fold step " << s);
+    const auto m = lwsccd_test::folded_cloth(14, s);
+    const StepOutcome expected = stepped->step(m.x0, m.x1);
+    into->step_into(Span<const Vec3d>(m.x0.data(), m.x0.size()), Span<const Vec3d>(m.x1.data(), m.x1.size()), kept);
+    lwsccd_test::require_same_contacts(kept.contacts, expected.contacts);
+    CHECK(kept.stats.hits_vf == expected.stats.hits_vf);
+    CHECK(kept.stats.triangle_pairs == expected.stats.triangle_pairs);
+    contacts += kept.contacts.vf.size() + kept.contacts.ee.size();
+  }
+  CHECK(contacts > 0);
+  // Float arrays: as step() on the same float vectors.
+  const auto m = lwsccd_test::folded_cloth(14, 3);
+  std::vector<Vec3f> f0, f1;
+  for (std::size_t v = 0; v < m.x0.size(); ++v) {
+    f0.push_back(m.x0[v].cast<float>());
+    f1.push_back(m.x1[v].cast<float>());
+  }
+  const StepOutcome expected = stepped->step(f0, f1);
+  into->step_into(Span<const Vec3f>(f0), Span<const Vec3f>(f1), kept);
+  lwsccd_test::require_same_contacts(kept.contacts, expected.contacts);
+  CHECK_THROWS_AS(into->step_into(Span<const Vec3f>(f0.data(), f0.size() - 1), Span<const Vec3f>(f1), kept), InputError);
+}

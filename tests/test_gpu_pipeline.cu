@@ -400,6 +400,130 @@ TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pi
   require_same_contacts(host_input.step(f0, f1), c);
 }
 
+namespace {
+
+// Staging of a page in two chunks, every copy through it (no copy is small enough to go straight
+// to pageable memory), so that a few kilobytes take every path of the ring.
+struct PageStaging : gpu::HostStagingPolicy {
+  static constexpr std::size_t kChunkBytes = 4096;
+  static constexpr int kChunks = 2;
+  static constexpr std::size_t kDirectUploadBytes = 1;  // (only empty copies, which return at once)
+  static constexpr std::size_t kDirectDownloadBytes = 1;
+  static constexpr std::size_t kThreadBytes = 1024;
+};
+
+}  // namespace
+
+TEST_CASE("HostStaging: copies of any size cross whole both ways through a ring of page-locked chunks",
+          "[gpu][staging]") {
+  gpu::CudaStream stream(cudaStreamNonBlocking);
+  using Pages = gpu::HostStaging<PageStaging>;
+  using Default = gpu::HostStaging<>;
+  for (const std::size_t bytes : {std::size_t(1), std::size_t(4095), std::size_t(4096), std::size_t(4097),
+                                  std::size_t(3 * 4096 + 17), std::size_t(100003)}) {
+    INFO(bytes << " bytes");
+    std::vector<unsigned char> source(bytes), back(bytes, 0), again(bytes, 0);
+    for (std::size_t i = 0; i < bytes; ++i) source[i] = static_cast<unsigned char>((i * 131 + bytes) % 251);
+    const std::vector<unsigned char> expected = source;
+    gpu::DeviceBuffer<unsigned char> device(bytes);
+    Pages::to_device(device.data(), source.data(), bytes, stream);
+    std::fill(source.begin(), source.end(), 0);  // read once to_device returns: changing it now changes nothing
+    Pages::to_host(back.data(), device.data(), bytes, stream);
+    CHECK(back == expected);
+    Default::to_host(again.data(), device.data(), bytes, stream);
+    CHECK(again == expected);
+  }
+  // Two host threads copying at once borrow chunks of their own.
+  const std::size_t bytes = 3 * 4096 * 50 + 1;
+  std::vector<unsigned char> a(bytes), b(bytes);
+  for (std::size_t i = 0; i < bytes; ++i) a[i] = static_cast<unsigned char>(i % 253), b[i] = static_cast<unsigned char>(i % 241);
+  gpu::DeviceBuffer<unsigned char> da(bytes), db(bytes);
+  std::vector<unsigned char> back_a(bytes), back_b(bytes);
+  gpu::CudaStream other(cudaStreamNonBlocking);
+  std::thread t([&] {
+    for (int r = 0; r < 20; ++r) {
+      Pages::to_device(db.data(), b.data(), bytes, other);
+      Pages::to_host(back_b.data(), db.data(), bytes, other);
+    }
+  });
+  for (int r = 0; r < 20; ++r) {
+    Pages::to_device(da.data(), a.data(), bytes, stream);
+    Pages::to_host(back_a.data(), da.data(), bytes, stream);
+  }
+  t.join();
+  CHECK(back_a == a);
+  CHECK(back_b == b);
+}
+
+TEST_CASE("GPU pipeline: step_into one kept result equals step() and the CPU pipeline as the counts grow and shrink",
+          "[gpu][pipeline][step_into]") {
+  const auto first = lwsccd_test::folded_cloth(60, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  gpu::CcdPipeline<> into(mesh), stepped(mesh);
+  cpu::CcdPipeline<> cpu_pipeline(mesh);
+  StepResult<double> kept;
+  std::size_t largest = 0, smallest = ~std::size_t(0);
+  for (const int s : {1, 5, 2, 6, 1}) {
+    INFO("fold step " << s);
+    const auto m = lwsccd_test::folded_cloth(60, s);
+    into.step_into(m.x0, m.x1, kept);
+    const auto g = stepped.step(m.x0, m.x1);
+    const auto c = cpu_pipeline.step(m.x0, m.x1);
+    require_same_contacts(kept, c);
+    require_same_contacts(g, c);
+    CHECK(kept.stats.hits_vf == kept.contacts.vf.size());
+    CHECK(kept.stats.hits_ee == kept.contacts.ee.size());
+    const std::size_t n = kept.contacts.vf.size() + kept.contacts.ee.size();
+    largest = std::max(largest, n);
+    smallest = std::min(smallest, n);
+  }
+  CHECK(largest > smallest);  // the kept lists grew and shrank
+  CHECK(largest * sizeof(FeatureHit<double>) > gpu::HostStagingPolicy::kDirectDownloadBytes);  // (through the staging)
+  // Float arrays into the same result.
+  const auto m = lwsccd_test::folded_cloth(60, 3);
+  std::vector<Vec3f> f0, f1;
+  std::vector<Vec3d> w0, w1;
+  for (std::size_t v = 0; v < m.x0.size(); ++v) {
+    f0.push_back(m.x0[v].cast<float>());
+    f1.push_back(m.x1[v].cast<float>());
+    w0.push_back(f0.back().cast<double>());
+    w1.push_back(f1.back().cast<double>());
+  }
+  into.step_into(Span<const Vec3f>(f0), Span<const Vec3f>(f1), kept);
+  require_same_contacts(kept, cpu_pipeline.step(w0, w1));
+}
+
+TEST_CASE("GPU pipeline: fresh steps (positions unrelated to the last step's) from a stale front or from the root "
+          "equal the CPU pipeline",
+          "[gpu][pipeline][fresh]") {
+  const auto first = lwsccd_test::folded_cloth(40, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  gpu::CcdPipeline<> stale(mesh), restarted(mesh);
+  cpu::CcdPipeline<> cpu_stale(mesh), cpu_restarted(mesh);
+  // Steps of the fold far apart in turn: each step's front is another configuration's.
+  for (const int s : {1, 7, 2, 8, 3}) {
+    INFO("fold step " << s);
+    const auto m = lwsccd_test::folded_cloth(40, s);
+    restarted.restart_from_root();
+    cpu_restarted.restart_from_root();
+    const auto g_stale = stale.step(m.x0, m.x1);
+    const auto g_root = restarted.step(m.x0, m.x1);
+    const auto c_stale = cpu_stale.step(m.x0, m.x1);
+    const auto c_root = cpu_restarted.step(m.x0, m.x1);
+    require_same_contacts(g_stale, c_stale);
+    require_same_contacts(g_root, c_root);
+    require_same_contacts(g_root, c_stale);
+    CHECK(g_root.stats.restarted_from_root);
+    CHECK(c_root.stats.restarted_from_root);
+    CHECK(g_root.stats.hits_vf + g_root.stats.hits_ee > 0);
+  }
+  // Without a call, the next step starts from the front again.
+  const auto m = lwsccd_test::folded_cloth(40, 3);
+  const auto g = restarted.step(m.x0, m.x1);
+  CHECK_FALSE(g.stats.restarted_from_root);
+  require_same_contacts(g, cpu_restarted.step(m.x0, m.x1));
+}
+
 TEST_CASE("GPU pipeline over horse-gallop: front tracking equals fresh traversals and the CPU pipeline at every step",
           "[gpu][pipeline][data]") {
   if (!lwsccd_test::have_data()) {

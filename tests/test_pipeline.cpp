@@ -42,6 +42,28 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
   }
 }
 
+TEST_CASE("CPU pipeline: restart_from_root makes the next step traverse from the root, with the same answer",
+          "[pipeline][fresh]") {
+  const auto first = lwsccd_test::folded_cloth(24, 1);
+  auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
+  cpu::CcdPipeline<Aabbf> pipeline(mesh), tracked(mesh);
+  const auto a = lwsccd_test::folded_cloth(24, 2), b = lwsccd_test::folded_cloth(24, 6);
+  pipeline.step(a.x0, a.x1);
+  tracked.step(a.x0, a.x1);
+  pipeline.restart_from_root();
+  const auto from_root = pipeline.step(b.x0, b.x1);
+  const auto from_front = tracked.step(b.x0, b.x1);
+  CHECK(from_root.stats.restarted_from_root);
+  CHECK_FALSE(from_front.stats.restarted_from_root);
+  REQUIRE(from_root.stats.hits_vf + from_root.stats.hits_ee > 0);
+  lwsccd_test::require_same_contacts(from_root.contacts, from_front.contacts);
+  CHECK(from_root.stats.triangle_pairs == from_front.stats.triangle_pairs);
+  // The front the restart recorded serves the next step.
+  const auto next = pipeline.step(b.x0, b.x1);
+  CHECK_FALSE(next.stats.restarted_from_root);
+  lwsccd_test::require_same_contacts(next.contacts, from_root.contacts);
+}
+
 namespace {
 
 // The oracle for a scene with bodies: the brute-force feature pairs under the layout (a feature's

@@ -167,6 +167,13 @@ class Pipeline:
             d["stats"],
         )
 
+    def restart_from_root(self) -> None:
+        """The next step traverses the hierarchy from its root instead of from the last step's
+        front. Call it before a step whose positions are unrelated to the last step's (a new
+        query on the same mesh, a restart, a jump in time), where the last front would only slow
+        that step down. The answer is the same either way."""
+        self._core.restart_from_root()
+
     def render(self, path: str, x0: Any, x1: Any, result: Optional[StepResult] = None, *,
                size: Tuple[int, int] = (800, 600)) -> str:
         """Writes a PNG picture of a step: the mesh at the step's earliest contact (t = 1 when

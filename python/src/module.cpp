@@ -110,7 +110,7 @@ static_assert(sizeof(ContactRecord) == 24, "the package's structured dtypes have
 
 // A step's contacts for Python: vertex-face pairs as (vertex, face), edge-edge pairs as (edge,
 // edge), each with its TOI (feature ids of the library turned into element indices).
-nb::dict outcome_dict(const lwsccd::TriangleMesh& mesh, lwsccd::StepOutcome&& outcome) {
+nb::dict outcome_dict(const lwsccd::TriangleMesh& mesh, const lwsccd::StepOutcome& outcome) {
   const std::int64_t v = mesh.num_vertices(), e = mesh.num_edges();
   auto records = [](const std::vector<lwsccd::FeatureHit<double>>& hits, std::int64_t first_base, std::int64_t second_base) {
     std::vector<std::uint8_t> bytes(hits.size() * sizeof(ContactRecord));
@@ -222,13 +222,15 @@ class Pipeline {
                 const nb::ndarray<const S, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>& x1) {
     check_count(x0.shape(0), "x0");
     check_count(x1.shape(0), "x1");
-    std::vector<lwsccd::Vec3<S>> p0 = to_points(x0), p1 = to_points(x1);
-    lwsccd::StepOutcome outcome;
+    // Read in place (the arrays are C-contiguous (n, 3)); the outcome's lists are kept between
+    // steps, so the GPU backend downloads into warm memory.
+    const lwsccd::Span<const lwsccd::Vec3<S>> p0(reinterpret_cast<const lwsccd::Vec3<S>*>(x0.data()), x0.shape(0));
+    const lwsccd::Span<const lwsccd::Vec3<S>> p1(reinterpret_cast<const lwsccd::Vec3<S>*>(x1.data()), x1.shape(0));
     {
       nb::gil_scoped_release unlocked;
-      outcome = pipeline_->step(p0, p1);
+      pipeline_->step_into(p0, p1, kept_);
     }
-    return outcome_dict(*mesh_, std::move(outcome));
+    return outcome_dict(*mesh_, kept_);
   }
 
   // Positions in device memory, by address (the Python side took them from
@@ -289,6 +291,7 @@ class Pipeline {
     lwsccd::cpu::render_contacts(path, *mesh_, p0, p1, contacts, width, height);
   }
 
+  void restart_from_root() { pipeline_->restart_from_root(); }
   const lwsccd::TriangleMesh& mesh() const { return *mesh_; }
   std::string backend() const { return pipeline_->backend(); }
 
@@ -301,6 +304,7 @@ class Pipeline {
 
   std::shared_ptr<const lwsccd::TriangleMesh> mesh_;
   std::unique_ptr<lwsccd::AnyPipeline> pipeline_;
+  lwsccd::StepOutcome kept_;  ///< the last host step's outcome (its lists' memory reused)
 };
 
 nb::dict frame_dict(const lwsccd::Frame& frame) {
@@ -349,6 +353,7 @@ NB_MODULE(_lwsccd, m) {
       .def("step_f32", &Pipeline::step<float>, "x0"_a, "x1"_a)
       .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a, "float32"_a)
       .def("step_on_device", &Pipeline::step_on_device, "x0"_a, "x1"_a, "float32"_a)
+      .def("restart_from_root", &Pipeline::restart_from_root)
       .def("render", &Pipeline::render, "path"_a, "x0"_a, "x1"_a, "vf"_a, "ee"_a, "earliest_toi"_a, "width"_a, "height"_a)
       .def_prop_ro("backend", &Pipeline::backend)
       .def_prop_ro("num_vertices", [](const Pipeline& p) { return p.mesh().num_vertices(); })

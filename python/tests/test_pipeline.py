@@ -110,6 +110,17 @@ def test_thread_counts_give_the_same_contacts(cloth_steps):
         cpu_pipeline(sim, threads=-2)
 
 
+def test_restart_from_root_gives_the_same_contacts(cloth_steps):
+    sim, steps = cloth_steps
+    tracked, restarted = cpu_pipeline(sim), cpu_pipeline(sim)
+    for x0, x1 in steps:
+        restarted.restart_from_root()
+        a, b = tracked.step(x0, x1), restarted.step(x0, x1)
+        assert b.stats["restarted_from_root"]
+        assert np.array_equal(a.vertex_face, b.vertex_face) and np.array_equal(a.edge_edge, b.edge_edge)
+    assert not a.stats["restarted_from_root"]  # (the third step: from the front)
+
+
 def test_obb_finds_a_subset_with_the_same_tois(cloth_steps):
     # OBBs cull more triangle pairs than AABBs; the narrow phase is the same, so every pair an
     # OBB pipeline reports is the AABB pipeline's, with the same TOI.

@@ -13,6 +13,8 @@
 
 #include "lwsccd/bvh/bvh.hpp"
 #include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/core/host_staging.cuh"
+#include "lwsccd/core/span.hpp"
 
 namespace lwsccd::gpu {
 
@@ -37,7 +39,12 @@ struct DeviceStep {
   /// Replaces the positions (same topology), e.g. for the next step of a sequence. Float input
   /// to double positions crosses as float (half the bytes) and is widened on the device.
   template <class Q>
-  void set_positions(const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1, cudaStream_t stream = nullptr);
+  void set_positions(const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1, cudaStream_t stream = nullptr) {
+    set_positions(Span<const Vec3<Q>>(h0), Span<const Vec3<Q>>(h1), stream);
+  }
+  /// The same from any host arrays (e.g. a NumPy array's memory); they may change once it returns.
+  template <class Q>
+  void set_positions(Span<const Vec3<Q>> h0, Span<const Vec3<Q>> h1, cudaStream_t stream = nullptr);
   /// Replaces the positions from device memory (num_vertices points each; copied, or converted
   /// by a kernel, so the caller's arrays may change afterwards). Throws InputError unless both
   /// point to device (or managed) memory. Non-finite values are reported by the next BVH build or

@@ -2,6 +2,8 @@
 #pragma once
 
 #include <cstddef>
+#include <type_traits>
+#include <utility>
 
 #include "lwsccd/core/config.hpp"
 
@@ -12,7 +14,9 @@ class Span {
  public:
   LWSCCD_HD constexpr Span() : data_(nullptr), size_(0) {}
   LWSCCD_HD constexpr Span(T* data, std::size_t size) : data_(data), size_(size) {}
-  template <class Container>
+  /// A view of a contiguous container of T (std::vector, std::array, ...).
+  template <class Container,
+            class = std::enable_if_t<std::is_convertible<decltype(std::declval<Container&>().data()), T*>::value>>
   Span(Container& c) : data_(c.data()), size_(c.size()) {}  // NOLINT: implicit like std::span
 
   LWSCCD_HD constexpr T* data() const { return data_; }

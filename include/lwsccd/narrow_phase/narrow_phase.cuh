@@ -10,6 +10,7 @@
 #include "lwsccd/bvh/bvh.cuh"
 #include "lwsccd/core/cuda_handles.cuh"
 #include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/core/host_staging.cuh"
 #include "lwsccd/narrow_phase/ccd_filters.hpp"
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
 #include "lwsccd/narrow_phase/narrow_phase.hpp"
@@ -198,6 +199,10 @@ class NarrowPhase {
   NarrowPhaseCounts counts(int list) const { return lists_[list].counts; }
   /// Copies the hits to the host, sorted by (first, second) like the CPU backend's.
   NarrowPhaseResult<T> download(cudaStream_t stream = nullptr) const;
+  /// The same into `result`, whose lists' memory is reused (a caller that keeps one result pays
+  /// no page faults for it), through page-locked chunks (HostStaging).
+  template <class StagingPolicy = HostStagingPolicy>
+  void download_into(NarrowPhaseResult<T>& result, cudaStream_t stream = nullptr) const;
   /// The hits of the last collected run on the device (sorted once `stream` reaches them).
   const FeatureHit<T>* vf_hits() const { return lists_[0].hits.data(); }
   const FeatureHit<T>* ee_hits() const { return lists_[1].hits.data(); }

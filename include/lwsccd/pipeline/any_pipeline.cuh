@@ -24,8 +24,28 @@ class AnyPipelineAdapter final : public PipelineAdapter<Pipeline> {
   StepOutcome step_from_device(const Vec3f* device_x0, const Vec3f* device_x1) override { return from_device(device_x0, device_x1); }
   AnyDeviceContacts step_on_device(const Vec3d* device_x0, const Vec3d* device_x1) override { return on_device(device_x0, device_x1); }
   AnyDeviceContacts step_on_device(const Vec3f* device_x0, const Vec3f* device_x1) override { return on_device(device_x0, device_x1); }
+  void step_into(Span<const Vec3d> x0, Span<const Vec3d> x1, StepOutcome& out) override { into(x0, x1, out); }
+  void step_into(Span<const Vec3f> x0, Span<const Vec3f> x1, StepOutcome& out) override { into(x0, x1, out); }
 
  private:
+  using Scalar = typename Pipeline::scalar_type;
+  // The arrays read in place; the contacts straight into out's lists (double TOIs), or into a
+  // kept float result and widened into them.
+  template <class Q>
+  void into(Span<const Vec3<Q>> x0, Span<const Vec3<Q>> x1, StepOutcome& out) {
+    if constexpr (std::is_same<Scalar, double>::value) {
+      kept_.contacts = std::move(out.contacts);
+      this->pipeline_.step_into(x0, x1, kept_);
+      out.stats = kept_.stats;
+      out.contacts = std::move(kept_.contacts);
+    } else {
+      this->pipeline_.step_into(x0, x1, kept_);
+      out.stats = kept_.stats;
+      lwsccd::detail::widen_into(kept_.contacts, out.contacts);
+    }
+  }
+  StepResult<Scalar> kept_;
+
   template <class Q>
   StepOutcome from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
     return this->outcome(this->pipeline_.step_from_device(device_x0, device_x1));

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "lwsccd/core/error.hpp"
+#include "lwsccd/core/span.hpp"
 #include "lwsccd/geometry/aabb.hpp"
 #include "lwsccd/geometry/obb.hpp"
 #include "lwsccd/narrow_phase/cubic_ccd.hpp"
@@ -75,6 +76,12 @@ class AnyPipeline {
   /// positions are widened exactly, so the answers are certified for them as given.
   virtual StepOutcome step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) = 0;
   virtual StepOutcome step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) = 0;
+  /// One step from host arrays of any origin (e.g. a NumPy array's memory) into `out`. The GPU
+  /// backend reads the arrays in place and reuses out's contact lists' memory
+  /// (gpu::CcdPipeline::step_into: a loop that keeps one outcome pays no page faults for its
+  /// contacts); the CPU backend copies the arrays and fills new lists.
+  virtual void step_into(Span<const Vec3d> x0, Span<const Vec3d> x1, StepOutcome& out) = 0;
+  virtual void step_into(Span<const Vec3f> x0, Span<const Vec3f> x1, StepOutcome& out) = 0;
   /// GPU backend: one step from positions in device memory (double or float). The CPU backend
   /// throws InputError.
   virtual StepOutcome step_from_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) { return no_device_positions(); }
@@ -83,6 +90,9 @@ class AnyPipeline {
   /// throws InputError.
   virtual AnyDeviceContacts step_on_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) { return no_device_results(); }
   virtual AnyDeviceContacts step_on_device(const Vec3f* /*device_x0*/, const Vec3f* /*device_x1*/) { return no_device_results(); }
+  /// The next step traverses from the BVTT's root, not the last step's front (positions unrelated
+  /// to the last step's: a new query on the same mesh, a restart). Same answer either way.
+  virtual void restart_from_root() = 0;
   virtual const TriangleMesh& mesh() const = 0;
   virtual const PipelineParams& params() const = 0;
   /// "cpu" or "gpu".
@@ -117,6 +127,21 @@ NarrowPhaseResult<double> to_double(NarrowPhaseResult<T>&& r) {
   }
 }
 
+// `from`'s hits and numbers into `to`, its lists' memory reused (TOIs widened to double).
+template <class T>
+void widen_into(const NarrowPhaseResult<T>& from, NarrowPhaseResult<double>& to) {
+  auto widen = [](const std::vector<FeatureHit<T>>& a, std::vector<FeatureHit<double>>& b) {
+    b.resize(a.size());
+    for (std::size_t i = 0; i < a.size(); ++i) b[i] = {a[i].first, a[i].second, double(a[i].toi)};
+  };
+  widen(from.vf, to.vf);
+  widen(from.ee, to.ee);
+  to.earliest_toi = double(from.earliest_toi);
+  to.gave_up = from.gave_up;
+  to.vf_counts = from.vf_counts;
+  to.ee_counts = from.ee_counts;
+}
+
 }  // namespace detail
 
 /// AnyPipeline over a pipeline type with step(x0, x1) -> StepResult<T>, mesh() and params().
@@ -128,6 +153,14 @@ class PipelineAdapter : public AnyPipeline {
       : pipeline_(std::forward<Args>(args)...), backend_(std::move(backend)) {}
   StepOutcome step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1) override { return outcome(pipeline_.step(x0, x1)); }
   StepOutcome step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1) override { return outcome(pipeline_.step(x0, x1)); }
+  // (The GPU adapter overrides these: its pipeline steps from the arrays in place.)
+  void step_into(Span<const Vec3d> x0, Span<const Vec3d> x1, StepOutcome& out) override {
+    out = outcome(pipeline_.step(copied(x0, copy0_), copied(x1, copy1_)));
+  }
+  void step_into(Span<const Vec3f> x0, Span<const Vec3f> x1, StepOutcome& out) override {
+    out = outcome(pipeline_.step(copied(x0, copy0f_), copied(x1, copy1f_)));
+  }
+  void restart_from_root() override { pipeline_.restart_from_root(); }
   const TriangleMesh& mesh() const override { return pipeline_.mesh(); }
   const PipelineParams& params() const override { return pipeline_.params(); }
   std::string backend() const override { return backend_; }
@@ -140,6 +173,15 @@ class PipelineAdapter : public AnyPipeline {
   }
   Pipeline pipeline_;
   std::string backend_;
+
+ private:
+  template <class Q>
+  static const std::vector<Vec3<Q>>& copied(Span<const Vec3<Q>> from, std::vector<Vec3<Q>>& to) {
+    to.assign(from.begin(), from.end());
+    return to;
+  }
+  std::vector<Vec3d> copy0_, copy1_;  ///< step_into's positions, for a pipeline that takes vectors
+  std::vector<Vec3f> copy0f_, copy1f_;
 };
 
 /// A type carried as a value (for the generic lambdas of dispatch_policies).

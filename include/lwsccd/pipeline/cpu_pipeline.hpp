@@ -78,6 +78,10 @@ class CcdPipeline {
     return step(wide0_, wide1_);
   }
 
+  /// The next step traverses the BVTT from its root instead of from the last step's front (as
+  /// gpu::CcdPipeline::restart_from_root: for positions unrelated to the last step's).
+  void restart_from_root() { tracker_.restart_next(); }
+
   const TriangleMesh& mesh() const { return *mesh_; }
   const BodyLayout& layout() const { return layout_; }
   const PipelineParams& params() const { return params_; }

@@ -32,6 +32,7 @@ template <class BV = Aabbf, class Scheduler = LazyStealScheduler, class Method =
 class CcdPipeline {
  public:
   using Task = SelfCollisionTask<BV>;
+  using scalar_type = T;  ///< the narrow phase's scalar (the contacts' TOIs)
 
   /// One self-colliding body. The topology is uploaded on `stream`, which the constructor
   /// synchronizes (so that a step on any stream finds it on the device).
@@ -74,10 +75,27 @@ class CcdPipeline {
   /// are certified for the float positions as given.
   /// @note Synchronizes `stream`.
   StepResult<T> step(const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1, cudaStream_t stream = nullptr) {
-    return step_from_host(x0, x1, stream);
+    StepResult<T> r;
+    step_from_host(Span<const Vec3d>(x0), Span<const Vec3d>(x1), r, stream);
+    return r;
   }
   StepResult<T> step(const std::vector<Vec3f>& x0, const std::vector<Vec3f>& x1, cudaStream_t stream = nullptr) {
-    return step_from_host(x0, x1, stream);
+    StepResult<T> r;
+    step_from_host(Span<const Vec3f>(x0), Span<const Vec3f>(x1), r, stream);
+    return r;
+  }
+
+  /// As step, from any host arrays (a std::vector, a NumPy array's memory: they may change once
+  /// the call returns), into `result`, whose contact lists' memory is reused: a loop that keeps
+  /// one StepResult pays no page faults for its contacts (on a virtual machine's host, ~2 us a
+  /// page: cloth-ball's 114 K contacts are 450 pages). Large arrays cross through the process's
+  /// page-locked chunks (HostStaging), the contacts too.
+  /// @note Synchronizes `stream`.
+  void step_into(Span<const Vec3d> x0, Span<const Vec3d> x1, StepResult<T>& result, cudaStream_t stream = nullptr) {
+    step_from_host(x0, x1, result, stream);
+  }
+  void step_into(Span<const Vec3f> x0, Span<const Vec3f> x1, StepResult<T>& result, cudaStream_t stream = nullptr) {
+    step_from_host(x0, x1, result, stream);
   }
 
   /// One step from positions already in device memory (mesh().num_vertices() points each, e.g.
@@ -103,6 +121,11 @@ class CcdPipeline {
     return on_device(device_x0, device_x1, stream);
   }
 
+  /// The next step traverses the BVTT from its root instead of from the last step's front: for a
+  /// step whose positions are unrelated to the last step's (a new query on the same mesh, a
+  /// restart, a jump in time), where that front would only slow it down. Same answer either way.
+  void restart_from_root() { reset_next_ = true; }
+
   const TriangleMesh& mesh() const { return *mesh_; }
   const BodyLayout& layout() const { return layout_; }
   const PipelineParams& params() const { return params_; }
@@ -127,13 +150,13 @@ class CcdPipeline {
 
  private:
   template <class Q>
-  StepResult<T> step_from_host(const std::vector<Vec3<Q>>& x0, const std::vector<Vec3<Q>>& x1, cudaStream_t stream) {
+  void step_from_host(Span<const Vec3<Q>> x0, Span<const Vec3<Q>> x1, StepResult<T>& result, cudaStream_t stream) {
     reset_peak_memory();
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, x0, x1, stream_);
-    else step_->set_positions(x0, x1, stream_);
-    return run_step(start);
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
+    step_->set_positions(x0, x1, stream_);
+    run_step(result, start);
   }
   template <class Q>
   StepResult<T> from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1, cudaStream_t stream) {
@@ -142,7 +165,9 @@ class CcdPipeline {
     stream_ = stream;
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
     step_->set_positions_from_device(device_x0, device_x1, stream_);
-    return run_step(start);
+    StepResult<T> r;
+    run_step(r, start);
+    return r;
   }
   template <class Q>
   DeviceStepResult<T> on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1, cudaStream_t stream) {
@@ -182,23 +207,26 @@ class CcdPipeline {
             narrow_.gave_up(), narrow_.survivors(), narrow_.warp_searches(), {narrow_.counts(0), narrow_.counts(1)}};
   }
 
-  StepResult<T> run_step(std::chrono::steady_clock::time_point start) {
-    StepResult<T> r;
+  // The stages, then the contacts into `r` (its lists' memory reused) through page-locked chunks.
+  void run_step(StepResult<T>& r, std::chrono::steady_clock::time_point start) {
+    r.stats = StepStats{};
     run_stages(r.stats);
     if (!streamed_) {
-      r.contacts = narrow_.download(stream_);
+      narrow_.download_into(r.contacts, stream_);
     } else {
       const Outcome& o = gathered_outcome_;
       const bool pairs = params_.mode != CcdMode::earliest;
-      r.contacts.vf = gathered_[0].download_prefix(pairs ? o.num_hits[0] : 0, stream_);
-      r.contacts.ee = gathered_[1].download_prefix(pairs ? o.num_hits[1] : 0, stream_);
+      for (int list = 0; list < 2; ++list) {
+        std::vector<FeatureHit<T>>& hits = list == 0 ? r.contacts.vf : r.contacts.ee;
+        hits.resize(pairs ? o.num_hits[list] : 0);
+        HostStaging<>::to_host(hits.data(), gathered_[list].data(), hits.size() * sizeof(FeatureHit<T>), stream_);
+      }
       r.contacts.earliest_toi = o.earliest;
       r.contacts.gave_up = o.gave_up;
       r.contacts.vf_counts = o.counts[0];
       r.contacts.ee_counts = o.counts[1];
     }
     finish_stats(r.stats, r.contacts.vf.size(), r.contacts.ee.size(), start);
-    return r;
   }
 
   void finish_stats(StepStats& stats, std::size_t hits_vf, std::size_t hits_ee, std::chrono::steady_clock::time_point start) {

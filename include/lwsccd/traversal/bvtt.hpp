@@ -183,6 +183,8 @@ class FrontTracker {
   bool last_was_restart() const { return restarted_; }
   std::size_t size() const { return front_.size(); }
   void reset() { front_.clear(); }
+  /// The next seeds() returns the root, whatever the front (the caller knows the front is stale).
+  void restart_next() { reset_next_ = true; }
 
  private:
   void recorded() {

@@ -185,7 +185,7 @@ void DeviceStep<P>::set_positions_from_device(const Vec3<Q>* d0, const Vec3<Q>* 
 
 template <class P>
 template <class Q>
-void DeviceStep<P>::set_positions(const std::vector<Vec3<Q>>& h0, const std::vector<Vec3<Q>>& h1, cudaStream_t stream) {
+void DeviceStep<P>::set_positions(Span<const Vec3<Q>> h0, Span<const Vec3<Q>> h1, cudaStream_t stream) {
   detail::require_position_type<Q>();
   for (const auto* h : {&h0, &h1}) {
     const char* name = h == &h0 ? "x0" : "x1";
@@ -193,25 +193,28 @@ void DeviceStep<P>::set_positions(const std::vector<Vec3<Q>>& h0, const std::vec
       throw InputError("gpu::DeviceStep", name, "has " + std::to_string(h->size()) + " positions, the mesh has " +
                                                     std::to_string(num_vertices) + " vertices");
   }
+  const auto n = static_cast<std::size_t>(num_vertices);
   if constexpr (std::is_same<P, Q>::value) {
-    // Copied as they are (a copy from pageable memory returns once the driver has taken the data):
-    // staging them first cost a host copy of 24 bytes a vertex, twice (~25 ms at 5 M vertices).
-    x0.upload(h0, stream);
-    x1.upload(h1, stream);
+    // Small arrays go as they are (the driver takes pageable memory at once); large ones through
+    // page-locked chunks, copied there on several threads (HostStaging).
+    x0.resize_discard(n);
+    x1.resize_discard(n);
+    HostStaging<>::to_device(x0.data(), h0.data(), n * sizeof(Vec3<P>), stream);
+    HostStaging<>::to_device(x1.data(), h1.data(), n * sizeof(Vec3<P>), stream);
   } else if constexpr (std::is_same<P, double>::value) {
     // Float input: half the bytes cross, widened on the device (exact). The second upload waits
     // for the first conversion (stream order), so one buffer serves both.
-    const auto n = static_cast<std::size_t>(num_vertices);
     x0.resize_discard(n);
     x1.resize_discard(n);
-    wide_.upload(h0, stream);
+    wide_.resize_discard(n);
+    HostStaging<>::to_device(wide_.data(), h0.data(), n * sizeof(Vec3<Q>), stream);
     detail::convert_points(wide_.data(), x0.data(), n, stream);
-    wide_.upload(h1, stream);
+    HostStaging<>::to_device(wide_.data(), h1.data(), n * sizeof(Vec3<Q>), stream);
     detail::convert_points(wide_.data(), x1.data(), n, stream);
   } else {
     // Staged through a host array of P; the copy must finish before the staging is reused.
     for (int which = 0; which < 2; ++which) {
-      const std::vector<Vec3<Q>>& h = which == 0 ? h0 : h1;
+      const Span<const Vec3<Q>>& h = which == 0 ? h0 : h1;
       staging_.resize(h.size());
       for (std::size_t v = 0; v < h.size(); ++v) staging_[v] = h[v].template cast<P>();
       (which == 0 ? x0 : x1).upload(staging_, stream);

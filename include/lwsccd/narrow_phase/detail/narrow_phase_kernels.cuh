@@ -450,4 +450,21 @@ NarrowPhaseResult<T> NarrowPhase<Method, T, Policy>::download(cudaStream_t strea
   return r;
 }
 
+template <class Method, class T, class Policy>
+template <class StagingPolicy>
+void NarrowPhase<Method, T, Policy>::download_into(NarrowPhaseResult<T>& r, cudaStream_t stream) const {
+  if (joined_ && stream != stream_) {  // the sort was enqueued on the run's stream
+    LWSCCD_CUDA_CHECK(cudaEventRecord(joined_, stream_));
+    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(stream, joined_, 0));
+  }
+  r.vf.resize(earliest_only_ ? 0 : lists_[0].count);
+  r.ee.resize(earliest_only_ ? 0 : lists_[1].count);
+  HostStaging<StagingPolicy>::to_host(r.vf.data(), lists_[0].hits.data(), r.vf.size() * sizeof(FeatureHit<T>), stream);
+  HostStaging<StagingPolicy>::to_host(r.ee.data(), lists_[1].hits.data(), r.ee.size() * sizeof(FeatureHit<T>), stream);
+  r.earliest_toi = earliest_;
+  r.gave_up = gave_up_;
+  r.vf_counts = lists_[0].counts;
+  r.ee_counts = lists_[1].counts;
+}
+
 }  // namespace lwsccd::gpu
