@@ -242,17 +242,20 @@ def ipctk_section(rows):
                 cells.append(f"{ms(r['first_ms'])} / {ms(r['median_ms'])}; step {r['step']:.6g}")
             else:
                 cells.append(f"{ms(r['median_ms'])}; step {r['step']:.6g}")
-        label = f"ipctk {r0.get('ipctk', '')} {name} + Tight Inclusion" if not name.startswith("lwsccd") else \
+        version = next((x["ipctk"] for x in timed if x.get("ipctk")), "")
+        label = f"ipctk {version} {name} + Tight Inclusion" if not name.startswith("lwsccd") else \
             (name.replace("lwsccd cpu", "lwsccd, CPU backend").replace("lwsccd gpu", "lwsccd, GPU"))
         body.append([label] + cells)
     pairs = []
     for scene in scenes:
         counted = next((x for x in rows if x["scene"] == scene and "candidates" in x), None)
         ours = next((x for x in timed if x["scene"] == scene and x["broad_phase"].startswith("lwsccd")), None)
+        text = f"{scene}: lwsccd {ours['colliding_pairs']:,}" if ours else f"{scene}:"
         if counted and counted.get("colliding_pairs") is not None:
-            pairs.append(f"{scene}: ipctk's narrow phase calls {counted['colliding_pairs']:,} of its "
-                         f"{counted['candidates']:,} LBVH candidates colliding"
-                         + (f", lwsccd {ours['colliding_pairs']:,}" if ours else ""))
+            text += f", ipctk {counted['colliding_pairs']:,} (of its {counted['candidates']:,} LBVH candidates)"
+        elif counted:
+            text += f", ipctk not counted ({counted['candidates']:,} candidates, one Python call each)"
+        pairs.append(text)
     gpu = next((x.get("gpu") for x in timed if x.get("gpu")), "")
     out = [f"ipc-toolkit (PyPI `ipctk`) and lwsccd on one machine ({r0.get('cpu', '?')}, {r0.get('cores', '?')} cores"
            + (f", {gpu}" if gpu else "") + f"; commit `{r0.get('commit', '?')}`, {r0.get('date', '?')}; "
@@ -262,7 +265,9 @@ def ipctk_section(rows):
            "(0.8 x the certified earliest contact).", "",
            table(["", *scenes], body, ["---"] + ["---:"] * len(scenes)), ""]
     if pairs:
-        out += ["Colliding pairs (the exact ground truth: cloth-funnel 134): " + "; ".join(pairs) + ".", ""]
+        out += ["Colliding pairs (lwsccd's are the scenes' exact ground truth, 0 false negatives and 0 false positives: "
+                "Whole step per scene; ipctk's narrow phase at tolerance 1e-6, each LBVH candidate's `ccd`): "
+                + "; ".join(pairs) + ".", ""]
     return out
 
 

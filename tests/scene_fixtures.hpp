@@ -73,4 +73,21 @@ inline MovingMesh coincident_triangles(int n) {
   return {TriangleMesh(3 * n, faces), x0, x1};
 }
 
+/// A step's positions rounded to float (what a float32 caller passes) and those floats widened back
+/// to double, exactly (what the pipelines certify float input as).
+struct FloatRounded {
+  std::vector<lwsccd::Vec3f> f0, f1;
+  std::vector<lwsccd::Vec3d> w0, w1;
+};
+inline FloatRounded float_rounded(const std::vector<lwsccd::Vec3d>& x0, const std::vector<lwsccd::Vec3d>& x1) {
+  FloatRounded r;
+  for (std::size_t v = 0; v < x0.size(); ++v) {
+    r.f0.push_back(x0[v].cast<float>());
+    r.f1.push_back(x1[v].cast<float>());
+    r.w0.push_back(r.f0.back().cast<double>());
+    r.w1.push_back(r.f1.back().cast<double>());
+  }
+  return r;
+}
+
 }  // namespace lwsccd_test

@@ -56,14 +56,7 @@ TEST_CASE("AnyPipeline: float positions are certified as given (the pipeline on 
   // float positions are a different (not necessarily equal) set from the double positions'.
   const auto m = lwsccd_test::folded_cloth(14, 3);
   auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
-  std::vector<Vec3f> f0, f1;
-  std::vector<Vec3d> w0, w1;
-  for (std::size_t v = 0; v < m.x0.size(); ++v) {
-    f0.push_back(m.x0[v].cast<float>());
-    f1.push_back(m.x1[v].cast<float>());
-    w0.push_back(f0.back().cast<double>());
-    w1.push_back(f1.back().cast<double>());
-  }
+  const auto [f0, f1, w0, w1] = lwsccd_test::float_rounded(m.x0, m.x1);
   CHECK(w0 != m.x0);  // rounding changed the input
   auto any = cpu::make_any_pipeline(mesh, BodyLayout{}, PipelineParams{}, PolicyChoice{});
   cpu::CcdPipeline<> direct(mesh);
@@ -98,11 +91,9 @@ TEST_CASE("AnyPipeline: step_into from host arrays equals step, double and float
   CHECK(contacts > 0);
   // Float arrays: as step() on the same float vectors.
   const auto m = lwsccd_test::folded_cloth(14, 3);
-  std::vector<Vec3f> f0, f1;
-  for (std::size_t v = 0; v < m.x0.size(); ++v) {
-    f0.push_back(m.x0[v].cast<float>());
-    f1.push_back(m.x1[v].cast<float>());
-  }
+  const lwsccd_test::FloatRounded r = lwsccd_test::float_rounded(m.x0, m.x1);
+  const std::vector<Vec3f>& f0 = r.f0;
+  const std::vector<Vec3f>& f1 = r.f1;
   const StepOutcome expected = stepped->step(f0, f1);
   into->step_into(Span<const Vec3f>(f0), Span<const Vec3f>(f1), kept);
   lwsccd_test::require_same_contacts(kept.contacts, expected.contacts);

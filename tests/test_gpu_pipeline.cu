@@ -481,16 +481,9 @@ TEST_CASE("GPU pipeline: step_into one kept result equals step() and the CPU pip
   CHECK(largest * sizeof(FeatureHit<double>) > gpu::HostStagingPolicy::kDirectDownloadBytes);  // (through the staging)
   // Float arrays into the same result.
   const auto m = lwsccd_test::folded_cloth(60, 3);
-  std::vector<Vec3f> f0, f1;
-  std::vector<Vec3d> w0, w1;
-  for (std::size_t v = 0; v < m.x0.size(); ++v) {
-    f0.push_back(m.x0[v].cast<float>());
-    f1.push_back(m.x1[v].cast<float>());
-    w0.push_back(f0.back().cast<double>());
-    w1.push_back(f1.back().cast<double>());
-  }
-  into.step_into(Span<const Vec3f>(f0), Span<const Vec3f>(f1), kept);
-  require_same_contacts(kept, cpu_pipeline.step(w0, w1));
+  const lwsccd_test::FloatRounded r = lwsccd_test::float_rounded(m.x0, m.x1);
+  into.step_into(Span<const Vec3f>(r.f0), Span<const Vec3f>(r.f1), kept);
+  require_same_contacts(kept, cpu_pipeline.step(r.w0, r.w1));
 }
 
 TEST_CASE("GPU pipeline: fresh steps (positions unrelated to the last step's) from a stale front or from the root "
