@@ -169,9 +169,9 @@ class Pipeline:
 
     def restart_from_root(self) -> None:
         """The next step traverses the hierarchy from its root instead of from the last step's
-        front. Call it before a step whose positions are unrelated to the last step's (a new
-        query on the same mesh, a restart, a jump in time), where the last front would only slow
-        that step down. The answer is the same either way."""
+        front. The answer is the same either way; on the shared scenes even a front from
+        unrelated positions was faster than the root (docs/PIPELINE.md), so call it only where
+        the last front is known to be far larger than the next step needs."""
         self._core.restart_from_root()
 
     def render(self, path: str, x0: Any, x1: Any, result: Optional[StepResult] = None, *,

@@ -90,8 +90,8 @@ class AnyPipeline {
   /// throws InputError.
   virtual AnyDeviceContacts step_on_device(const Vec3d* /*device_x0*/, const Vec3d* /*device_x1*/) { return no_device_results(); }
   virtual AnyDeviceContacts step_on_device(const Vec3f* /*device_x0*/, const Vec3f* /*device_x1*/) { return no_device_results(); }
-  /// The next step traverses from the BVTT's root, not the last step's front (positions unrelated
-  /// to the last step's: a new query on the same mesh, a restart). Same answer either way.
+  /// The next step traverses from the BVTT's root, not the last step's front (gpu::CcdPipeline::
+  /// restart_from_root). Same answer either way.
   virtual void restart_from_root() = 0;
   virtual const TriangleMesh& mesh() const = 0;
   virtual const PipelineParams& params() const = 0;

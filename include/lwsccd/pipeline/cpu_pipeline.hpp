@@ -79,7 +79,7 @@ class CcdPipeline {
   }
 
   /// The next step traverses the BVTT from its root instead of from the last step's front (as
-  /// gpu::CcdPipeline::restart_from_root: for positions unrelated to the last step's).
+  /// gpu::CcdPipeline::restart_from_root; same answer either way).
   void restart_from_root() { tracker_.restart_next(); }
 
   const TriangleMesh& mesh() const { return *mesh_; }

@@ -121,9 +121,11 @@ class CcdPipeline {
     return on_device(device_x0, device_x1, stream);
   }
 
-  /// The next step traverses the BVTT from its root instead of from the last step's front: for a
-  /// step whose positions are unrelated to the last step's (a new query on the same mesh, a
-  /// restart, a jump in time), where that front would only slow it down. Same answer either way.
+  /// The next step traverses the BVTT from its root instead of from the last step's front. Same
+  /// answer either way: the front is a cut of the BVTT whatever the positions. For a caller who
+  /// knows the last front is far larger than the next step needs; on the shared scenes a front
+  /// from unrelated positions was still faster than the root (docs/PIPELINE.md, fresh steps), so
+  /// the pipeline never restarts on its own for that.
   void restart_from_root() { reset_next_ = true; }
 
   const TriangleMesh& mesh() const { return *mesh_; }
