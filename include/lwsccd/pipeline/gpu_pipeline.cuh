@@ -223,6 +223,7 @@ class CcdPipeline {
         hits.resize(pairs ? o.num_hits[list] : 0);
         HostStaging<>::to_host(hits.data(), gathered_[list].data(), hits.size() * sizeof(FeatureHit<T>), stream_);
       }
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));  // (also with no hits)
       r.contacts.earliest_toi = o.earliest;
       r.contacts.gave_up = o.gave_up;
       r.contacts.vf_counts = o.counts[0];

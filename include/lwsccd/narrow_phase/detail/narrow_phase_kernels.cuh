@@ -431,22 +431,7 @@ void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::s
 template <class Method, class T, class Policy>
 NarrowPhaseResult<T> NarrowPhase<Method, T, Policy>::download(cudaStream_t stream) const {
   NarrowPhaseResult<T> r;
-  if (joined_ && stream != stream_) {  // the sort was enqueued on the run's stream
-    LWSCCD_CUDA_CHECK(cudaEventRecord(joined_, stream_));
-    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(stream, joined_, 0));
-  }
-  auto fetch = [&](const DeviceBuffer<FeatureHit<T>>& buffer, std::size_t count, std::vector<FeatureHit<T>>& dst) {
-    dst.resize(count);
-    if (count)
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(dst.data(), buffer.data(), count * sizeof(FeatureHit<T>), cudaMemcpyDeviceToHost, stream));
-  };
-  fetch(lists_[0].hits, earliest_only_ ? 0 : lists_[0].count, r.vf);
-  fetch(lists_[1].hits, earliest_only_ ? 0 : lists_[1].count, r.ee);
-  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
-  r.earliest_toi = earliest_;
-  r.gave_up = gave_up_;
-  r.vf_counts = lists_[0].counts;
-  r.ee_counts = lists_[1].counts;
+  download_into(r, stream);
   return r;
 }
 
@@ -461,6 +446,7 @@ void NarrowPhase<Method, T, Policy>::download_into(NarrowPhaseResult<T>& r, cuda
   r.ee.resize(earliest_only_ ? 0 : lists_[1].count);
   HostStaging<StagingPolicy>::to_host(r.vf.data(), lists_[0].hits.data(), r.vf.size() * sizeof(FeatureHit<T>), stream);
   HostStaging<StagingPolicy>::to_host(r.ee.data(), lists_[1].hits.data(), r.ee.size() * sizeof(FeatureHit<T>), stream);
+  LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));  // (also with no hits: the stream's work is done on return)
   r.earliest_toi = earliest_;
   r.gave_up = gave_up_;
   r.vf_counts = lists_[0].counts;
