@@ -1,6 +1,7 @@
 // The geometry core run inside kernels, compared with the same code run on the host.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cstring>
 #include <random>
 #include <type_traits>
@@ -9,6 +10,7 @@
 
 #include "lwsccd/core/cuda_check.cuh"
 #include "lwsccd/core/cuda_handles.cuh"
+#include "lwsccd/core/device_buffer.cuh"
 #include "lwsccd/geometry/bv_traits.hpp"
 #include "lwsccd/geometry/morton.hpp"
 
@@ -191,4 +193,79 @@ TEST_CASE("CudaEvent and CudaStream own their handle: moved, it stays valid; the
   moved_event = gpu::CudaEvent(cudaEventDisableTiming);
   LWSCCD_CUDA_CHECK(cudaEventRecord(moved_event, moved_stream));
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(moved_stream));
+}
+
+namespace {
+// Spins for about `ns` nanoseconds of the GPU's clock, then fills `out` with `value`: a writer
+// that is still running when the host has long given its buffer back.
+__global__ void late_fill_kernel(unsigned* out, std::size_t n, unsigned value, unsigned long long ns) {
+  if (threadIdx.x == 0 && blockIdx.x == 0) {
+    unsigned long long start = 0, now = 0;
+    asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(start));
+    do {
+      asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(now));
+    } while (now - start < ns);
+  }
+  __syncthreads();
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) out[i] = value;
+}
+}  // namespace
+
+TEST_CASE("Device blocks given back are kept for the next request of their size, reused only once no earlier work can touch them",
+          "[gpu][pool]") {
+  gpu::set_memory_caching(true);
+  gpu::release_cached_memory();
+  CHECK(gpu::memory_stats().cached == 0);
+  const std::size_t n = (std::size_t(3) << 20) + 17;  // an odd size: no other buffer of the process has it
+  const std::size_t in_use = gpu::memory_stats().in_use;
+  const unsigned* first = nullptr;
+  {
+    gpu::DeviceBuffer<unsigned> a(n);
+    first = a.data();
+    CHECK(a.capacity_bytes() == n * sizeof(unsigned));  // exactly what was asked for
+    CHECK(gpu::memory_stats().in_use == in_use + n * sizeof(unsigned));
+  }
+  CHECK(gpu::memory_stats().in_use == in_use);
+  CHECK(gpu::memory_stats().cached == n * sizeof(unsigned));
+  {
+    gpu::DeviceBuffer<unsigned> other(n + 1);  // another size: a block of its own
+    CHECK(other.data() != first);
+    gpu::DeviceBuffer<unsigned> again(n);  // the same size: the block given back
+    CHECK(again.data() == first);
+    CHECK(gpu::memory_stats().cached == 0);
+  }
+  // A kernel still writing into a buffer that its owner gave back: the next buffer of that size
+  // gets the block only after the kernel is done (else the late writes would land in it).
+  gpu::CudaStream side(cudaStreamNonBlocking);
+  std::vector<unsigned> host(n);
+  for (int round = 0; round < 3; ++round) {
+    {
+      gpu::DeviceBuffer<unsigned> busy(n);
+      late_fill_kernel<<<64, 256, 0, side>>>(busy.data(), n, 0xdeadbeefu, 20'000'000ull);  // ~20 ms
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }  // given back while the kernel runs
+    gpu::DeviceBuffer<unsigned> fresh(n);
+    LWSCCD_CUDA_CHECK(cudaMemset(fresh.data(), 0x11, n * sizeof(unsigned)));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(side));
+    LWSCCD_CUDA_CHECK(cudaMemcpy(host.data(), fresh.data(), n * sizeof(unsigned), cudaMemcpyDeviceToHost));
+    CHECK(std::count(host.begin(), host.end(), 0x11111111u) == static_cast<std::ptrdiff_t>(n));
+  }
+  // Freed on request, and where a budget needs their room.
+  gpu::release_cached_memory();
+  CHECK(gpu::memory_stats().cached == 0);
+  { gpu::DeviceBuffer<unsigned> a(n); }
+  CHECK(gpu::memory_stats().cached == n * sizeof(unsigned));
+  const std::size_t previous = gpu::memory_budget();
+  gpu::set_memory_budget(gpu::memory_stats().in_use + n * sizeof(unsigned) + 4096);
+  {
+    gpu::DeviceBuffer<unsigned> b(n + 1);  // fits the budget once the cached block is freed
+    CHECK(gpu::memory_stats().cached == 0);
+  }
+  gpu::set_memory_budget(previous);
+  // Caching off: blocks given back are freed at once.
+  gpu::release_cached_memory();
+  gpu::set_memory_caching(false);
+  { gpu::DeviceBuffer<unsigned> a(n); }
+  CHECK(gpu::memory_stats().cached == 0);
+  gpu::set_memory_caching(true);
 }

@@ -169,6 +169,75 @@ TEMPLATE_TEST_CASE("GPU schedulers equal the CPU engine on self collision", "[gp
   }
 }
 
+// A traversal whose outputs fill up part way keeps what they hold: the blocks that find no room
+// hand their items back unprocessed, the host grows the outputs and relaunches with those items.
+// The same results and front as with room enough, and the same items processed (none twice).
+template <class Scheduler, class Task>
+void fills_up_and_goes_on(const Task& task, const std::vector<NodePair>& seeds, const std::vector<TrianglePair>& results,
+                          const std::vector<std::pair<index_t, index_t>>& front, std::size_t processed) {
+  gpu::TraversalOutput<Task> out;
+  gpu::detail::storage_of(out).results_.resize_discard(7);
+  gpu::detail::storage_of(out).front_.resize_discard(5);
+  REQUIRE(gpu_pairs<Scheduler>(task, seeds, out, true) == results);
+  CHECK(as_pairs(out.download_front()) == front);
+  CHECK(out.complete());
+  CHECK(out.stats().relaunches > 0);
+  CHECK(out.stats().items_processed == processed);
+  // Only the front short of room, then only the results.
+  gpu::detail::storage_of(out).front_ = gpu::DeviceBuffer<NodePair>(3);
+  REQUIRE(gpu_pairs<Scheduler>(task, seeds, out, true) == results);
+  CHECK(as_pairs(out.download_front()) == front);
+  gpu::detail::storage_of(out).results_ = gpu::DeviceBuffer<TrianglePair>(2);
+  REQUIRE(gpu_pairs<Scheduler>(task, seeds, out, true) == results);
+  CHECK(as_pairs(out.download_front()) == front);
+  CHECK(out.stats().items_processed == processed);
+}
+
+TEST_CASE("GPU traversals whose outputs fill up keep what they hold and go on from there", "[gpu][traverse][front]") {
+  const DeviceFoldedCloth<Aabbf> cloth(40, 2);
+  using Task = SelfCollisionTask<Aabbf>;
+  const Task task = cloth.task();
+  gpu::TraversalOutput<Task> roomy;
+  const std::vector<NodePair> root{NodePair{0, 0}};
+  const auto results = gpu_pairs<gpu::LazyStealScheduler>(task, root, roomy, true);
+  const auto front_items = roomy.download_front();
+  const auto front = as_pairs(front_items);
+  const std::size_t processed = roomy.stats().items_processed;
+  REQUIRE(results.size() > 100);
+  REQUIRE(front.size() > 100);
+  fills_up_and_goes_on<gpu::StaticTaskList>(task, root, results, front, processed);
+  fills_up_and_goes_on<gpu::GProximityBalancer>(task, root, results, front, processed);
+  fills_up_and_goes_on<gpu::LazyStealScheduler>(task, root, results, front, processed);
+  fills_up_and_goes_on<TinyStatic>(task, root, results, front, processed);
+  fills_up_and_goes_on<TinyBalanced>(task, root, results, front, processed);
+  fills_up_and_goes_on<TinyLazy>(task, root, results, front, processed);
+  // From a front (the flat start: the items it cannot finish go to the next launch unprocessed).
+  const auto from_front = gpu_pairs<gpu::LazyStealScheduler>(task, front_items, roomy, true);
+  const auto next_front = as_pairs(roomy.download_front());
+  const std::size_t from_front_processed = roomy.stats().items_processed;
+  fills_up_and_goes_on<FlatLazy>(task, front_items, from_front, next_front, from_front_processed);
+  fills_up_and_goes_on<TinyFlatLazy>(task, front_items, from_front, next_front, from_front_processed);
+  // The cut of gpu::expand: what it met on the way is kept across the growths as well.
+  gpu::DeviceBuffer<NodePair> d_root;
+  d_root.upload(root);
+  gpu::TraversalOutput<Task> cut_out;
+  gpu::detail::storage_of(cut_out).results_.resize_discard(1);
+  gpu::detail::storage_of(cut_out).front_.resize_discard(1);
+  const std::size_t n = gpu::expand(task, d_root.data(), 1, 2000, cut_out, true);
+  REQUIRE(cut_out.complete());
+  std::vector<TrianglePair> met = cut_out.download_results();
+  std::vector<NodePair> met_front = cut_out.download_front();
+  gpu::DeviceBuffer<NodePair> cut(std::max<std::size_t>(n, 1));
+  if (n) LWSCCD_CUDA_CHECK(cudaMemcpy(cut.data(), cut_out.expanded(), n * sizeof(NodePair), cudaMemcpyDeviceToDevice));
+  gpu::traverse<gpu::LazyStealScheduler>(task, cut.data(), n, cut_out, true);
+  const auto rest = cut_out.download_results();
+  const auto rest_front = cut_out.download_front();
+  met.insert(met.end(), rest.begin(), rest.end());
+  met_front.insert(met_front.end(), rest_front.begin(), rest_front.end());
+  CHECK(sorted(met) == results);
+  CHECK(as_pairs(met_front) == front);
+}
+
 TEST_CASE("device memory budget: exceeding it is a clear error, not a crash", "[gpu][traverse]") {
   const DeviceFoldedCloth<Aabbf> cloth(60, 1);
   const SelfCollisionTask<Aabbf> task = cloth.task();

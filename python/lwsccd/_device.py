@@ -15,6 +15,12 @@ def gpu_name() -> str:
     return _lwsccd.gpu_name()
 
 
+def release_cached_memory() -> None:
+    """Frees the device memory that destroyed pipelines gave back and the process kept for later
+    ones (a later pipeline on a mesh of the same size starts with it); nothing without a GPU."""
+    _lwsccd.release_cached_memory()
+
+
 def gpu_available() -> bool:
     """True when the GPU backend is compiled in and a CUDA device is present."""
     return built_with_gpu() and gpu_name() != ""

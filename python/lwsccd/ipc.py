@@ -40,6 +40,7 @@ from typing import Any, Optional, Tuple
 
 import numpy as np
 
+from ._device import release_cached_memory
 from .pipeline import Pipeline
 
 __all__ = ["compute_collision_free_stepsize", "is_step_collision_free", "clear_cache"]
@@ -54,8 +55,9 @@ _CACHE_SIZE = 4
 
 
 def clear_cache() -> None:
-    """Drops the pipelines kept for earlier meshes (their device memory with them)."""
+    """Drops the pipelines kept for earlier meshes and frees their device memory."""
     _CACHE.clear()
+    release_cached_memory()
 
 
 def _arrays(mesh: Any) -> Tuple[np.ndarray, np.ndarray, int]:

@@ -11,6 +11,8 @@ const bool kBuiltWithGpu = true;
 
 std::string gpu_name() { return lwsccd::gpu::device_name(); }
 
+void release_cached_memory() { lwsccd::gpu::release_cached_memory(); }
+
 std::unique_ptr<lwsccd::AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
                                                        const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
                                                        const lwsccd::PolicyChoice& choice) {

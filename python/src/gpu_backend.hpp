@@ -34,6 +34,9 @@ DeviceHitArrays copy_device_hits(const void* hits, std::size_t n, bool toi_is_do
                                  std::int64_t second_base);
 void free_device_array(void* p) noexcept;
 
+/// gpu::release_cached_memory(); nothing without the GPU backend.
+void release_cached_memory();
+
 /// Waits for a CUDA stream given by its handle's address (a producer's stream in
 /// __cuda_array_interface__); nothing without the GPU backend.
 void synchronize_stream(std::uintptr_t stream);

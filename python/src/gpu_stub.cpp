@@ -7,6 +7,8 @@ const bool kBuiltWithGpu = false;
 
 std::string gpu_name() { return ""; }
 
+void release_cached_memory() {}
+
 std::unique_ptr<lwsccd::AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh>, const lwsccd::BodyLayout&,
                                                        const lwsccd::PipelineParams&, const lwsccd::PolicyChoice&) {
   throw lwsccd::Error(

@@ -92,6 +92,7 @@ nb::dict stats_dict(const lwsccd::StepStats& s) {
   d["narrow_ee"] = counts_dict(s.narrow_ee);
   d["peak_device_bytes"] = s.peak_device_bytes;
   d["reruns"] = s.reruns;
+  d["traversal_relaunches"] = s.traversal_relaunches;
   d["traversal_parts"] = s.traversal_parts;
   d["narrow_parts"] = s.narrow_parts;
   d["rebuilt"] = s.rebuilt;
@@ -365,6 +366,7 @@ NB_MODULE(_lwsccd, m) {
       }, nb::rv_policy::move);
 
   m.def("gpu_name", &lwsccd_python::gpu_name);
+  m.def("release_cached_memory", &lwsccd_python::release_cached_memory);
   m.def("synchronize_stream", &lwsccd_python::synchronize_stream, "stream"_a);
   // The device address of a DLPack CUDA array of (n, 3) float64 or float32, C-contiguous
   // (nanobind checks; float64 tried first).

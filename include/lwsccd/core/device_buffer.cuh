@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
+#include <map>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -17,10 +20,12 @@
 
 namespace lwsccd::gpu {
 
-/// Bytes of device memory held by lwsccd objects now, and the most held at once.
+/// Bytes of device memory held by lwsccd objects now, and the most held at once; `cached`: blocks
+/// the objects gave back, kept by the process for the next ones (gpu::release_cached_memory()).
 struct MemoryStats {
   std::size_t in_use = 0;
   std::size_t peak = 0;
+  std::size_t cached = 0;
 };
 
 namespace detail {
@@ -36,13 +41,13 @@ inline std::atomic<std::size_t>& bytes_budget() {
   static std::atomic<std::size_t> v{~std::size_t(0)};
   return v;
 }
-// Refuses an allocation that would take the library past the budget (before cudaMalloc).
-inline void check_budget(std::size_t bytes) {
-  const std::size_t in_use = bytes_in_use().load(), budget = bytes_budget().load();
-  if (bytes > budget || in_use > budget - bytes)
-    throw Error("lwsccd: device memory budget exceeded: an allocation of " + std::to_string(bytes) + " bytes with " +
-                std::to_string(in_use) + " in use would pass the budget of " + std::to_string(budget) +
-                " bytes (gpu::set_memory_budget)");
+inline std::atomic<std::size_t>& bytes_cached() {
+  static std::atomic<std::size_t> v{0};
+  return v;
+}
+inline std::atomic<bool>& caching_enabled() {
+  static std::atomic<bool> v{true};
+  return v;
 }
 inline void account_alloc(std::size_t bytes) {
   const std::size_t now = bytes_in_use().fetch_add(bytes) + bytes;
@@ -51,15 +56,167 @@ inline void account_alloc(std::size_t bytes) {
   }
 }
 inline void account_free(std::size_t bytes) { bytes_in_use().fetch_sub(bytes); }
+
+// The process's cache of device blocks that lwsccd objects gave back, per device, so that a
+// pipeline made after others starts with their memory and a buffer that grows does not pay
+// cudaFree's device-wide wait. Stream-safe without knowing the streams: a given-back block may
+// still be read by work enqueued before; it serves a request only after a device-wide
+// synchronisation that came after it was given back (one cudaDeviceSynchronize makes every block
+// given back until then reusable; cudaFree waited as much for each block). A block serves only a
+// request of its exact size (a pipeline on the same scene asks for the same sizes), so what
+// objects hold stays what they asked for, byte for byte (the budget's accounting). Freed when the process ends, on gpu::release_cached_memory(), when
+// cudaMalloc fails, and where a memory budget needs their room.
+class DevicePool {
+ public:
+  struct Block {
+    void* ptr = nullptr;
+    std::size_t bytes = 0;
+  };
+
+  static DevicePool& instance() {
+    static DevicePool pool;  // (destroyed at exit before the CUDA runtime's own teardown)
+    return pool;
+  }
+  static bool alive() { return alive_flag().load(); }
+
+  // A block of `bytes` on the current device.
+  Block allocate(std::size_t bytes) {
+    const std::size_t size = bytes;
+    int device = 0;
+    LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      PerDevice& d = of(device);
+      auto range = d.blocks.equal_range(size);
+      if (range.first != range.second) {
+        auto safe = range.first;
+        while (safe != range.second && safe->second.released > d.synced) ++safe;
+        if (safe == range.second) {  // given back since the last wait: wait once for all of them
+          LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+          d.synced = d.releases;
+          safe = range.first;
+        }
+        Block b{safe->second.ptr, size};
+        d.blocks.erase(safe);
+        bytes_cached().fetch_sub(size);
+        return b;
+      }
+    }
+    void* ptr = nullptr;
+    cudaError_t e = cudaMalloc(&ptr, size);
+    if (e == cudaErrorMemoryAllocation) {  // the cache's blocks first, then once more
+      (void)cudaGetLastError();
+      release_all(device);
+      e = cudaMalloc(&ptr, size);
+    }
+    LWSCCD_CUDA_CHECK(e);
+    return {ptr, size};
+  }
+
+  // Takes back a block of `device` (never throws: called from destructors).
+  void give_back(void* ptr, std::size_t bytes, int device) noexcept {
+    if (!caching_enabled().load()) {
+      cudaFree(ptr);
+      return;
+    }
+    try {
+      std::lock_guard<std::mutex> lock(mutex_);
+      PerDevice& d = of(device);
+      d.blocks.emplace(bytes, Cached{ptr, ++d.releases});
+      bytes_cached().fetch_add(bytes);
+    } catch (...) {
+      cudaFree(ptr);  // (no room to remember it)
+    }
+  }
+
+  // Frees every cached block of `device` (-1: of every device) after a device-wide wait.
+  void release_all(int device = -1) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    int current = 0;
+    LWSCCD_CUDA_CHECK(cudaGetDevice(&current));
+    for (std::size_t k = 0; k < devices_.size(); ++k) {
+      if ((device >= 0 && static_cast<int>(k) != device) || devices_[k].blocks.empty()) continue;
+      LWSCCD_CUDA_CHECK(cudaSetDevice(static_cast<int>(k)));
+      LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+      for (auto& [size, c] : devices_[k].blocks) {
+        LWSCCD_CUDA_CHECK(cudaFree(c.ptr));
+        bytes_cached().fetch_sub(size);
+      }
+      devices_[k].blocks.clear();
+      devices_[k].synced = devices_[k].releases;
+    }
+    LWSCCD_CUDA_CHECK(cudaSetDevice(current));
+  }
+
+  DevicePool(const DevicePool&) = delete;
+  DevicePool& operator=(const DevicePool&) = delete;
+
+ private:
+  struct Cached {
+    void* ptr;
+    std::uint64_t released;  ///< the device's count of blocks given back, when this one was
+  };
+  struct PerDevice {
+    std::multimap<std::size_t, Cached> blocks;
+    std::uint64_t releases = 0;  ///< blocks given back so far
+    std::uint64_t synced = 0;    ///< of those, the ones given back before the last wait
+  };
+  DevicePool() { alive_flag().store(true); }
+  ~DevicePool() {
+    alive_flag().store(false);
+    for (auto& d : devices_)
+      for (auto& [size, c] : d.blocks) cudaFree(c.ptr);  // (errors ignored: the process is ending)
+  }
+  static std::atomic<bool>& alive_flag() {
+    static std::atomic<bool> v{false};
+    return v;
+  }
+  PerDevice& of(int device) {
+    if (static_cast<std::size_t>(device) >= devices_.size()) devices_.resize(static_cast<std::size_t>(device) + 1);
+    return devices_[static_cast<std::size_t>(device)];
+  }
+
+  std::mutex mutex_;
+  std::vector<PerDevice> devices_;
+};
+
+// Refuses an allocation that would take the library past the budget (before any allocation).
+// Cached blocks count as held: where they stand in the way they are freed first.
+inline void check_budget(std::size_t bytes) {
+  const std::size_t budget = bytes_budget().load();
+  auto passes = [&] {
+    const std::size_t held = bytes_in_use().load() + bytes_cached().load();
+    return bytes > budget || held > budget - bytes;
+  };
+  if (!passes()) return;
+  if (bytes_cached().load() > 0) DevicePool::instance().release_all();
+  if (!passes()) return;
+  const std::size_t in_use = bytes_in_use().load();
+  throw Error("lwsccd: device memory budget exceeded: an allocation of " + std::to_string(bytes) + " bytes with " +
+              std::to_string(in_use) + " in use would pass the budget of " + std::to_string(budget) +
+              " bytes (gpu::set_memory_budget)");
+}
 }  // namespace detail
 
-inline MemoryStats memory_stats() { return {detail::bytes_in_use().load(), detail::bytes_peak().load()}; }
-/// Caps the device memory all lwsccd objects may hold together; an allocation past it throws
+inline MemoryStats memory_stats() {
+  return {detail::bytes_in_use().load(), detail::bytes_peak().load(), detail::bytes_cached().load()};
+}
+/// Caps the device memory all lwsccd objects may hold together, the process's cached blocks
+/// included (freed first where they stand in the way); an allocation past it throws
 /// lwsccd::Error (nothing is allocated then). Default: no cap.
 inline void set_memory_budget(std::size_t bytes) { detail::bytes_budget().store(bytes); }
 inline std::size_t memory_budget() { return detail::bytes_budget().load(); }
 /// Restarts the peak at the current use (for measuring one phase).
 inline void reset_peak_memory() { detail::bytes_peak().store(detail::bytes_in_use().load()); }
+/// Frees the device blocks lwsccd objects gave back and the process kept for later ones (after a
+/// device-wide synchronisation), on every device: for a program that is done with lwsccd for now.
+inline void release_cached_memory() {
+  if (detail::bytes_cached().load() > 0) detail::DevicePool::instance().release_all();
+}
+/// Whether blocks lwsccd objects give back are kept for later ones (default: true). Off, they are
+/// freed at once (cudaFree, as a program that shares the device tightly may prefer); turning it
+/// off does not free what is cached (release_cached_memory()).
+inline void set_memory_caching(bool enabled) { detail::caching_enabled().store(enabled); }
 
 /// A typed device array. Growing discards the contents (callers refill what they grow).
 template <class T>
@@ -70,9 +227,10 @@ class DeviceBuffer {
   ~DeviceBuffer() { release(); }
   DeviceBuffer(const DeviceBuffer&) = delete;
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  DeviceBuffer(DeviceBuffer&& o) noexcept : ptr_(o.ptr_), size_(o.size_), capacity_(o.capacity_) {
+  DeviceBuffer(DeviceBuffer&& o) noexcept
+      : ptr_(o.ptr_), size_(o.size_), capacity_(o.capacity_), bytes_(o.bytes_), device_(o.device_) {
     o.ptr_ = nullptr;
-    o.size_ = o.capacity_ = 0;
+    o.size_ = o.capacity_ = o.bytes_ = 0;
   }
   DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
     if (this != &o) {
@@ -80,20 +238,26 @@ class DeviceBuffer {
       ptr_ = o.ptr_;
       size_ = o.size_;
       capacity_ = o.capacity_;
+      bytes_ = o.bytes_;
+      device_ = o.device_;
       o.ptr_ = nullptr;
-      o.size_ = o.capacity_ = 0;
+      o.size_ = o.capacity_ = o.bytes_ = 0;
     }
     return *this;
   }
 
-  /// Sets the size to n, reallocating (contents lost) only when n exceeds the capacity.
+  /// Sets the size to n, reallocating (contents lost) only when n exceeds the capacity. The
+  /// block comes from the process's cache where it holds one of the size (detail::DevicePool).
   void resize_discard(std::size_t n) {
     if (n > capacity_) {
       release();
       detail::check_budget(n * sizeof(T));
-      LWSCCD_CUDA_CHECK(cudaMalloc(&ptr_, n * sizeof(T)));
-      capacity_ = n;
-      detail::account_alloc(capacity_ * sizeof(T));
+      const detail::DevicePool::Block block = detail::DevicePool::instance().allocate(n * sizeof(T));
+      LWSCCD_CUDA_CHECK(cudaGetDevice(&device_));
+      ptr_ = static_cast<T*>(block.ptr);
+      bytes_ = block.bytes;
+      capacity_ = block.bytes / sizeof(T);
+      detail::account_alloc(bytes_);
     }
     size_ = n;
   }
@@ -120,6 +284,8 @@ class DeviceBuffer {
       if (size_) LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.ptr_, ptr_, size_ * sizeof(T), cudaMemcpyDeviceToDevice, stream));
       std::swap(ptr_, bigger.ptr_);
       std::swap(capacity_, bigger.capacity_);
+      std::swap(bytes_, bigger.bytes_);
+      std::swap(device_, bigger.device_);
     }
     size_ = n;
   }
@@ -136,21 +302,26 @@ class DeviceBuffer {
   T* data() { return ptr_; }
   const T* data() const { return ptr_; }
   std::size_t size() const { return size_; }
-  std::size_t capacity_bytes() const { return capacity_ * sizeof(T); }
+  std::size_t capacity_bytes() const { return bytes_; }
 
  private:
   void release() noexcept {
     if (ptr_) {
-      cudaFree(ptr_);  // never throws from a destructor; a failure here means a dead context
-      detail::account_free(capacity_ * sizeof(T));
+      // Never throws from a destructor; after the pool's end (a static object destroyed later)
+      // straight to cudaFree, whose failure here would mean a dead context.
+      if (detail::DevicePool::alive()) detail::DevicePool::instance().give_back(ptr_, bytes_, device_);
+      else cudaFree(ptr_);
+      detail::account_free(bytes_);
     }
     ptr_ = nullptr;
-    size_ = capacity_ = 0;
+    size_ = capacity_ = bytes_ = 0;
   }
 
   T* ptr_ = nullptr;
   std::size_t size_ = 0;
   std::size_t capacity_ = 0;
+  std::size_t bytes_ = 0;  ///< the block's size (capacity_ elements)
+  int device_ = 0;
 };
 
 

@@ -151,6 +151,9 @@ struct StepStats {
   /// GPU: stages enqueued again in this step because a list outgrew the room earlier steps gave
   /// it (the feature pairs' or the narrow phase's; nothing is lost, the step just costs more).
   std::size_t reruns = 0;
+  /// GPU: launches of this step's traversal after its first (blocks handed items back: a full
+  /// deque, or outputs that filled up and grew; a first step from the root has a few).
+  std::size_t traversal_relaunches = 0;
   /// A step in parts (PipelineParams::part_pairs, or a GPU budget): the traversal's parts and the
   /// narrow phase's parts (a part's candidates went through the feature pairs and the narrow
   /// phase together); 0: the step ran whole.

@@ -112,6 +112,7 @@ struct TraversalStorage {
   std::size_t output_limit_ = 0;
   bool complete_ = true;
   bool front_complete_ = true;
+  bool halt_on_overflow_ = true;  ///< Outputs::halt_on_overflow of the launches (prepare_outputs)
   bool awaiting_collect_ = false;  ///< traverse_async() left the counts on the device
   bool awaiting_front_ = false;    ///< and recorded a front
   TraversalStats stats_;

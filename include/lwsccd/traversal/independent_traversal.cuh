@@ -49,7 +49,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads)
         e.num_results = 0;
         task.emit_leaf_pair(query_primitive, bvh.primitive(child), e);
         if (e.num_results) {
-          const unsigned long long i = atomicAdd(&out.counters[kResults], 1ull);
+          const unsigned long long i = atomicAdd(&out.counters[kOutputs], 1ull);  // (the low half: results)
           if (i < out.result_capacity) out.results[i] = e.results[0];
         }
       } else {
@@ -80,6 +80,7 @@ void independent_self_traversal(const SelfCollisionTask<BV>& task, TraversalOutp
                                 cudaStream_t stream = nullptr) {
   detail::TraversalStorage<SelfCollisionTask<BV>>& out = detail::storage_of(output);
   detail::ensure(out.counters_, detail::kCounters);
+  out.halt_on_overflow_ = false;  // (its own loop: the launch reruns with room for the count)
   if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
   if (out.front_.size() == 0) out.front_.resize_discard(1);
   out.stats_ = {};
@@ -93,7 +94,7 @@ void independent_self_traversal(const SelfCollisionTask<BV>& task, TraversalOutp
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
     const auto c = detail::read_counters(out, stream);
-    const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
+    const std::size_t results = detail::results_of(c[detail::kOutputs]);
     out.stats_.items_processed = static_cast<std::size_t>(c[detail::kProcessed]);
     if (results <= out.results_.size()) {
       out.num_results_ = results;

@@ -106,6 +106,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::traversal_part(StepInProgress& step)
           cudaMemcpyAsync(cut_.data(), traversal_.expanded(), step.num_seeds * sizeof(NodePair), cudaMemcpyDeviceToDevice, stream_));
     step.seeds = cut_.data();
     stats.bvtt_nodes += traversal_.stats().items_processed;
+    stats.traversal_relaunches += traversal_.stats().relaunches;
     keep_part_front(step);
     met_.resize_discard(std::max<std::size_t>(traversal_.num_results(), 1));
     met_size_ = traversal_.num_results();
@@ -138,6 +139,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::traversal_part(StepInProgress& step)
     break;
   }
   stats.bvtt_nodes += traversal_.stats().items_processed;
+  stats.traversal_relaunches += traversal_.stats().relaunches;
   keep_part_front(step);
   ++stats.traversal_parts;
   step.next_seed += n;

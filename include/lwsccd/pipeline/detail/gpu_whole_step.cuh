@@ -149,6 +149,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::keep_front(bool restart, StepStats& 
   }
   stats.restarted_from_root = restart;
   stats.bvtt_nodes = traversal_.stats().items_processed;
+  stats.traversal_relaunches = traversal_.stats().relaunches;
   stats.front_size = front_size_;
   stats.triangle_pairs = traversal_.num_results();
 }

@@ -129,6 +129,10 @@ void run_balanced(const Task& task, const typename Task::item_type* seeds, std::
     LWSCCD_CUDA_CHECK_LAUNCH();
     const auto after = read_counters(out, stream);
     extra = after[kAppended];
+    if (after[kOverflow] != 0) {  // blocks handed back their items because the outputs were full
+      if (!absorb_overflow(out, after, stream)) return;  // stopped at the output limit (incomplete)
+      continue;
+    }
     if (after[kHalted] > 0) {
       // Queues too small for the work: grow them (contents move through the balancing kernel).
       ++out.stats_.relaunches;

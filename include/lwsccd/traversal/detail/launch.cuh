@@ -70,7 +70,65 @@ std::vector<unsigned long long> read_counters(TraversalStorage<Task>& out, cudaS
 
 template <class Task>
 Outputs<Task> outputs_of(TraversalStorage<Task>& out, bool record_front) {
-  return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front};
+  return {out.results_.data(), out.results_.size(), out.front_.data(), out.front_.size(), out.counters_.data(), record_front,
+          out.halt_on_overflow_};
+}
+
+// How much an output that was full grows at once in a halting traversal (the final count is not
+// known until the traversal ends: a few growths from the starting room reach any size).
+inline constexpr std::size_t kOutputGrowth = 4;
+// Up to this many entries an output half full grows along with a full one (absorb_overflow).
+inline constexpr std::size_t kSmallOutputRoom = std::size_t(1) << 20;
+
+// After a launch of a halting traversal whose counters `c` the host has read: where the outputs
+// were full, each full one grows (keeping what it holds), the counts resume where the stored
+// prefix ends, and the next launch takes up the items handed back. Returns false where the output
+// limit forbids growing: the traversal stops there, incomplete, with what was stored.
+template <class Task>
+bool absorb_overflow(TraversalStorage<Task>& out, const std::vector<unsigned long long>& c, cudaStream_t stream) {
+  if (c[kOverflow] == 0) return true;
+  using Item = typename Task::item_type;
+  using Result = typename Task::result_type;
+  const unsigned long long stored = ~c[kOverflow];
+  const std::size_t results = results_of(stored), front = front_of(stored);
+  const std::size_t results_room = out.results_.size(), front_room = out.front_.size();
+  // An output is full when the reservations after the stored prefix pass its room (c[kOutputs]
+  // counts them all); only those grow.
+  auto grown = [](std::size_t room, std::size_t reserved) {
+    return reserved > room ? std::min(std::max(room * kOutputGrowth, reserved + reserved / 4), kMaxOutputRoom) : room;
+  };
+  const std::size_t reserved_results = results_of(c[kOutputs]), reserved_front = front_of(c[kOutputs]);
+  std::size_t new_results = grown(results_room, reserved_results), new_front = grown(front_room, reserved_front);
+  // An output still small and half full grows with the other: both fill as the traversal goes
+  // deeper, and a relaunch (~0.05-0.08 ms on an H100) costs more than the room.
+  auto along = [](std::size_t room, std::size_t stored, std::size_t grown_room) {
+    return grown_room == room && room <= kSmallOutputRoom && 2 * stored >= room ? std::min(room * kOutputGrowth, kMaxOutputRoom)
+                                                                               : grown_room;
+  };
+  if (new_results != results_room || new_front != front_room) {
+    new_results = along(results_room, results, new_results);
+    new_front = along(front_room, front, new_front);
+  }
+  auto bytes = [](std::size_t r, std::size_t f) { return r * sizeof(Result) + f * sizeof(Item); };
+  if (out.output_limit_ && bytes(new_results, new_front) > out.output_limit_) {  // the least growth that lets it go on
+    new_results = reserved_results > results_room ? std::min(reserved_results + reserved_results / 4, kMaxOutputRoom) : results_room;
+    new_front = reserved_front > front_room ? std::min(reserved_front + reserved_front / 4, kMaxOutputRoom) : front_room;
+  }
+  if ((out.output_limit_ && bytes(new_results, new_front) > out.output_limit_) ||
+      (new_results <= results_room && new_front <= front_room)) {  // (the second: past kMaxOutputRoom)
+    out.complete_ = false;
+    out.num_results_ = results;
+    out.num_front_ = front;
+    return false;
+  }
+  out.results_.resize_discard(results);  // (no reallocation: only what is kept is copied below)
+  out.results_.resize_keep(new_results, 0, stream);
+  out.front_.resize_discard(front);
+  out.front_.resize_keep(new_front, 0, stream);
+  const unsigned long long resume[2] = {stored, 0};  // kOutputs, kOverflow
+  LWSCCD_CUDA_CHECK(cudaMemcpyAsync(out.counters_.data() + kOutputs, resume, sizeof resume, cudaMemcpyHostToDevice, stream));
+  ++out.stats_.relaunches;
+  return true;
 }
 
 // Threads per block of the flat launches (a thread per item, no shared memory: the block size
@@ -84,13 +142,15 @@ std::size_t expand_level(const Task& task, const typename Task::item_type* in, s
                          bool record_front, cudaStream_t stream) {
   ensure(out.next_, n * Task::kMaxChildren);
   LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kAppended, 0, sizeof(unsigned long long), stream));
+  LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kRequeued, 0, sizeof(unsigned long long), stream));
   expand_kernel<Task, kFlatLaunchThreads><<<static_cast<unsigned>((n + kFlatLaunchThreads - 1) / kFlatLaunchThreads),
                                              kFlatLaunchThreads, 0, stream>>>(
       task, in, n, out.next_.data(), n * Task::kMaxChildren, outputs_of(out, record_front));
   LWSCCD_CUDA_CHECK_LAUNCH();
   const auto c = read_counters(out, stream);
-  out.stats_.items_processed += n;
+  out.stats_.items_processed += n - static_cast<std::size_t>(c[kRequeued]);
   std::swap(out.work_, out.next_);
+  if (!absorb_overflow(out, c, stream)) return 0;  // stopped at the output limit (incomplete)
   return static_cast<std::size_t>(c[kAppended]);
 }
 
@@ -118,6 +178,7 @@ std::size_t expand_breadth_first(const Task& task, const typename Task::item_typ
     const auto c = read_counters(out, stream);
     n = static_cast<std::size_t>(c[kAppended]);
     if (c[kLevels] % 2 == 1) std::swap(out.work_, out.next_);
+    if (!absorb_overflow(out, c, stream)) return 0;  // stopped at the output limit (incomplete)
   }
   while (n > 0 && n < stop_at) n = expand_level(task, out.work_.data(), n, out, record_front, stream);
   return n;

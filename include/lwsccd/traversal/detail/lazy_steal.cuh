@@ -83,6 +83,7 @@ template <class Task>
 void enqueue_flat_start(const Task& task, const typename Task::item_type* seeds, std::size_t num_seeds,
                         TraversalStorage<Task>& out, bool record_front, cudaStream_t stream) {
   ensure(out.next_, out.list_room_);
+  LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data() + kRequeued, 0, sizeof(unsigned long long), stream));
   expand_kernel<Task, kFlatLaunchThreads><<<static_cast<unsigned>((num_seeds + kFlatLaunchThreads - 1) / kFlatLaunchThreads),
                                              kFlatLaunchThreads, 0, stream>>>(
       task, seeds, num_seeds, out.next_.data(), out.list_room_, outputs_of(out, record_front));
@@ -108,7 +109,10 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     // The host waits here (traverse_async does not): a front whose items all ended at once (no
     // children, as is common) then needs no lazy launch (~14 us on cloth-funnel's front). The
     // lazy launch still takes the count from the device, which keeps only what the list held.
-    if (read_counters(out, stream)[kAppended] == 0) return;
+    const auto c = read_counters(out, stream);
+    out.stats_.items_processed -= static_cast<std::size_t>(c[kRequeued]);  // (processed again below)
+    if (!absorb_overflow(out, c, stream)) return;  // stopped at the output limit (incomplete)
+    if (c[kAppended] == 0) return;
   } else {
     n = expand_breadth_first(task, seeds, num_seeds, static_cast<std::size_t>(blocks) * Policy::kSeedsPerBlock, out,
                              record_front, stream);
@@ -122,7 +126,10 @@ void run_lazy_steal(const Task& task, const typename Task::item_type* seeds, std
     if (c[kLost] > 0) return;  // a list had no room: run_until_outputs_fit grows it and runs the pass again
     std::swap(out.work_, out.next_);
     n = c[kAppended];
+    const bool outputs_were_full = c[kOverflow] != 0;
+    if (!absorb_overflow(out, c, stream)) return;  // stopped at the output limit (incomplete)
     if (n == 0) return;
+    if (outputs_were_full) continue;  // (absorb_overflow counted the relaunch; the deques were not the cause)
     ++out.stats_.relaunches;  // halted blocks handed items back: they start the next launch
     // Larger deques, fewer relaunches; under an output limit (a memory budget planned around
     // these deques) they keep their size: each launch still processes items before a block halts.

@@ -114,6 +114,7 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   __shared__ typename Reduce::TempStorage reduce_storage;
   __shared__ int s_size, take, action, count, source, moved;
   __shared__ bool share_now;  // kShareWhenHungry: thread 0's reading at the end of the last round
+  __shared__ bool draining;   // halting traversal: thread 0 saw the outputs full
   __shared__ unsigned long long from, out_base[2];
   const int t = threadIdx.x, me = blockIdx.x, blocks = static_cast<int>(gridDim.x);
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> live(out.counters[kPending]);
@@ -137,6 +138,24 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
   }
   __syncthreads();
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> hungry(out.counters[kHungry]);
+  // Every item of the shared stack to the host's hand-back list (out of the live count); all
+  // threads call it.
+  auto hand_back_all = [&]() {
+    if (t == 0) {
+      moved = s_size;
+      from = atomicAdd(&out.counters[kAppended], static_cast<unsigned long long>(moved));
+      atomicAdd(&out.counters[kHalted], 1ull);
+      if (from + moved > hand_back_room)  // no room to hand them back: the pass reruns with more
+        atomicAdd(&out.counters[kLost], from + moved - (from > hand_back_room ? from : hand_back_room));
+      live.fetch_sub(static_cast<unsigned long long>(moved), cuda::memory_order_acq_rel);
+    }
+    __syncthreads();
+    for (int i = t; i < moved; i += kThreads)
+      if (from + i < hand_back_room) hand_back[from + i] = s_items[i];
+    __syncthreads();
+    if (t == 0) s_size = 0;
+    __syncthreads();
+  };
   while (true) {
     if (s_size == 0) {  // find work: own deque first, then a lazy steal
       const long long start = clock64();
@@ -304,9 +323,25 @@ __global__ void __launch_bounds__(Policy::kBlockThreads, Policy::kFitBlocksPerSm
       drop_oldest<Item, kShared, kThreads>(s_items, s_size, moved);
     }
     // One round: up to a block of items from the top of the shared stack.
-    if (t == 0) take = s_size < kThreads ? s_size : kThreads;
+    // A halting traversal whose outputs are full (this block's or another's round did not fit):
+    // what the block holds goes back to the host unprocessed; the host grows the outputs and
+    // relaunches with it (traverse()). The block goes on draining what it finds until none is left.
+    if (t == 0) {
+      take = s_size < kThreads ? s_size : kThreads;
+      draining = out.halt_on_overflow && *reinterpret_cast<const volatile unsigned long long*>(&out.counters[kOverflow]) != 0;
+    }
     __syncthreads();
+    if (draining) {
+      hand_back_all();
+      busy += clock64() - start;
+      continue;
+    }
     const int total = process_round<Task, Scan>(task, s_items, s_size, take, scan_storage, out_base, out);
+    if (total == kRoundUndone) {  // (the items are back on the stack)
+      hand_back_all();
+      busy += clock64() - start;
+      continue;
+    }
     if (t == 0 && total != take) {
       // Children counted and parents retired in one update (see the termination note above).
       live.fetch_add(static_cast<unsigned long long>(static_cast<long long>(total) - take), cuda::memory_order_relaxed);

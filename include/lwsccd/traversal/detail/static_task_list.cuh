@@ -61,11 +61,15 @@ void run_static(const Task& task, const typename Task::item_type* seeds, std::si
     LWSCCD_CUDA_CHECK_LAUNCH();
     const auto c = read_counters(out, stream);
     n = static_cast<std::size_t>(c[kAppended]);
+    std::swap(out.work_, out.next_);
+    if (c[kOverflow] != 0) {  // blocks handed back their items because the outputs were full
+      if (!absorb_overflow(out, c, stream)) return;  // stopped at the output limit (incomplete)
+      continue;
+    }
     if (c[kHalted] > 0) {
       ++out.stats_.relaunches;
       global_capacity *= 2;  // the next launch has room to make progress
     }
-    std::swap(out.work_, out.next_);
   }
 }
 

@@ -26,9 +26,12 @@ namespace lwsccd::gpu {
 namespace detail {
 
 // Outputs sized for a traversal (first use: room for 2^16 entries each), counters allocated.
+// `halt`: blocks whose outputs are full hand their items back (traverse()), or only count
+// (traverse_async()).
 template <class Task>
-void prepare_outputs(TraversalStorage<Task>& out, bool record_front) {
+void prepare_outputs(TraversalStorage<Task>& out, bool record_front, bool halt) {
   ensure(out.counters_, kCounters);
+  out.halt_on_overflow_ = halt;
   if (out.results_.size() == 0) out.results_.resize_discard(1 << 16);
   if (out.front_.size() == 0) out.front_.resize_discard(record_front ? (1 << 16) : 1);
   out.stats_ = {};
@@ -44,8 +47,12 @@ template <class Task>
 bool grow_outputs(TraversalStorage<Task>& out, std::size_t results, std::size_t front) {
   using Item = typename Task::item_type;
   using Result = typename Task::result_type;
-  const std::size_t results_room = results > out.results_.size() ? results + results / 4 : out.results_.size();
-  const std::size_t front_room = front > out.front_.size() ? front + front / 4 : out.front_.size();
+  const std::size_t results_room =
+      results > out.results_.size() ? std::min(results + results / 4, kMaxOutputRoom) : out.results_.size();
+  const std::size_t front_room = front > out.front_.size() ? std::min(front + front / 4, kMaxOutputRoom) : out.front_.size();
+  if (results_room < results || front_room < front)
+    throw Error("lwsccd: traversal: more than 2^31 results or front entries (" + std::to_string(results) + ", " +
+                std::to_string(front) + ") in one traversal; split it (gpu::expand) or use a memory budget");
   if (out.output_limit_ && results_room * sizeof(Result) + front_room * sizeof(Item) > out.output_limit_) return false;
   out.results_.resize_discard(results_room);
   out.front_.resize_discard(front_room);
@@ -53,12 +60,14 @@ bool grow_outputs(TraversalStorage<Task>& out, std::size_t results, std::size_t 
 }
 
 // Runs `attempt` (one complete pass that leaves the final counters in out.host_counters_ when it
-// read them) until the results and front fit their outputs, growing them in between (tasks are
-// deterministic, so a pass again from the same seeds gives the same outputs); stops without
+// read them) until the results and front fit their outputs. Within a pass, blocks whose outputs
+// are full hand their items back and the schedulers' loops grow the outputs and go on
+// (absorb_overflow); a pass that lost items for want of list room runs again from the same seeds
+// with longer lists (tasks are deterministic, so it gives the same outputs). Stops without
 // growing past out's output limit (complete_ false).
 template <class Task, class Attempt>
 void run_until_outputs_fit(TraversalStorage<Task>& out, bool record_front, cudaStream_t stream, Attempt attempt) {
-  prepare_outputs(out, record_front);
+  prepare_outputs(out, record_front, true);
   while (true) {
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, kCounters * sizeof(unsigned long long), stream));
     out.stats_.items_processed = 0;
@@ -70,8 +79,9 @@ void run_until_outputs_fit(TraversalStorage<Task>& out, bool record_front, cudaS
                        ? std::vector<unsigned long long>(out.host_counters_.data(), out.host_counters_.data() + kCounters)
                        : read_counters(out, stream);
     out.stats_.items_processed += static_cast<std::size_t>(c[kProcessed]);
-    const std::size_t results = static_cast<std::size_t>(c[kResults]);
-    const std::size_t front = record_front ? static_cast<std::size_t>(c[kFront]) : 0;
+    if (!out.complete_) return;  // stopped at the output limit: num_results_, num_front_ hold what was stored
+    const std::size_t results = results_of(c[kOutputs]);
+    const std::size_t front = record_front ? front_of(c[kOutputs]) : 0;
     if (c[kLost] > 0) {  // the lazy scheduler's lists had no room for some items: longer ones, again
       grow_lazy_lists(out, c[kLost]);
       if (!grow_outputs(out, results, front)) {
@@ -125,7 +135,7 @@ void traverse_async(const Task& task, const typename Task::item_type* seeds, std
   if constexpr (std::is_same<typename Scheduler::scheduler_kind, lazy_steal_kind>::value) {
     detail::TraversalStorage<Task>& out = detail::storage_of(output);
     if (out.output_limit_ == 0) {  // a limit needs the host between launches to keep to it
-      detail::prepare_outputs(out, record_front);
+      detail::prepare_outputs(out, record_front, false);
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(out.counters_.data(), 0, detail::kCounters * sizeof(unsigned long long), stream));
       if (detail::enqueue_lazy_steal<Task, Scheduler>(task, seeds, num_seeds, out, record_front, stream)) {
         detail::enqueue_counter_read(out, stream);
@@ -143,8 +153,8 @@ bool TraversalOutput<Task>::collect() {
   if (!s_.awaiting_collect_) return true;
   s_.awaiting_collect_ = false;
   const unsigned long long* c = s_.host_counters_.data();
-  const std::size_t results = static_cast<std::size_t>(c[detail::kResults]);
-  const std::size_t front = s_.awaiting_front_ ? static_cast<std::size_t>(c[detail::kFront]) : 0;
+  const std::size_t results = detail::results_of(c[detail::kOutputs]);
+  const std::size_t front = s_.awaiting_front_ ? detail::front_of(c[detail::kOutputs]) : 0;
   s_.stats_.items_processed += static_cast<std::size_t>(c[detail::kProcessed]);
   const bool results_fit = results <= s_.results_.size();
   s_.front_complete_ = front <= s_.front_.size();
@@ -160,7 +170,7 @@ bool TraversalOutput<Task>::collect() {
 
 template <class Task>
 DeviceCount TraversalOutput<Task>::result_count() const {
-  return {s_.counters_.data() + detail::kResults, DeviceCount::Part::whole, s_.results_.size()};
+  return {s_.counters_.data() + detail::kOutputs, DeviceCount::Part::low, s_.results_.size()};
 }
 
 template <class Task>
