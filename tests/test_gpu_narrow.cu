@@ -17,12 +17,15 @@ using namespace lwsccd;
 
 namespace {
 
-// The certified filter's interval list with almost no room: its pairs go to the whole search.
+// The certified filters' interval lists with almost no room (single precision's, and one entry
+// for the double filter's): their pairs go to the whole search.
 struct TinyFilterRoom : gpu::NarrowPhasePolicy {
   static constexpr int kFilterRoomPercent = 1;
+  static constexpr int kDoubleAfterSingleRoomPercent = 0;
 };
 struct TinyDeepRoom : gpu::NarrowPhasePolicy {
   static constexpr int kDeepRoomPercent = 1;
+  static constexpr int kDoubleAfterSingleRoomPercent = 0;
 };
 struct FirstRoundOnly : gpu::NarrowPhasePolicy {
   static constexpr bool kFilterSecondRound = false;

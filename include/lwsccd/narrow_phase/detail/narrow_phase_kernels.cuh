@@ -95,7 +95,10 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
       l.undecided.resize_discard(l.work_room);
       l.deferred.resize_discard(l.work_room);
       if (Policy::kRefineFilter && params.mode != CcdMode::set) {  // mode set does not run the filter
-        l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
+        // (FP32 first: the double filter's lists hold only what single precision leaves.)
+        const std::size_t filter_percent = kSingleFirst ? Policy::kDoubleAfterSingleRoomPercent : Policy::kFilterRoomPercent;
+        const std::size_t deep_percent = kSingleFirst ? Policy::kDoubleAfterSingleRoomPercent : Policy::kDeepRoomPercent;
+        l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * filter_percent, 1));
         l.intervals.resize_discard(l.interval_room);
         l.listed.resize_discard((l.work_room + 31) / 32);
         if (kSingleFirst) {
@@ -112,7 +115,7 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
         }
         if (second_round(params.mode)) {
           l.expanded.resize_discard(l.interval_room);
-          l.deep_room = std::max(l.deep_room, std::max<std::size_t>(l.work_room / 100 * Policy::kDeepRoomPercent, 1));
+          l.deep_room = std::max(l.deep_room, std::max<std::size_t>(l.work_room / 100 * deep_percent, 1));
           l.deep.resize_discard(l.deep_room);
         }
       }
