@@ -64,8 +64,9 @@ inline void account_free(std::size_t bytes) { bytes_in_use().fetch_sub(bytes); }
 // synchronisation that came after it was given back (one cudaDeviceSynchronize makes every block
 // given back until then reusable; cudaFree waited as much for each block). A block serves only a
 // request of its exact size (a pipeline on the same scene asks for the same sizes), so what
-// objects hold stays what they asked for, byte for byte (the budget's accounting). Freed when the process ends, on gpu::release_cached_memory(), when
-// cudaMalloc fails, and where a memory budget needs their room.
+// objects hold stays what they asked for, byte for byte (the budget's accounting). Freed when the
+// process ends, on gpu::release_cached_memory(), when cudaMalloc fails, and where a memory budget
+// needs their room.
 class DevicePool {
  public:
   struct Block {
@@ -73,8 +74,11 @@ class DevicePool {
     std::size_t bytes = 0;
   };
 
+  // Destroyed at exit before the CUDA runtime's own teardown: its constructor makes a CUDA call
+  // first, which registers that teardown earlier (so the blocks are freed; memory checkers see no
+  // leak).
   static DevicePool& instance() {
-    static DevicePool pool;  // (destroyed at exit before the CUDA runtime's own teardown)
+    static DevicePool pool;
     return pool;
   }
   static bool alive() { return alive_flag().load(); }
@@ -161,7 +165,11 @@ class DevicePool {
     std::uint64_t releases = 0;  ///< blocks given back so far
     std::uint64_t synced = 0;    ///< of those, the ones given back before the last wait
   };
-  DevicePool() { alive_flag().store(true); }
+  DevicePool() {
+    int device = 0;
+    (void)cudaGetDevice(&device);  // (initializes the runtime; a failure shows at the first allocation)
+    alive_flag().store(true);
+  }
   ~DevicePool() {
     alive_flag().store(false);
     for (auto& d : devices_)
