@@ -192,13 +192,13 @@ class DevicePool {
 // Cached blocks count as held: where they stand in the way they are freed first.
 inline void check_budget(std::size_t bytes) {
   const std::size_t budget = bytes_budget().load();
-  auto passes = [&] {
+  auto exceeds = [&] {
     const std::size_t held = bytes_in_use().load() + bytes_cached().load();
     return bytes > budget || held > budget - bytes;
   };
-  if (!passes()) return;
+  if (!exceeds()) return;
   if (bytes_cached().load() > 0) DevicePool::instance().release_all();
-  if (!passes()) return;
+  if (!exceeds()) return;
   const std::size_t in_use = bytes_in_use().load();
   throw Error("lwsccd: device memory budget exceeded: an allocation of " + std::to_string(bytes) + " bytes with " +
               std::to_string(in_use) + " in use would pass the budget of " + std::to_string(budget) +

@@ -46,6 +46,12 @@ LWSCCD_HD constexpr unsigned long long pack_outputs(unsigned long long results, 
 LWSCCD_HD constexpr std::size_t results_of(unsigned long long outputs) { return static_cast<std::size_t>(outputs & 0xffffffffull); }
 LWSCCD_HD constexpr std::size_t front_of(unsigned long long outputs) { return static_cast<std::size_t>(outputs >> 32); }
 inline constexpr std::size_t kMaxOutputRoom = std::size_t(1) << 31;
+// Throws where one traversal asks for more results or front entries than an output may hold.
+inline void check_output_counts(std::size_t results, std::size_t front) {
+  if (results > kMaxOutputRoom || front > kMaxOutputRoom)
+    throw Error("lwsccd: traversal: more than 2^31 results or front entries (" + std::to_string(results) + ", " +
+                std::to_string(front) + ") in one traversal; split it (gpu::expand) or use a memory budget");
+}
 
 template <class Task>
 struct Outputs {

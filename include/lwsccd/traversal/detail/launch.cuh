@@ -98,6 +98,7 @@ bool absorb_overflow(TraversalStorage<Task>& out, const std::vector<unsigned lon
     return reserved > room ? std::min(std::max(room * kOutputGrowth, reserved + reserved / 4), kMaxOutputRoom) : room;
   };
   const std::size_t reserved_results = results_of(c[kOutputs]), reserved_front = front_of(c[kOutputs]);
+  check_output_counts(reserved_results, reserved_front);  // (never silently incomplete without a limit)
   std::size_t new_results = grown(results_room, reserved_results), new_front = grown(front_room, reserved_front);
   // An output still small and half full grows with the other: both fill as the traversal goes
   // deeper, and a relaunch (~0.05-0.08 ms on an H100) costs more than the room.
@@ -115,7 +116,7 @@ bool absorb_overflow(TraversalStorage<Task>& out, const std::vector<unsigned lon
     new_front = reserved_front > front_room ? std::min(reserved_front + reserved_front / 4, kMaxOutputRoom) : front_room;
   }
   if ((out.output_limit_ && bytes(new_results, new_front) > out.output_limit_) ||
-      (new_results <= results_room && new_front <= front_room)) {  // (the second: past kMaxOutputRoom)
+      (new_results <= results_room && new_front <= front_room)) {  // (the second: nothing could grow)
     out.complete_ = false;
     out.num_results_ = results;
     out.num_front_ = front;

@@ -50,9 +50,7 @@ bool grow_outputs(TraversalStorage<Task>& out, std::size_t results, std::size_t 
   const std::size_t results_room =
       results > out.results_.size() ? std::min(results + results / 4, kMaxOutputRoom) : out.results_.size();
   const std::size_t front_room = front > out.front_.size() ? std::min(front + front / 4, kMaxOutputRoom) : out.front_.size();
-  if (results_room < results || front_room < front)
-    throw Error("lwsccd: traversal: more than 2^31 results or front entries (" + std::to_string(results) + ", " +
-                std::to_string(front) + ") in one traversal; split it (gpu::expand) or use a memory budget");
+  check_output_counts(results, front);
   if (out.output_limit_ && results_room * sizeof(Result) + front_room * sizeof(Item) > out.output_limit_) return false;
   out.results_.resize_discard(results_room);
   out.front_.resize_discard(front_room);
