@@ -43,6 +43,12 @@ std::unique_ptr<AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::Tri
                                                const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
                                                const PolicyChoice& choice);
 
+/// A step split over GPUs 0 .. gpus - 1 (gpu::MultiGpuPipeline, default policies only). Throws
+/// lwsccd::Error when built without NCCL, InputError for other policies or too few GPUs.
+std::unique_ptr<AnyPipeline> make_multi_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
+                                                     const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
+                                                     const PolicyChoice& choice, int gpus);
+
 /// GPU pipelines: the step from positions copied to the device beforehand (not timed), contacts
 /// left there (AnyPipeline::step_on_device); nothing for the CPU backend.
 std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline& pipeline, const std::vector<lwsccd::Vec3d>& x0,

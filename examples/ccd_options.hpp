@@ -17,6 +17,7 @@ struct Options {
   std::size_t first_frame = 30;
   std::size_t steps = 0;  // 0: 3 for the built-in scene, all for a sequence
   std::string device = "auto";
+  int gpus = 1;  // > 1: the step split over GPUs 0 .. gpus - 1 (gpu::MultiGpuPipeline)
   ccd_app::PolicyChoice policies;
   lwsccd::PipelineParams params;
   bool check = false;
@@ -46,6 +47,8 @@ inline void print_usage(std::FILE* out) {
                "\n"
                "pipeline\n"
                "  --device D       auto (default: the GPU when there is one), gpu, cpu\n"
+               "  --gpus N         split each step over GPUs 0 .. N-1 (NCCL; default policies, no memory\n"
+               "                   budget or parts; same contacts as one GPU)\n"
                "  --bv B           bounding volume of the swept triangles: aabb (default), obb\n"
                "  --scheduler S    GPU traversal load balancer: lazy (default, lazy work stealing),\n"
                "                   gproximity, static\n"
@@ -132,6 +135,8 @@ inline Options parse_options(int argc, char** argv) {
       o.steps = static_cast<std::size_t>(parse_integer(a, value(), 1, 100000));
     } else if (a == "--device") {
       o.device = parse_choice(a, value(), {"auto", "gpu", "cpu"});
+    } else if (a == "--gpus") {
+      o.gpus = static_cast<int>(parse_integer(a, value(), 1, 64));
     } else if (a == "--bv") {
       o.policies.bv = parse_choice(a, value(), {"aabb", "obb"});
     } else if (a == "--scheduler") {

@@ -78,9 +78,11 @@ int main(int argc, char** argv) {
     if (o.device == "gpu" && gpu.empty())
       throw lwsccd::Error("--device gpu: no CUDA device found (or lwsccd-ccd was built without CUDA); use --device cpu");
     const bool on_gpu = o.device == "gpu" || (o.device == "auto" && !gpu.empty());
-    const std::string backend = on_gpu ? "GPU " + gpu : "CPU";
-    auto pipeline = on_gpu ? ccd_app::make_gpu_pipeline(src.mesh, src.layout, o.params, o.policies)
-                           : ccd_app::make_cpu_pipeline(src.mesh, src.layout, o.params, o.policies);
+    if (o.gpus > 1 && !on_gpu) throw lwsccd::Error("--gpus " + std::to_string(o.gpus) + ": needs the GPU backend (no CUDA device, or --device cpu)");
+    const std::string backend = on_gpu ? (o.gpus > 1 ? std::to_string(o.gpus) + " x GPU " : "GPU ") + gpu : "CPU";
+    auto pipeline = o.gpus > 1 ? ccd_app::make_multi_gpu_pipeline(src.mesh, src.layout, o.params, o.policies, o.gpus)
+                    : on_gpu   ? ccd_app::make_gpu_pipeline(src.mesh, src.layout, o.params, o.policies)
+                               : ccd_app::make_cpu_pipeline(src.mesh, src.layout, o.params, o.policies);
     const bool progress = src.num_steps > 1 && isatty(STDERR_FILENO);
     std::vector<StepReport> reports;
     for (std::size_t i = 0; i < src.num_steps; ++i) {

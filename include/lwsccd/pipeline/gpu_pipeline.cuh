@@ -22,6 +22,7 @@
 #include "lwsccd/core/cuda_handles.cuh"
 #include "lwsccd/features/representative.cuh"
 #include "lwsccd/narrow_phase/narrow_phase.cuh"
+#include "lwsccd/pipeline/detail/bvtt_share.cuh"
 #include "lwsccd/pipeline/pipeline_types.hpp"
 #include "lwsccd/pipeline/stage_sequence.hpp"
 #include "lwsccd/traversal/gpu_traverse.cuh"
@@ -128,6 +129,54 @@ class CcdPipeline {
   /// the pipeline never restarts on its own for that.
   void restart_from_root() { reset_next_ = true; }
 
+  // ---- One share of a step split over devices (gpu::MultiGpuPipeline drives these) ----
+
+  /// From now on this pipeline finds only share `index` of `count` of each step's contacts. From
+  /// the root, its traversal starts from every count-th node pair of a cut of the BVTT made from
+  /// the tree's topology alone (the same cut on every device holding the same tree), and it takes
+  /// the same share of the orphans; later steps start from its own front. `count` pipelines over
+  /// the same positions, each with its share, find each contact exactly once, provided they
+  /// rebuild their trees in the same steps and restart from the root together (rebuild_due(),
+  /// wants_restart(); the front's entries may move between them: kept_front()). Throws InputError
+  /// for index >= count, and for a split step that would stream (a budget or part_pairs).
+  void set_share(std::size_t index, std::size_t count) {
+    if (count == 0 || index >= count)
+      throw InputError("gpu::CcdPipeline::set_share", "index", std::to_string(index) + " is not below the count " + std::to_string(count));
+    if (count > 1 && (params_.device_memory_budget || params_.part_pairs))
+      throw InputError("gpu::CcdPipeline::set_share", "params",
+                       "a step split over devices does not stream: device_memory_budget and part_pairs must be 0");
+    share_index_ = index;
+    share_count_ = count;
+    reset_next_ = true;
+  }
+  std::size_t share_index() const { return share_index_; }
+  std::size_t share_count() const { return share_count_; }
+  /// After a step: the last refit found the tree decayed, so the next step rebuilds it.
+  bool rebuild_due() const { return rebuild_due_; }
+  /// The next step rebuilds the tree (and so restarts from the root).
+  void rebuild_next() { rebuild_due_ = true; }
+  /// After a step: the next one would start from the root (its front grew past the limit, or a
+  /// restart was asked for).
+  bool wants_restart() const { return reset_next_ || rebuild_due_ || !params_.front_tracking; }
+  /// The next step's seeds, the front kept on the device (kept_front_size() node pairs, on the
+  /// stream of the last step). A split step moves entries between devices through these: each
+  /// entry is a part of the BVTT on its own.
+  NodePair* kept_front() { return seeds_.data(); }
+  std::size_t kept_front_size() const { return front_size_; }
+  /// Keeps `n` entries of the front: fewer drops the last ones (moved elsewhere); more keeps the
+  /// entries there and makes room after them for the caller to fill on `stream` (moved here).
+  void resize_kept_front(std::size_t n, cudaStream_t stream) {
+    if (n > front_size_ && n > seeds_.capacity_bytes() / sizeof(NodePair)) {
+      DeviceBuffer<NodePair> bigger(n + n / 4);
+      if (front_size_)
+        LWSCCD_CUDA_CHECK(cudaMemcpyAsync(bigger.data(), seeds_.data(), front_size_ * sizeof(NodePair), cudaMemcpyDeviceToDevice, stream));
+      seeds_ = std::move(bigger);
+    }
+    // The growth limit compares against the size at the restart: moved entries move that too.
+    size_at_restart_ = n > front_size_ ? size_at_restart_ + (n - front_size_) : size_at_restart_ - std::min(size_at_restart_, front_size_ - n);
+    front_size_ = n;
+  }
+
   const TriangleMesh& mesh() const { return *mesh_; }
   const BodyLayout& layout() const { return layout_; }
   const PipelineParams& params() const { return params_; }
@@ -137,7 +186,7 @@ class CcdPipeline {
     return resident_bytes() + traversal_.device_bytes() + seeds_.capacity_bytes() + root_.capacity_bytes() +
            cut_.capacity_bytes() + next_front_.capacity_bytes() + scratch_.capacity_bytes() + emitter_.list_bytes() +
            narrow_.device_bytes() + gathered_[0].capacity_bytes() + gathered_[1].capacity_bytes() + gathered_sorter_.device_bytes() +
-           met_.capacity_bytes();
+           met_.capacity_bytes() + share_cut_.device_bytes();
   }
   /// Of those, what no split of a step can reduce: topology, positions, the BVH, the feature boxes.
   std::size_t resident_bytes() const {
@@ -471,6 +520,9 @@ class CcdPipeline {
   std::size_t met_size_ = 0;
   std::uint64_t front_refused_generation_ = ~std::uint64_t(0);  ///< the tree on which a front did not fit
   bool recording_front_ = false;           ///< this streamed step records the front for the next one
+  // A share of a step split over devices (set_share):
+  std::size_t share_index_ = 0, share_count_ = 1;
+  detail::BvttShareCut share_cut_;         ///< the topology cut a restart deals out
 };
 
 }  // namespace lwsccd::gpu

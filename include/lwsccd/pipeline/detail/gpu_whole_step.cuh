@@ -63,8 +63,11 @@ void CcdPipeline<BV, Scheduler, Method, T>::collect_refit() {
 template <class BV, class Scheduler, class Method, class T>
 void CcdPipeline<BV, Scheduler, Method, T>::enqueue_feature_pairs() {
   using OrphanRange = typename FeatureEmitter<>::OrphanRange;
+  // A share of a split step tests its share of the orphans (all of them where there is one share).
+  const std::size_t orphans = emitter_.num_orphans();
+  const std::size_t first = orphans * share_index_ / share_count_, end = orphans * (share_index_ + 1) / share_count_;
   emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.result_count(), stream_,
-                   OrphanRange{0, emitter_.num_orphans()}, false);
+                   OrphanRange{first, end - first}, false);
   if (!emitter_sized_) {
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
     if (!emitter_.collect(stream_)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
@@ -123,9 +126,18 @@ void CcdPipeline<BV, Scheduler, Method, T>::update_node_bodies() {
 template <class BV, class Scheduler, class Method, class T>
 bool CcdPipeline<BV, Scheduler, Method, T>::traverse_step() {
   const Task task = traversal_task();
-  const bool restart = !params_.front_tracking || bvh_.generation() != generation_ || front_size_ == 0 || reset_next_;
+  // A share of a split step restarts only when told (every share at once): an empty front is then
+  // its share of the BVTT with nothing on it.
+  const bool shared = share_count_ > 1;
+  const bool restart =
+      !params_.front_tracking || bvh_.generation() != generation_ || (front_size_ == 0 && !shared) || reset_next_;
   generation_ = bvh_.generation();
-  if (restart) {
+  if (restart && shared) {
+    // Enough pairs per share that pairs of uneven work even out (cloth-ball: ~1.3 M node pairs from the root).
+    const std::size_t n = share_cut_.make(bvh_.view(), task.filter, StreamingPolicy::kCutItems * share_count_, share_index_,
+                                          share_count_, cut_, stream_);
+    traverse<Scheduler>(task, cut_.data(), n, traversal_, params_.front_tracking, stream_);
+  } else if (restart) {
     root_.upload(std::vector<NodePair>{NodePair{0, 0}}, stream_);
     traverse<Scheduler>(task, root_.data(), 1, traversal_, params_.front_tracking, stream_);
   } else {

@@ -1,0 +1,6 @@
+// lwsccd — a CCD step split over several GPUs, as users include it: gpu::MultiGpuPipeline
+// (pipeline/multi_gpu_pipeline.cuh), the same contacts as gpu::CcdPipeline from one process driving
+// several GPUs or from one process per GPU. Needs NCCL: link the CMake target lwsccd::multi_gpu.
+#pragma once
+
+#include "lwsccd/pipeline/multi_gpu_pipeline.cuh"
