@@ -44,6 +44,15 @@ std::vector<double> parse_list(const std::string& text) {
   return out;
 }
 
+// A timed step's figures: the call's host time and the stages of `stats` (the slowest GPU's).
+void record(Row& row, double ms, const lwsccd::StepStats& stats) {
+  row.step_ms.push_back(ms);
+  row.refit_ms.push_back(stats.refit_ms);
+  row.traverse_ms.push_back(stats.traverse_ms);
+  row.features_ms.push_back(stats.features_ms);
+  row.narrow_ms.push_back(stats.narrow_ms);
+}
+
 double elapsed_ms(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since).count();
 }
@@ -99,11 +108,7 @@ int main(int argc, char** argv) {
           contacts[s] = r.contacts.num_vf + r.contacts.num_ee;
           earliest[s] = r.contacts.earliest_toi;
           if (static_cast<int>(s) < warm) continue;
-          row.step_ms.push_back(ms);
-          row.refit_ms.push_back(r.stats.refit_ms);
-          row.traverse_ms.push_back(r.stats.traverse_ms);
-          row.features_ms.push_back(r.stats.features_ms);
-          row.narrow_ms.push_back(r.stats.narrow_ms);
+          record(row, ms, r.stats);
           row.busy_ms.resize(1);
           row.busy_ms[0].push_back(r.stats.traverse_ms + r.stats.features_ms + r.stats.narrow_ms);
           row.contacts = contacts[s];
@@ -129,11 +134,7 @@ int main(int argc, char** argv) {
           const double ms = elapsed_ms(start);
           row.differences += r.contacts.num_vf + r.contacts.num_ee != contacts[s] || r.contacts.earliest_toi != earliest[s];
           if (static_cast<int>(s) < warm) continue;
-          row.step_ms.push_back(ms);
-          row.refit_ms.push_back(r.stats.refit_ms);
-          row.traverse_ms.push_back(r.stats.traverse_ms);
-          row.features_ms.push_back(r.stats.features_ms);
-          row.narrow_ms.push_back(r.stats.narrow_ms);
+          record(row, ms, r.stats);
           row.busy_ms.resize(devices.size());
           for (std::size_t d = 0; d < devices.size(); ++d) {
             const StepStats& ds = split.device_stats()[d];

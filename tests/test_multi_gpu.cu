@@ -116,6 +116,11 @@ TEST_CASE("Shares of the BVTT on one GPU find every contact once: pipelines with
   gpu::CcdPipeline<> q(sim->mesh(), streamed);
   CHECK_THROWS_AS(q.set_share(0, 2), InputError);
   CHECK_NOTHROW(q.set_share(0, 1));
+  // A budget set after the share: refused at the step, not streamed with duplicates.
+  gpu::CcdPipeline<> r(sim->mesh(), sim->layout());
+  r.set_share(1, 2);
+  r.set_device_memory_budget(std::size_t(1) << 30);
+  CHECK_THROWS_AS(r.step(steps[0].x0, steps[0].x1), InputError);
 }
 
 TEST_CASE("A share of a mesh with fewer node pairs than shares finds its part, maybe none", "[multi_gpu][share]") {

@@ -345,6 +345,8 @@ class CcdPipeline {
   // once collected). A step in parts (a memory budget, or part_pairs) waits for each part.
   void run_stages(StepStats& stats) {
     streamed_ = params_.device_memory_budget > 0 || params_.part_pairs > 0;
+    if (streamed_ && share_count_ > 1)  // (a budget set after set_share)
+      throw InputError("gpu::CcdPipeline", "device_memory_budget", "a share of a step split over devices does not stream");
     StepInProgress step(stats);
     step.in_parts = streamed_;
     if (!streamed_) LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0], stream_));
