@@ -23,6 +23,7 @@
 #include <nccl.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -283,7 +284,7 @@ class MultiGpuPipeline {
     try {
       workers_.run([this](std::size_t r) {
         if (!ranks_[r]) return;
-        const ncclComm_t comm = ranks_[r]->owns_comm ? ranks_[r]->comm : nullptr;
+        const ncclComm_t comm = ranks_[r]->owns_comm && !aborted_ ? ranks_[r]->comm : nullptr;
         ranks_[r].reset();
         if (comm) ncclCommDestroy(comm);
       });
@@ -476,61 +477,91 @@ class MultiGpuPipeline {
     return {to[0], to[1]};
   }
 
-  // Every share's step: positions, its pipeline's step, the statistics all-gathered and the
-  // earliest TOI all-reduced, the contacts gathered and sorted on the root, then the next step
-  // agreed on (rebuild, restart, or the fronts rebalanced).
+  // Every share's step (run_share, on its GPU's thread), then the whole step's statistics.
   template <class Positions>
   void run_step(Positions&& place_positions, StepStats& stats, std::vector<StepStats>& devices, std::size_t& moved) {
+    if (aborted_)
+      throw Error("gpu::MultiGpuPipeline: an earlier step failed on one GPU and its communicator was aborted; make a new pipeline");
     const std::size_t shares = share_count_;
     workers_.run([&](std::size_t r) {
-      using clock = std::chrono::steady_clock;
-      auto lap = [mark = clock::now()]() mutable {
-        const auto now = clock::now();
-        const double ms = std::chrono::duration<double, std::milli>(now - mark).count();
-        mark = now;
-        return ms;
-      };
-      MultiGpuTimes times;
-      Rank& k = *ranks_[r];
-      const auto x = place_positions(k);
-      times.positions_ms = lap();
-      k.part = k.pipeline->step_on_device(x.first, x.second, k.stream);
-      times.share_step_ms = lap();
-      if (k.broadcast_pending) {  // (the caller may overwrite its positions once the step returns)
-        LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(k.stream, k.broadcast_done, 0));
-        k.broadcast_pending = false;
+      try {
+        run_share(place_positions, r, shares);
+      } catch (...) {
+        abort_communicators();
+        throw;
       }
-      // Statistics and wishes of every share, everywhere.
-      k.exchange.resize_discard(shares * detail::kPackedStats);
-      k.host_exchange.ensure(shares * detail::kPackedStats);
-      k.host_earliest.ensure(1);
-      k.earliest.resize_discard(1);
-      const std::size_t me = first_rank_ + r;
-      double* mine = k.host_exchange.data() + me * detail::kPackedStats;
-      StepStats own = k.part.stats;
-      own.peak_device_bytes = k.pipeline->device_bytes() + wrapper_bytes(k);  // (memory_stats() counts the process's GPUs together)
-      detail::pack_stats(own, k.pipeline->rebuild_due(), k.pipeline->wants_restart(), times.positions_ms + times.share_step_ms, mine);
-      k.host_earliest[0] = k.part.contacts.earliest_toi;
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.exchange.data() + me * detail::kPackedStats, mine, detail::kPackedStats * sizeof(double),
-                                        cudaMemcpyHostToDevice, k.stream));
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.earliest.data(), k.host_earliest.data(), sizeof(T), cudaMemcpyHostToDevice, k.stream));
-      LWSCCD_NCCL_CHECK(ncclGroupStart());
-      LWSCCD_NCCL_CHECK(ncclAllGather(k.exchange.data() + me * detail::kPackedStats, k.exchange.data(), detail::kPackedStats,
-                                      ncclDouble, k.comm, k.stream));
-      LWSCCD_NCCL_CHECK(ncclAllReduce(k.earliest.data(), k.earliest.data(), 1, detail::nccl_type<T>(), ncclMin, k.comm, k.stream));
-      LWSCCD_NCCL_CHECK(ncclGroupEnd());
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.host_exchange.data(), k.exchange.data(), shares * detail::kPackedStats * sizeof(double),
-                                        cudaMemcpyDeviceToHost, k.stream));
-      LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.host_earliest.data(), k.earliest.data(), sizeof(T), cudaMemcpyDeviceToHost, k.stream));
-      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(k.stream));
-      times.exchange_ms = lap();
-      gather_contacts(k, r);
-      times.gather_ms = lap();
-      agree_on_next_step(k, r);
-      times.rebalance_ms = lap();
-      if (r == 0) times_ = times;
     });
     // Every rank holds the same exchange: read the first.
+    combine(stats, devices, shares);
+    moved = moved_;
+    device_stats_ = devices;
+  }
+
+  // An error on one GPU alone (e.g. out of memory) would leave the others waiting in a collective
+  // for it: this process's communicators are aborted, which ends their waits with errors (NCCL's
+  // kernels watch for it), and the pipeline refuses further steps. (One process per GPU: the other
+  // processes' waits end as any NCCL program's do, by their own watchdog or timeout.)
+  void abort_communicators() {
+    if (aborted_.exchange(true)) return;
+    for (auto& k : ranks_)
+      if (k && k->comm) ncclCommAbort(k->comm);
+  }
+
+  // One share's step: positions, its pipeline's step, the statistics all-gathered and the
+  // earliest TOI all-reduced, the contacts gathered to the root and merged there, then the next
+  // step agreed on (rebuild, restart, or the fronts rebalanced).
+  template <class Positions>
+  void run_share(Positions& place_positions, std::size_t r, std::size_t shares) {
+    using clock = std::chrono::steady_clock;
+    auto lap = [mark = clock::now()]() mutable {
+      const auto now = clock::now();
+      const double ms = std::chrono::duration<double, std::milli>(now - mark).count();
+      mark = now;
+      return ms;
+    };
+    MultiGpuTimes times;
+    Rank& k = *ranks_[r];
+    const auto x = place_positions(k);
+    times.positions_ms = lap();
+    k.part = k.pipeline->step_on_device(x.first, x.second, k.stream);
+    times.share_step_ms = lap();
+    if (k.broadcast_pending) {  // (the caller may overwrite its positions once the step returns)
+      LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(k.stream, k.broadcast_done, 0));
+      k.broadcast_pending = false;
+    }
+    // Statistics and wishes of every share, everywhere.
+    k.exchange.resize_discard(shares * detail::kPackedStats);
+    k.host_exchange.ensure(shares * detail::kPackedStats);
+    k.host_earliest.ensure(1);
+    k.earliest.resize_discard(1);
+    const std::size_t me = first_rank_ + r;
+    double* mine = k.host_exchange.data() + me * detail::kPackedStats;
+    StepStats own = k.part.stats;
+    own.peak_device_bytes = k.pipeline->device_bytes() + wrapper_bytes(k);  // (memory_stats() counts the process's GPUs together)
+    detail::pack_stats(own, k.pipeline->rebuild_due(), k.pipeline->wants_restart(), times.positions_ms + times.share_step_ms, mine);
+    k.host_earliest[0] = k.part.contacts.earliest_toi;
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.exchange.data() + me * detail::kPackedStats, mine, detail::kPackedStats * sizeof(double),
+                                      cudaMemcpyHostToDevice, k.stream));
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.earliest.data(), k.host_earliest.data(), sizeof(T), cudaMemcpyHostToDevice, k.stream));
+    LWSCCD_NCCL_CHECK(ncclGroupStart());
+    LWSCCD_NCCL_CHECK(ncclAllGather(k.exchange.data() + me * detail::kPackedStats, k.exchange.data(), detail::kPackedStats,
+                                    ncclDouble, k.comm, k.stream));
+    LWSCCD_NCCL_CHECK(ncclAllReduce(k.earliest.data(), k.earliest.data(), 1, detail::nccl_type<T>(), ncclMin, k.comm, k.stream));
+    LWSCCD_NCCL_CHECK(ncclGroupEnd());
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.host_exchange.data(), k.exchange.data(), shares * detail::kPackedStats * sizeof(double),
+                                      cudaMemcpyDeviceToHost, k.stream));
+    LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.host_earliest.data(), k.earliest.data(), sizeof(T), cudaMemcpyDeviceToHost, k.stream));
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(k.stream));
+    times.exchange_ms = lap();
+    gather_contacts(k, r);
+    times.gather_ms = lap();
+    agree_on_next_step(k, r);
+    times.rebalance_ms = lap();
+    if (r == 0) times_ = times;
+  }
+
+  // The whole step's statistics from the shares' (stage times the slowest GPU's, counts summed).
+  void combine(StepStats& stats, std::vector<StepStats>& devices, std::size_t shares) const {
     const Rank& k = *ranks_[0];
     devices.resize(shares);
     for (std::size_t s = 0; s < shares; ++s) devices[s] = detail::unpack_stats(k.host_exchange.data() + s * detail::kPackedStats);
@@ -559,8 +590,6 @@ class MultiGpuPipeline {
       stats.restarted_from_root = stats.restarted_from_root || d.restarted_from_root;
       stats.front_outgrown = stats.front_outgrown || d.front_outgrown;
     }
-    moved = moved_;
-    device_stats_ = devices;
   }
 
   // The shares' contacts to the root (rank 0), in rank order, sorted there once. Mode earliest
@@ -713,6 +742,7 @@ class MultiGpuPipeline {
   std::vector<StepStats> device_stats_;
   std::size_t moved_ = 0;
   MultiGpuTimes times_;
+  std::atomic<bool> aborted_{false};  ///< a step failed on one GPU: the communicators were aborted
 };
 
 }  // namespace lwsccd::gpu
