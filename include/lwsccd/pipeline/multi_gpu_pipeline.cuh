@@ -1,6 +1,6 @@
 // lwsccd — a CCD step split over several GPUs with NCCL (gpu::MultiGpuPipeline). Needs NCCL
 // (nccl.h, libnccl; the CUDA toolkit's or the nvidia-nccl wheel's): include <lwsccd/multi_gpu.cuh>
-// and link NCCL (the CMake target lwsccd::multi_gpu does both).
+// and link NCCL (in lwsccd's build, the CMake target lwsccd::multi_gpu does both).
 //
 // Each GPU holds the whole mesh, its own BVH (built from the same positions, so the same tree)
 // and a gpu::CcdPipeline that finds one share of the contacts (CcdPipeline::set_share): from the
