@@ -418,6 +418,28 @@ def schedulers_section(rows, kind, out_dir, gpu):
 
 
 # --- scaling -------------------------------------------------------------------------------------
+def multi_gpu_section(rows):
+    """The built-in scene split over several GPUs (lwsccd-bench-multi-gpu), against one GPU."""
+    if not rows:
+        return []
+    m = rows[0]
+    lines = [f"The same scene split over GPUs (`gpu::MultiGpuPipeline`, [MULTI_GPU.md](MULTI_GPU.md)), device-resident "
+             f"steps (positions on the first GPU, contacts left there): {m.get('machine', m.get('gpu', ''))}, commit "
+             f"{m.get('commit', '?')}, {m.get('date', '?')}, medians of {m.get('reps', '?')} steps:", ""]
+    body = []
+    one = {r["triangles"]: r["step_ms"] for r in rows if r["config"] == "one-gpu"}
+    for r in rows:
+        base = one.get(r["triangles"])
+        speedup = f"{base / r['step_ms']:.2f}x" if base and r["config"] == "split" else "-"
+        body.append([count(r["triangles"]), "one GPU" if r["config"] == "one-gpu" else f"split, {r['gpus']} GPU(s)",
+                     f"{ms(r['step_ms'])} ({ms(r['step_p10_ms'])}-{ms(r['step_p90_ms'])})", speedup,
+                     " / ".join(ms(b) for b in r["busy_ms_per_gpu"]),
+                     " / ".join(count(int(v)) for v in r["device_mib_per_gpu"]), r["steps_differing_from_one_gpu"]])
+    lines.append(table(["triangles", "pipeline", "step ms (p10-p90)", "speed-up", "busy ms per GPU", "MiB per GPU",
+                        "steps differing from one GPU"], body))
+    return lines
+
+
 def scaling_section(rows, kind, out_dir, gpu):
     rows = [r for r in rows if r["sweep"] == "scaling"]
     if not rows:
@@ -554,6 +576,8 @@ def main():
         out += ["## Schedulers", ""] + schedulers_section(load(os.path.join(results, f"traverse_{kind}.json")), kind,
                                                           results, gpu) + [""]
         out += ["## Scaling", ""] + scaling_section(pipeline, kind, results, gpu) + [""]
+        for name in sorted(f for f in os.listdir(results) if f.startswith(f"multi_gpu_{kind}x") and f.endswith(".json")):
+            out += multi_gpu_section(load(os.path.join(results, name))) + [""]
         out += ["## BVH build and refit", "", f"Median ms ({gpu}):", ""] + bvh_section(
             load(os.path.join(results, f"bvh_{kind}.json"))) + [""]
         out += ["## Rays", ""] + rays_section(load(os.path.join(results, f"rays_{kind}.json")), kind, results, gpu) + [""]

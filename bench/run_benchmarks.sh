@@ -8,7 +8,8 @@
 # overwriting the last ones: <kind> is the GPU's short name (h100, h200, ...), or cpu.
 #   GPU (where nvidia-smi sees one): machine_<kind>.json, pipeline_<kind>.json (whole step: default
 #       policies per scene, methods x precision, scaling 1K..10M), traverse_<kind>.json (schedulers),
-#       rays_<kind>.json, bvh_<kind>.json, fp_<kind>.json (FP64 and FP32 instructions of a steady
+#       rays_<kind>.json, bvh_<kind>.json, multi_gpu_<kind>x<N>.json (two GPUs or more, NCCL),
+#       fp_<kind>.json (FP64 and FP32 instructions of a steady
 #       step per feature pair: bench/fp_instructions.py, where Nsight Compute's ncu is)
 #   CPU: machine_cpu.json, accuracy_cpu.json (every narrow-phase method on the query sets and
 #       scenes), pipeline_cpu.json (the CPU backend, default policies per scene)
@@ -86,6 +87,12 @@ if [ ${#missing[@]} -gt 0 ]; then
   cmake --build "$build" -j"$(nproc)" --target "${missing[@]}"
 fi
 [ "$build_ccd" = 1 ] && cmake --build "$build" -j"$(nproc)" --target lwsccd-ccd
+# Two GPUs or more: the split's benchmark, where the build found NCCL (no target otherwise).
+if [ -n "$gpu_name" ] && [ "$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | wc -l)" -ge 2 ] &&
+   [ ! -x "$bin/lwsccd-bench-multi-gpu" ]; then
+  cmake --build "$build" -j"$(nproc)" --target lwsccd-bench-multi-gpu 2>/dev/null ||
+    echo "run_benchmarks.sh: no lwsccd-bench-multi-gpu (a build without NCCL): the split over GPUs not measured" >&2
+fi
 data_args=()
 [ -n "$data" ] && data_args=(--data "$data")
 mkdir -p "$results"
@@ -131,6 +138,11 @@ if [ -n "$gpu_name" ]; then
   "$bin/lwsccd-bench-traverse" "${data_args[@]}" --json "$results/traverse_$kind.json"
   "$bin/lwsccd-bench-rays" "${data_args[@]}" --json "$results/rays_$kind.json"
   "$bin/lwsccd-bench-bvh" "${data_args[@]}" --json "$results/bvh_$kind.json"
+  # The step split over GPUs, where there are two or more and the build has NCCL.
+  gpus=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | wc -l)
+  if [ "$gpus" -ge 2 ] && [ -x "$bin/lwsccd-bench-multi-gpu" ]; then
+    "$bin/lwsccd-bench-multi-gpu" --sizes 1e6,1e7 --gpus "1,$gpus" --reps 11 --json "$results/multi_gpu_${kind}x$gpus.json"
+  fi
   # FP64 and FP32 instructions of a steady step, per feature pair (Nsight Compute, where it is).
   ncu="$(command -v ncu || ls /usr/local/cuda*/bin/ncu 2>/dev/null | head -n1 || true)"
   ccd="$build/examples/lwsccd-ccd"
