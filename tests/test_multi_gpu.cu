@@ -232,6 +232,45 @@ TEST_CASE("MultiGpuPipeline equals one GPU pair for pair over steps with fronts 
   }
 }
 
+TEST_CASE("MultiGpuPipeline: an error on one GPU alone ends every GPU's wait, and later steps are refused",
+          "[multi_gpu][abort]") {
+  if (device_count() < 2) {
+    WARN("SKIPPED: needs two CUDA devices");
+    return;
+  }
+  std::shared_ptr<ClothBallSimulation> sim;
+  const std::vector<Step> steps = builtin_steps(60000, 2, sim);
+  gpu::MultiGpuPipeline<> split(sim->mesh(), sim->layout(), std::vector<int>{0, 1});
+  const std::size_t n = steps[0].x0.size();
+  LWSCCD_CUDA_CHECK(cudaSetDevice(0));
+  gpu::DeviceBuffer<Vec3d> x0, x1;
+  gpu::DeviceBuffer<Vec3f> f0, f1;
+  x0.upload(steps[0].x0);
+  x1.upload(steps[0].x1);
+  std::vector<Vec3f> f(n);
+  for (std::size_t i = 0; i < n; ++i) f[i] = {float(steps[1].x0[i].x), float(steps[1].x0[i].y), float(steps[1].x0[i].z)};
+  f0.upload(f);
+  for (std::size_t i = 0; i < n; ++i) f[i] = {float(steps[1].x1[i].x), float(steps[1].x1[i].y), float(steps[1].x1[i].z)};
+  f1.upload(f);
+  LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+  REQUIRE_NOTHROW(split.step_from_device(x0.data(), x1.data()));
+  // From float device positions only the second GPU needs new buffers (its copies of the
+  // broadcast): a budget short of them fails there alone, while the first GPU's broadcast waits.
+  gpu::release_cached_memory();  // (a budget frees a device's cached blocks before it refuses)
+  const std::size_t previous = gpu::memory_budget();
+  gpu::set_memory_budget(gpu::memory_stats().in_use + n * sizeof(Vec3f) / 2);
+  bool threw = false;
+  try {
+    split.step_from_device(f0.data(), f1.data());
+  } catch (const Error& e) {
+    threw = true;
+    std::printf("one GPU failed: %s\n", e.what());
+  }
+  gpu::set_memory_budget(previous);
+  CHECK(threw);
+  CHECK_THROWS_WITH(split.step_from_device(x0.data(), x1.data()), Catch::Contains("aborted"));
+}
+
 TEST_CASE("MultiGpuPipeline equals one GPU on the real scenes", "[multi_gpu][data]") {
   if (!lwsccd_test::have_data()) {
     WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());

@@ -88,23 +88,31 @@ class DevicePool {
     const std::size_t size = bytes;
     int device = 0;
     LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      PerDevice& d = of(device);
-      auto range = d.blocks.equal_range(size);
-      if (range.first != range.second) {
+    // A block given back since the last wait needs one (for all of them). The wait is made without
+    // the lock: another thread driving another GPU (gpu::MultiGpuPipeline) may have to allocate
+    // before this device's work (a collective waiting for that GPU) can end.
+    for (int attempt = 0; attempt < 2; ++attempt) {
+      std::uint64_t releases = 0;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        PerDevice& d = of(device);
+        auto range = d.blocks.equal_range(size);
+        if (range.first == range.second) break;
         auto safe = range.first;
         while (safe != range.second && safe->second.released > d.synced) ++safe;
-        if (safe == range.second) {  // given back since the last wait: wait once for all of them
-          LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
-          d.synced = d.releases;
-          safe = range.first;
+        if (safe != range.second) {
+          Block b{safe->second.ptr, size};
+          d.blocks.erase(safe);
+          bytes_cached().fetch_sub(size);
+          return b;
         }
-        Block b{safe->second.ptr, size};
-        d.blocks.erase(safe);
-        bytes_cached().fetch_sub(size);
-        return b;
+        releases = d.releases;
       }
+      if (attempt == 1) break;
+      LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+      std::lock_guard<std::mutex> lock(mutex_);
+      PerDevice& d = of(device);
+      d.synced = std::max(d.synced, releases);  // (what was given back before the wait)
     }
     void* ptr = nullptr;
     cudaError_t e = cudaMalloc(&ptr, size);
@@ -197,7 +205,11 @@ inline void check_budget(std::size_t bytes) {
     return bytes > budget || held > budget - bytes;
   };
   if (!exceeds()) return;
-  if (bytes_cached().load() > 0) DevicePool::instance().release_all();
+  // The current device's cached blocks only: freeing another's would wait for that GPU, whose work
+  // may wait for this thread (a collective of gpu::MultiGpuPipeline).
+  int device = 0;
+  LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
+  if (bytes_cached().load() > 0) DevicePool::instance().release_all(device);
   if (!exceeds()) return;
   const std::size_t in_use = bytes_in_use().load();
   throw Error("lwsccd: device memory budget exceeded: an allocation of " + std::to_string(bytes) + " bytes with " +
@@ -210,7 +222,8 @@ inline MemoryStats memory_stats() {
   return {detail::bytes_in_use().load(), detail::bytes_peak().load(), detail::bytes_cached().load()};
 }
 /// Caps the device memory all lwsccd objects may hold together, the process's cached blocks
-/// included (freed first where they stand in the way); an allocation past it throws
+/// included (the current device's are freed first where they stand in the way; another device's
+/// only by release_cached_memory(), which waits for that device); an allocation past it throws
 /// lwsccd::Error (nothing is allocated then). Default: no cap.
 inline void set_memory_budget(std::size_t bytes) { detail::bytes_budget().store(bytes); }
 inline std::size_t memory_budget() { return detail::bytes_budget().load(); }

@@ -31,6 +31,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <shared_mutex>
 #include <string>
 #include <thread>
 #include <type_traits>
@@ -466,6 +467,7 @@ class MultiGpuPipeline {
         to[t] = x[t].data();
       }
     }
+    const auto use = nccl_use();
     LWSCCD_NCCL_CHECK(ncclGroupStart());
     for (int t = 0; t < 2; ++t)
       LWSCCD_NCCL_CHECK(ncclBroadcast(to[t], to[t], 3 * n, detail::nccl_type<Q>(), 0, k.comm, stream));
@@ -503,8 +505,17 @@ class MultiGpuPipeline {
   // processes' waits end as any NCCL program's do, by their own watchdog or timeout.)
   void abort_communicators() {
     if (aborted_.exchange(true)) return;
+    std::unique_lock<std::shared_mutex> lock(nccl_mutex_);  // (the calls under way end first)
     for (auto& k : ranks_)
       if (k && k->comm) ncclCommAbort(k->comm);
+  }
+
+  // Held while a thread makes NCCL calls (never while it waits for a GPU): once an abort has begun,
+  // no thread calls NCCL on the aborted communicators.
+  std::shared_lock<std::shared_mutex> nccl_use() {
+    std::shared_lock<std::shared_mutex> lock(nccl_mutex_);
+    if (aborted_) throw Error("gpu::MultiGpuPipeline: the step failed on another GPU; the communicators were aborted");
+    return lock;
   }
 
   // One share's step: positions, its pipeline's step, the statistics all-gathered and the
@@ -543,6 +554,7 @@ class MultiGpuPipeline {
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.exchange.data() + me * detail::kPackedStats, mine, detail::kPackedStats * sizeof(double),
                                       cudaMemcpyHostToDevice, k.stream));
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.earliest.data(), k.host_earliest.data(), sizeof(T), cudaMemcpyHostToDevice, k.stream));
+    const auto use = nccl_use();
     LWSCCD_NCCL_CHECK(ncclGroupStart());
     LWSCCD_NCCL_CHECK(ncclAllGather(k.exchange.data() + me * detail::kPackedStats, k.exchange.data(), detail::kPackedStats,
                                     ncclDouble, k.comm, k.stream));
@@ -611,6 +623,7 @@ class MultiGpuPipeline {
           LWSCCD_CUDA_CHECK(cudaMemcpyAsync(k.gathered[list].data(), own[list], own_count[list] * sizeof(FeatureHit<T>),
                                             cudaMemcpyDeviceToDevice, k.stream));
       }
+    const auto use = nccl_use();
     LWSCCD_NCCL_CHECK(ncclGroupStart());
     for (int list = 0; list < 2; ++list) {
       if (root) {
@@ -698,6 +711,7 @@ class MultiGpuPipeline {
     if (r == 0) moved_ = move;
     if (move == 0 || (me != busiest && me != idlest)) return;
     Pipeline& p = *k.pipeline;
+    const auto use = nccl_use();
     if (me == busiest) {
       const std::size_t keep = p.kept_front_size() - move;
       LWSCCD_NCCL_CHECK(ncclSend(p.kept_front() + keep, move * sizeof(NodePair), ncclUint8, static_cast<int>(idlest), k.comm, k.stream));
@@ -743,6 +757,7 @@ class MultiGpuPipeline {
   std::size_t moved_ = 0;
   MultiGpuTimes times_;
   std::atomic<bool> aborted_{false};  ///< a step failed on one GPU: the communicators were aborted
+  std::shared_mutex nccl_mutex_;       ///< NCCL calls (shared) against an abort (exclusive)
 };
 
 }  // namespace lwsccd::gpu
