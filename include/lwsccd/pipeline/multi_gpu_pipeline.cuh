@@ -159,6 +159,8 @@ class DeviceWorkers {
 // A step's statistics as numbers, for the all-gather (and back).
 constexpr int kPackedCounts = 6;
 constexpr int kPackedFields = 24;
+// Entries read by name (the rest are unpacked by unpack_stats).
+constexpr int kPackedFront = 6, kPackedHitsVf = 10, kPackedRebuild = 21, kPackedRestart = 22, kPackedDone = 23;
 constexpr int kPackedStats = kPackedFields + 2 * kPackedCounts;
 inline void pack_counts(const NarrowPhaseCounts& c, double* out) {
   const std::size_t v[kPackedCounts] = {c.pairs, c.certified_hits, c.certified_misses, c.fallbacks, c.screened, c.single_misses};
@@ -404,20 +406,21 @@ class MultiGpuPipeline {
           return std::pair<const Vec3<Q>*, const Vec3<Q>*>(x[0].data(), x[1].data());
         },
         result.stats, result.devices, result.moved_front_entries);
-    download(result.contacts);
-    result.times = times_;
-    result.stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return result;
+    return finished(std::move(result), start);
   }
   template <class Q>
   MultiGpuStepResult<T> from_device(const Vec3<Q>* x0, const Vec3<Q>* x1) {
     const auto start = std::chrono::steady_clock::now();
     MultiGpuStepResult<T> result;
     run_step([&](Rank& k) { return broadcast(k, x0, x1); }, result.stats, result.devices, result.moved_front_entries);
+    return finished(std::move(result), start);
+  }
+  // A host step's end: the contacts downloaded, the host times, the call's time.
+  MultiGpuStepResult<T> finished(MultiGpuStepResult<T>&& result, std::chrono::steady_clock::time_point start) {
     download(result.contacts);
     result.times = times_;
     result.stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return result;
+    return std::move(result);
   }
   template <class Q>
   DeviceStepResult<T> on_device(const Vec3<Q>* x0, const Vec3<Q>* x1) {
@@ -495,6 +498,9 @@ class MultiGpuPipeline {
     });
     // Every rank holds the same exchange: read the first.
     combine(stats, devices, shares);
+    gathered_.gave_up = stats.gave_up;  // (every share's, summed)
+    gathered_.vf_counts = stats.narrow_vf;
+    gathered_.ee_counts = stats.narrow_ee;
     moved = moved_;
     device_stats_ = devices;
   }
@@ -613,7 +619,7 @@ class MultiGpuPipeline {
     std::size_t total[2] = {0, 0};
     for (std::size_t s = 0; s < shares; ++s)
       for (int list = 0; list < 2; ++list)
-        total[list] += pairs ? static_cast<std::size_t>(k.host_exchange[s * detail::kPackedStats + 10 + list]) : 0;
+        total[list] += pairs ? static_cast<std::size_t>(k.host_exchange[s * detail::kPackedStats + detail::kPackedHitsVf + list]) : 0;
     const FeatureHit<T>* own[2] = {k.part.contacts.vf, k.part.contacts.ee};
     const std::size_t own_count[2] = {pairs ? k.part.contacts.num_vf : 0, pairs ? k.part.contacts.num_ee : 0};
     if (root)
@@ -629,7 +635,7 @@ class MultiGpuPipeline {
       if (root) {
         std::size_t at = own_count[list];
         for (std::size_t s = 1; s < shares; ++s) {
-          const std::size_t n = static_cast<std::size_t>(k.host_exchange[s * detail::kPackedStats + 10 + list]);
+          const std::size_t n = static_cast<std::size_t>(k.host_exchange[s * detail::kPackedStats + detail::kPackedHitsVf + list]);
           if (pairs && n)
             LWSCCD_NCCL_CHECK(ncclRecv(k.gathered[list].data() + at, n * sizeof(FeatureHit<T>), ncclUint8, static_cast<int>(s), k.comm, k.stream));
           at += pairs ? n : 0;
@@ -667,14 +673,6 @@ class MultiGpuPipeline {
       c.num_vf = total[0];
       c.num_ee = total[1];
       c.earliest_toi = k.host_earliest[0];
-      c.gave_up = 0;
-      c.vf_counts = c.ee_counts = NarrowPhaseCounts{};
-      for (std::size_t s = 0; s < shares; ++s) {
-        const StepStats d = detail::unpack_stats(k.host_exchange.data() + s * detail::kPackedStats);
-        c.gave_up += d.gave_up;
-        add_counts(c.vf_counts, d.narrow_vf);
-        add_counts(c.ee_counts, d.narrow_ee);
-      }
     } else if (r == 0) {
       gathered_ = DeviceContacts<T>{};
       gathered_.earliest_toi = k.host_earliest[0];
@@ -693,10 +691,10 @@ class MultiGpuPipeline {
     std::vector<std::size_t> front(shares);
     for (std::size_t s = 0; s < shares; ++s) {
       const double* d = k.host_exchange.data() + s * detail::kPackedStats;
-      rebuild = rebuild || d[21] != 0;
-      restart = restart || d[22] != 0;
-      busy[s] = d[23];
-      front[s] = static_cast<std::size_t>(d[6]);
+      rebuild = rebuild || d[detail::kPackedRebuild] != 0;
+      restart = restart || d[detail::kPackedRestart] != 0;
+      busy[s] = d[detail::kPackedDone];
+      front[s] = static_cast<std::size_t>(d[detail::kPackedFront]);
       if (busy[s] > busy[busiest]) busiest = s;
       if (busy[s] < busy[idlest]) idlest = s;
     }
