@@ -476,9 +476,12 @@ int main(int argc, char** argv) {
       j["certified_misses"] = v.certified_misses + e.certified_misses;
       j["fallbacks"] = v.fallbacks + e.fallbacks;
       j["screened"] = v.screened + e.screened;
-      // Where the pairs were decided: single precision, double, the fallback search.
+      // Where the pairs were decided: single precision, contacts in single precision with a double
+      // tail, double, the fallback search.
       j["decided_fp32"] = v.single_misses + e.single_misses;
-      j["decided_fp64"] = v.pairs + e.pairs - v.single_misses - e.single_misses - v.fallbacks - e.fallbacks;
+      j["decided_fp32_fp64_tail"] = v.single_descents + e.single_descents;
+      j["decided_fp64"] = v.pairs + e.pairs - v.single_misses - e.single_misses - v.single_descents - e.single_descents -
+                          v.fallbacks - e.fallbacks;
       j["rebuilds"] = r.rebuilds;
       j["restarts_from_root"] = r.restarts;
       j["front_growth_limit"] = r.front_growth_limit;

@@ -24,17 +24,19 @@ struct StepReport {
   std::size_t check_differences = 0;
 };
 
-/// Where a step's feature pairs were decided: the single-precision screen, the double-precision
-/// certified path (its screen and refinement), the fallback search.
+/// Where a step's feature pairs were decided: in single precision (the screen, the filter, the
+/// search), contacts searched in single precision with the certain descent's last levels in double,
+/// the double-precision certified path (its screen and refinement), the fallback search.
 struct Decided {
-  std::size_t single = 0, double_ = 0, fallback = 0;
+  std::size_t single = 0, single_then_double = 0, double_ = 0, fallback = 0;
 };
 inline Decided decided_by(const lwsccd::StepStats& s) {
   Decided d;
   for (const lwsccd::NarrowPhaseCounts* c : {&s.narrow_vf, &s.narrow_ee}) {
     d.single += c->single_misses;
+    d.single_then_double += c->single_descents;
     d.fallback += c->fallbacks;
-    d.double_ += c->pairs - c->single_misses - c->fallbacks;
+    d.double_ += c->pairs - c->single_misses - c->single_descents - c->fallbacks;
   }
   return d;
 }
@@ -67,7 +69,8 @@ inline void print_table(const StepSource& src, const std::string& backend, const
                   s.narrow_vf.screened, s.narrow_ee.screened, s.narrow_vf.certified_hits, s.narrow_ee.certified_hits,
                   s.narrow_vf.certified_misses, s.narrow_ee.certified_misses, s.narrow_vf.fallbacks, s.narrow_ee.fallbacks);
       const Decided d = decided_by(s);
-      std::printf("  pairs decided in FP32 %zu, in FP64 %zu, by the fallback %zu\n", d.single, d.double_, d.fallback);
+      std::printf("  pairs decided in FP32 %zu, in FP32 with an FP64 tail %zu, in FP64 %zu, by the fallback %zu\n", d.single,
+                  d.single_then_double, d.double_, d.fallback);
     }
     if (s.narrow_survivors)
       std::printf("  narrow phase: %zu pairs past the first pass, %zu of them searched by a warp\n", s.narrow_survivors,
@@ -135,7 +138,7 @@ inline void print_json(const StepSource& src, const std::string& backend, const 
     };
     step["certified"] = {{"vf", certified(s.narrow_vf)}, {"ee", certified(s.narrow_ee)}};
     const Decided d = decided_by(s);
-    step["decided"] = {{"fp32", d.single}, {"fp64", d.double_}, {"fallback", d.fallback}};
+    step["decided"] = {{"fp32", d.single}, {"fp32_fp64_tail", d.single_then_double}, {"fp64", d.double_}, {"fallback", d.fallback}};
     if (r.has_truth)
       step["truth"] = {{"true_contacts", r.truth.true_contacts}, {"false_negatives", r.truth.false_negatives},
                        {"false_positives", r.truth.false_positives}};

@@ -165,6 +165,12 @@ struct ShrunkPolicy : CertifiedPolicy {
   static constexpr double kInsideBound = kInside / 100.0;
 };
 
+// ShrunkPolicy with the double path alone (no single-precision pass).
+template <int kCoefficient, int kSplit, int kInside>
+struct ShrunkDoublePolicy : ShrunkPolicy<kCoefficient, kSplit, kInside> {
+  static constexpr bool kSingleFirst = false;
+};
+
 // The sound policy with the single-precision screen's input bound scaled by the given percentage.
 template <int kInput>
 struct ShrunkInputPolicy : CertifiedPolicy {
@@ -179,6 +185,16 @@ struct DoubleScreenPolicy : CertifiedPolicy {
 // The single-precision filter's first round alone.
 struct SingleFirstRoundPolicy : CertifiedPolicy {
   static constexpr bool kSingleSecondRound = false;
+};
+
+// Pairs the single passes leave searched in double from [0, 1] (no search in single precision).
+struct NoSingleDescentPolicy : CertifiedPolicy {
+  static constexpr bool kSingleDescent = false;
+};
+
+// The double tail halves down to the leaf instead of proving the leaf it guesses.
+struct NoDescentJumpPolicy : CertifiedPolicy {
+  static constexpr bool kDescentJump = false;
 };
 
 // The halving search alone, without the certain descent.

@@ -35,6 +35,7 @@ inline void require_same_counts(const lwsccd::NarrowPhaseCounts& a, const lwsccd
   REQUIRE(a.fallbacks == b.fallbacks);
   REQUIRE(a.screened == b.screened);
   REQUIRE(a.single_misses == b.single_misses);
+  REQUIRE(a.single_descents == b.single_descents);
 }
 
 }  // namespace lwsccd_test

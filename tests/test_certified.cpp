@@ -15,6 +15,32 @@
 using namespace lwsccd;
 using namespace lwsccd::certified_test;
 
+namespace {
+// A vertex-face and an edge-edge pair near contact: small motions of jittered features of size
+// 2^-10 .. 2^9, up to 2^(origin_bits - 1) from the origin.
+std::pair<VertexFaceQuery<double>, EdgeEdgeQuery<double>> near_contact_pairs(std::mt19937_64& rng, int origin_bits) {
+  std::uniform_real_distribution<double> jitter(-1, 1);
+  const double s = std::ldexp(1.0, int(rng() % 20) - 10), o = std::ldexp(1.0, int(rng() % origin_bits));
+  auto point = [&](double x, double y, double z) {
+    return Vec3<double>{o + s * (x + 0.1 * jitter(rng)), -o + s * (y + 0.1 * jitter(rng)), s * (z + 0.1 * jitter(rng))};
+  };
+  const VertexFaceQuery<double> vf{point(0.3, 0.3, 0.2), point(0, 0, 0), point(1, 0, 0), point(0, 1, 0),
+                                   point(0.3 + jitter(rng), 0.3 + jitter(rng), -0.2 * jitter(rng)), point(0, 0, 0),
+                                   point(1, 0, 0), point(0, 1, 0)};
+  const EdgeEdgeQuery<double> ee{point(-1, 0, 0.2), point(1, 0, 0.2), point(0, -1, 0), point(0, 1, 0),
+                                 point(-1, jitter(rng), -0.2 * jitter(rng)), point(1, jitter(rng), -0.2 * jitter(rng)),
+                                 point(0, -1, 0), point(0, 1, 0)};
+  return {vf, ee};
+}
+
+// Whether the single-precision screen and filter leave the pair to the refinement.
+template <class Q, class T>
+bool certified_first_passes_leave(const Q& q, const CcdParams<T>& params) {
+  return detail::certified_first_screen<CertifiedPolicy>(q, params) == detail::ScreenVerdict::passed &&
+         !detail::CertifiedFilter<CertifiedPolicy>::decides_single(q, params);
+}
+}  // namespace
+
 TEST_CASE("certified path: hard generated cases never missed, intervals contain the exact TOI", "[narrow][certified]") {
   for (const Outcome& o : {run_generators<CertifiedPolicy, double>(12, true), run_generators<CertifiedPolicy, float>(12, true),
                            run_generators<NoDescentPolicy, double>(12, false), run_generators<NoDescentPolicy, float>(12, false)}) {
@@ -184,6 +210,25 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
               violations_mutated);
   CHECK(violations_sound == 0);
   CHECK(violations_mutated > 0);
+
+  // The value at a point (bernstein_at, B11), against long double: random cubics at random dyadic
+  // points of 1 to 30 bits stay within the bound; without the added bound they do not.
+  std::size_t point_sound = 0, point_mutated = 0;
+  for (int n = 0; n < 4000; ++n) {
+    const detail::BernsteinPiece<double> piece{{coef(rng), coef(rng), coef(rng), coef(rng)}, 0, 0};
+    const int bits = 1 + int(rng() % 30);
+    const double s = std::ldexp(double(rng() % (1ull << bits)), -bits);
+    long double c[4] = {piece.c[0], piece.c[1], piece.c[2], piece.c[3]};
+    for (int level = 3; level > 0; --level)
+      for (int i = 0; i < level; ++i) c[i] = c[i] + static_cast<long double>(s) * (c[i + 1] - c[i]);
+    const auto sound_value = detail::bernstein_at<CertifiedPolicy>(piece, s);
+    const auto mutated_value = detail::bernstein_at<ShrunkPolicy<100, 0, 100>>(piece, s);
+    point_sound += std::fabs(static_cast<long double>(sound_value.value) - c[0]) > sound_value.exact;
+    point_mutated += std::fabs(static_cast<long double>(mutated_value.value) - c[0]) > mutated_value.exact;
+  }
+  std::printf("  the cubic at a point: %zu values outside the bound (sound), %zu (bound removed)\n", point_sound, point_mutated);
+  CHECK(point_sound == 0);
+  CHECK(point_mutated > 0);
 }
 
 TEST_CASE("single precision: the input bound covers rounding to float; without it a contact is lost (mutation check)",
@@ -306,30 +351,30 @@ TEST_CASE("single precision: FP32 first never contradicts the double path", "[na
   // screen, on coordinates relative to the pair, may decide a pair far from the origin that the
   // double screen leaves undecided: then undecided becomes a miss.)
   std::mt19937_64 rng(7);
-  std::uniform_real_distribution<double> jitter(-1, 1);
   std::size_t pairs = 0, differ = 0, single = 0, contradicted = 0, decided_more = 0, second_round = 0;
   for (int n = 0; n < 20000; ++n) {
-    const double s = std::ldexp(1.0, int(rng() % 20) - 10), o = std::ldexp(1.0, int(rng() % 30));
-    auto point = [&](double x, double y, double z) {
-      return Vec3<double>{o + s * (x + 0.1 * jitter(rng)), -o + s * (y + 0.1 * jitter(rng)), s * (z + 0.1 * jitter(rng))};
-    };
-    const VertexFaceQuery<double> vf{point(0.3, 0.3, 0.2), point(0, 0, 0), point(1, 0, 0), point(0, 1, 0),
-                                     point(0.3 + jitter(rng), 0.3 + jitter(rng), -0.2 * jitter(rng)), point(0, 0, 0),
-                                     point(1, 0, 0), point(0, 1, 0)};
-    const EdgeEdgeQuery<double> ee{point(-1, 0, 0.2), point(1, 0, 0.2), point(0, -1, 0), point(0, 1, 0),
-                                   point(-1, jitter(rng), -0.2 * jitter(rng)), point(1, jitter(rng), -0.2 * jitter(rng)),
-                                   point(0, -1, 0), point(0, 1, 0)};
+    const auto [vf, ee] = near_contact_pairs(rng, 30);
     const auto a = detail::certified_classify<CertifiedPolicy>(vf, CcdParams<double>{});
     const auto b = detail::certified_classify<DoubleScreenPolicy>(vf, CcdParams<double>{});
     const auto c = detail::certified_classify<CertifiedPolicy>(ee, CcdParams<double>{});
     const auto d = detail::certified_classify<DoubleScreenPolicy>(ee, CcdParams<double>{});
+    // Decided a miss in single precision: the screen, the filter, or the search in float.
+    auto search_miss = [](const auto& q) {
+      bool done = false;
+      return detail::certified_refine_single_first<CertifiedPolicy>(q, CcdParams<double>{}, done).certainty == Certainty::miss && done;
+    };
     const bool vf_single = detail::certified_screen_single<CertifiedPolicy>(vf, CcdParams<double>{}) ||
-                           detail::CertifiedFilter<CertifiedPolicy>::decides_single(vf, CcdParams<double>{});
+                           detail::CertifiedFilter<CertifiedPolicy>::decides_single(vf, CcdParams<double>{}) || search_miss(vf);
     const bool ee_single = detail::certified_screen_single<CertifiedPolicy>(ee, CcdParams<double>{}) ||
-                           detail::CertifiedFilter<CertifiedPolicy>::decides_single(ee, CcdParams<double>{});
+                           detail::CertifiedFilter<CertifiedPolicy>::decides_single(ee, CcdParams<double>{}) || search_miss(ee);
     contradicted += (vf_single && b.certainty == Certainty::hit) + (ee_single && d.certainty == Certainty::hit);
-    const bool vf_same = a.certainty == b.certainty && a.lo == b.lo && a.hi == b.hi;
-    const bool ee_same = c.certainty == d.certainty && c.lo == d.lo && c.hi == d.hi;
+    // The same answer, or a hit whose lower bound the double search noted earlier (section 3.4, B10).
+    auto same_or_later_lower = [](const auto& x, const auto& y) {
+      return (x.certainty == y.certainty && x.lo == y.lo && x.hi == y.hi) ||
+             (x.certainty == Certainty::hit && y.certainty == Certainty::hit && x.hi == y.hi && y.lo < x.lo);
+    };
+    const bool vf_same = same_or_later_lower(a, b);
+    const bool ee_same = same_or_later_lower(c, d);
     decided_more += (!vf_same && vf_single && b.certainty == Certainty::undecided) + (!ee_same && ee_single && d.certainty == Certainty::undecided);
     differ += (!vf_same && !(vf_single && b.certainty == Certainty::undecided)) + (!ee_same && !(ee_single && d.certainty == Certainty::undecided));
     single += vf_single + ee_single;
@@ -406,6 +451,118 @@ TEST_CASE("certified path: the certain descent agrees with the halving search an
   CHECK(disagreements == 0);
   CHECK(apart == 0);
   CHECK(without_toi == 0);
+}
+
+TEST_CASE("single precision: contacts searched in float with a double tail agree with the double search",
+          "[narrow][certified][single]") {
+  // Near-contact pairs near and far from the origin (as above) and contacts at known dyadic times,
+  // classified with the search in single precision (CertifiedPolicy::kSingleDescent) and without.
+  // The float search's misses and hand-offs are proofs for the input, so the answers agree: the
+  // same certainty and interval, except a miss where the double search left the pair undecided,
+  // or a hit whose lower bound the double search noted earlier (an interval excluded only as
+  // given); no hit is ever lost or gained, and a known contact time is never before the lower bound.
+  std::mt19937_64 rng(11);
+  std::size_t pairs = 0, descents = 0, hits = 0, differ = 0, decided_more = 0, earlier_noted = 0, past_toi = 0;
+  std::size_t known_hits = 0, known_descents = 0;  // of the contacts at known times
+  std::size_t tail_differ = 0;                      // the leaf proved against the halvings
+  auto compare = [&](const auto& q, double toi) {
+    using T = std::decay_t<decltype(q.points()[0].x)>;
+    const CcdParams<T> params;
+    const CertifiedAnswer<T> mixed = detail::certified_classify<CertifiedPolicy>(q, params);
+    const CertifiedAnswer<T> whole = detail::certified_classify<NoSingleDescentPolicy>(q, params);
+    bool done = false;
+    if (certified_first_passes_leave(q, params)) {
+      const CertifiedAnswer<T> single = detail::certified_refine_single_first<CertifiedPolicy>(q, params, done);
+      descents += done && single.certainty == Certainty::hit;
+      known_descents += done && single.certainty == Certainty::hit && toi >= 0;
+    }
+    hits += mixed.certainty == Certainty::hit;
+    known_hits += mixed.certainty == Certainty::hit && toi >= 0;
+    const bool same = mixed.certainty == whole.certainty && mixed.lo == whole.lo && mixed.hi == whole.hi;
+    const bool more = mixed.certainty == Certainty::miss && whole.certainty == Certainty::undecided;
+    const bool noted = mixed.certainty == Certainty::hit && whole.certainty == Certainty::hit && mixed.hi == whole.hi &&
+                       whole.lo < mixed.lo;
+    decided_more += more;
+    earlier_noted += noted;
+    differ += !same && !more && !noted;
+    if (mixed.certainty == Certainty::hit && toi >= 0) past_toi += mixed.lo > T(toi + 1e-12);
+    // The double tail's leaf, proved by its ends' signs, against the halvings down to it: the same
+    // answer, or a later lower bound where the halvings noted one only as given on the way.
+    const CertifiedAnswer<T> halved = detail::certified_classify<NoDescentJumpPolicy>(q, params);
+    const bool tail_same = mixed.certainty == halved.certainty && mixed.lo == halved.lo && mixed.hi == halved.hi;
+    tail_differ += !tail_same && !(mixed.certainty == Certainty::hit && halved.certainty == Certainty::hit &&
+                                   mixed.hi == halved.hi && halved.lo < mixed.lo);
+    ++pairs;
+  };
+  for (int n = 0; n < 20000; ++n) {
+    const auto [vf, ee] = near_contact_pairs(rng, 24);
+    compare(vf, -1.0);
+    compare(ee, -1.0);
+    compare(vf.cast<float>(), -1.0);
+  }
+  // A vertex through a triangle's interior and an edge through an edge at t = toi, the plane z = 0
+  // at that time (off the dyadic grid, where the descent cannot halve; the coordinates' rounding
+  // moves the exact time by ~1e-16).
+  for (int n = 0; n < 2000; ++n) {
+    const double toi = (std::uniform_int_distribution<int>(1, 1022)(rng) + 1.0 / 3.0) / 1024.0, speed = 1.0 + rng() % 8;
+    const double x = std::uniform_int_distribution<int>(-64, 64)(rng) / 16.0;
+    const VertexFaceQuery<double> vf{{x + 1, 1, -speed * toi}, {x, 0, 0}, {x + 4, 0, 0}, {x, 4, 0},
+                                     {x + 1, 1, speed * (1 - toi)}, {x, 0, 0}, {x + 4, 0, 0}, {x, 4, 0}};
+    const EdgeEdgeQuery<double> ee{{-8, x, -speed * toi}, {8, x, -speed * toi}, {x, -8, 0}, {x, 8, 0},
+                                   {-8, x, speed * (1 - toi)}, {8, x, speed * (1 - toi)}, {x, -8, 0}, {x, 8, 0}};
+    compare(vf, toi);
+    compare(ee, toi);
+  }
+  std::printf("  single-precision search: %zu pairs, %zu hits, %zu of them with a double tail (contacts at known times: %zu of "
+              "%zu); %zu misses the double search left undecided, %zu lower bounds the double search noted earlier, %zu other "
+              "differences, %zu lower bounds past the TOI\n",
+              pairs, hits, descents, known_descents, known_hits, decided_more, earlier_noted, differ, past_toi);
+  CHECK(known_hits == 4000);
+  CHECK(known_descents * 10 > known_hits * 9);
+  CHECK(descents * 4 > hits);
+  std::printf("  the double tail's leaf proved by its ends' signs against the halvings: %zu differences\n", tail_differ);
+  CHECK(tail_differ == 0);
+  CHECK(differ == 0);
+  CHECK(past_toi == 0);
+}
+
+TEST_CASE("single precision: a contact claimed in float holds for the input; without the inside test's bound a miss is "
+          "a hit (mutation check)", "[narrow][certified][single]") {
+  // A vertex crossing a triangle's plane slowly (0.01 a step), beside an edge by d = 5e-8: a
+  // certain miss in double (d is far beyond double's rounding of the coordinates, and beyond what
+  // the vertex moves in the tolerance's time), but below float's rounding of the pair's relative
+  // coordinates (up to ~4: 2.4e-7), so the float query may put the vertex inside. The search in
+  // single precision claims the contact only where its inside test is certain for every query
+  // within the input's rounding to float (B12, counted as given: moving_difference's `given`);
+  // without the inside test's bound it hands such misses to double as contacts. (The double path
+  // alone, with the bound removed, still sees the vertex outside: its rounding is far below d.)
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> unit(-1, 1), along(0.2, 0.8);
+  std::size_t cases = 0, hits_sound = 0, hits_mutated = 0, hits_double_mutated = 0, misses_double = 0;
+  for (int n = 0; n < 4000; ++n) {
+    const double o = std::ldexp(1.0, 4 + int(rng() % 4));
+    const Vec3d a{o + unit(rng), o + unit(rng), o + unit(rng)};
+    const Vec3d b = a + Vec3d{3 + unit(rng), unit(rng), 0.3 * unit(rng)}, c = a + Vec3d{unit(rng), 3 + unit(rng), 0.3 * unit(rng)};
+    const auto unit_vector = [](const Vec3d& v) { return v * (1.0 / norm(v)); };
+    const Vec3d normal = unit_vector(cross(b - a, c - a));
+    Vec3d out = unit_vector(cross(b - a, normal));  // in the plane, normal to ab
+    if (dot(out, c - a) > 0) out = out * -1.0;    // away from c: outside the triangle
+    const Vec3d beside = a + (b - a) * along(rng) + out * 5e-8;
+    const VertexFaceQuery<double> q{beside + normal * 0.003, a, b, c, beside - normal * 0.007, a, b, c};  // (at t = 0.3: off the grid)
+    ++cases;
+    misses_double += detail::certified_classify<DoubleScreenPolicy>(q, CcdParams<double>{}).certainty == Certainty::miss;
+    hits_sound += detail::certified_classify<CertifiedPolicy>(q, CcdParams<double>{}).certainty == Certainty::hit;
+    hits_mutated += detail::certified_classify<ShrunkPolicy<100, 100, 0>>(q, CcdParams<double>{}).certainty == Certainty::hit;
+    hits_double_mutated +=
+        detail::certified_classify<ShrunkDoublePolicy<100, 100, 0>>(q, CcdParams<double>{}).certainty == Certainty::hit;
+  }
+  std::printf("  slow vertices beside an edge by 5e-8: %zu; certain misses in double %zu; hits %zu "
+              "(sound), %zu (inside bound removed), %zu (inside bound removed, double alone)\n", cases, misses_double, hits_sound,
+              hits_mutated, hits_double_mutated);
+  CHECK(misses_double * 10 > cases * 9);
+  CHECK(hits_sound == 0);
+  CHECK(hits_mutated > 0);
+  CHECK(hits_double_mutated == 0);
 }
 
 TEST_CASE("inclusion search: time_from drops the time a caller proved free of contact", "[narrow][certified]") {

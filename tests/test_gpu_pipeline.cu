@@ -171,6 +171,9 @@ TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth
     const auto g = gpu_pipeline.step(scene.step.x0, scene.step.x1);
     const auto c = cpu_pipeline.step(scene.step.x0, scene.step.x1);
     require_same_contacts(g, c);
+    // Every pair answered where the CPU answers it (single precision, a double tail, double, the fallback).
+    lwsccd_test::require_same_counts(g.stats.narrow_vf, c.stats.narrow_vf);
+    lwsccd_test::require_same_counts(g.stats.narrow_ee, c.stats.narrow_ee);
     // No ground-truth contact is missed by the whole pipeline.
     const std::size_t missed = score_against_truth(scene.truth, g.contacts).false_negatives;
     std::printf("%s: GPU pipeline %.2f ms (refit %.3f, traverse %.3f, features %.3f, narrow %.3f), %zu + %zu contacts, "

@@ -68,6 +68,7 @@ nb::dict counts_dict(const lwsccd::NarrowPhaseCounts& c) {
   d["fallbacks"] = c.fallbacks;
   d["screened"] = c.screened;
   d["single_misses"] = c.single_misses;
+  d["single_descents"] = c.single_descents;
   return d;
 }
 

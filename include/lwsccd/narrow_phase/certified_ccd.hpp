@@ -63,6 +63,21 @@ struct CertifiedPolicy {
   /// Multiplier of the single-precision screen's input bound, which covers rounding the relative
   /// coordinates to float (1 = as derived; only the mutation tests change it).
   static constexpr double kSingleInputBound = 1.0;
+  /// FP32 first for contacts: a pair the single-precision screen and filter leave is searched in
+  /// single precision first (its as-given bounds made its perturbed ones, so that its claims hold
+  /// for the input), and a contact's certain descent goes on in double only from the interval
+  /// float can no longer halve (refine_single_first); false: the pairs the
+  /// single passes leave are searched in double from [0, 1].
+  static constexpr bool kSingleDescent = true;
+  /// The search in single precision leaves to double a pair that needs more halvings than this
+  /// before a certain descent (its levels to kInsideFrom and one interval's to the next inside
+  /// test take 22), or whose motion is coplanar: such searches are long, and float rarely
+  /// decides them.
+  static constexpr int kSingleSearchSplits = 24;
+  /// The double tail of such a contact proves the leaf that holds the root from f's signs at its
+  /// two ends, the leaf guessed in float, instead of halving down to it (about a third of the
+  /// tail's FP64 instructions); false, or where those signs are not certain: the halvings.
+  static constexpr bool kDescentJump = true;
   /// Mode earliest: the certified pass (and its fallback) first look only at the window
   /// [0, 2^-kEarliestFirst), then at windows kEarliestStep binary orders wider, up to the whole
   /// step, and stop at the first window that holds a contact. A step's earliest contact is
@@ -133,7 +148,8 @@ struct CertifiedCcdT {
   /// A batch's steps, in this order (classify runs them on one query): screen_verdict on every
   /// pair (single precision alone when Policy::kSingleFirst, saying in which precision a miss was
   /// decided); filter_single on what it passes (detail::CertifiedFilter::decides_single: true for
-  /// a certain miss proved in float by the refinement's first levels); screen_after_single, the
+  /// a certain miss proved in float by the refinement's first levels); refine_single_first on
+  /// what that leaves (the search in float: its misses and contacts); screen_after_single, the
   /// double screen, on what that leaves; then refine. The batches give the first two the pair's
   /// vertices rounded to float (gather_single_vertex_face: no double arithmetic before a pair is
   /// decided in float), the others the double query.
@@ -148,6 +164,15 @@ struct CertifiedCcdT {
   template <class Q, class T>
   LWSCCD_HD static bool screen_after_single(const Q& q, const CcdParams<T>& params) {
     return detail::certified_screen_after_single<Policy>(q, params);
+  }
+  /// What a batch runs first on a pair the single-precision screen and filter left, where
+  /// Policy::kSingleDescent: the search in single precision, whose certain misses and contacts
+  /// (the certain descent's last levels in double) decide the pair (`done` set); on what it
+  /// leaves, screen_after_single then refine (detail::certified_refine_after_single: the order
+  /// classify runs them in).
+  template <bool kSettle = true, class Q, class T>
+  LWSCCD_HD static CertifiedAnswer<T> refine_single_first(const Q& q, const CcdParams<T>& params, bool& done) {
+    return detail::certified_refine_single_first<Policy, kSettle>(q, params, done);
   }
   /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
   template <bool kSettle = true, class Q, class T>

@@ -36,6 +36,9 @@ struct NarrowPhaseCounts {
   /// CertifiedCcd: pairs decided in single precision (certain misses of its FP32 screen or filter;
   /// part of certified_misses). The rest of the certain answers took double; `fallbacks` the search.
   std::size_t single_misses = 0;
+  /// CertifiedCcd: certain hits whose search ran in single precision, with only the certain
+  /// descent's last levels in double (part of certified_hits; CertifiedPolicy::kSingleDescent).
+  std::size_t single_descents = 0;
 };
 
 /// Adds b's numbers to a's.
@@ -46,6 +49,7 @@ inline void add_counts(NarrowPhaseCounts& a, const NarrowPhaseCounts& b) {
   a.fallbacks += b.fallbacks;
   a.screened += b.screened;
   a.single_misses += b.single_misses;
+  a.single_descents += b.single_descents;
 }
 
 template <class T>
@@ -163,12 +167,19 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
             }
             ++out.counts.screened;
           }
+          // The search in single precision first (its misses, and contacts with a double tail),
+          // then the double screen and search on what it leaves.
           const auto q = gather(i);
-          if (Method::screen_after_single(q, params)) {
-            ++out.counts.certified_misses;
-            continue;
+          bool done = false;
+          CertifiedAnswer<T> a = Method::refine_single_first(q, params, done);
+          if (done) {
+            out.counts.single_misses += a.certainty == Certainty::miss;
+            out.counts.single_descents += a.certainty == Certainty::hit;
+          } else if (Method::screen_after_single(q, params)) {
+            a = {Certainty::miss, T(0), T(1)};
+          } else {
+            a = Method::refine(q, params);
           }
-          const CertifiedAnswer<T> a = Method::refine(q, params);
           if (a.certainty == Certainty::hit) out.hits.push_back({pair_of(i).first, pair_of(i).second, a.lo}), ++out.counts.certified_hits;
           else if (a.certainty == Certainty::miss) ++out.counts.certified_misses;
           else out.open.push_back({i, a.lo});
@@ -198,6 +209,7 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
     counts.fallbacks += part.counts.fallbacks;
     counts.screened += part.counts.screened;
     counts.single_misses += part.counts.single_misses;
+    counts.single_descents += part.counts.single_descents;
     gave_up += part.gave_up;
   }
 }

@@ -311,13 +311,13 @@ struct CertifiedFilter {
 };
 
 /// The whole certified classification of one query, in the order batches run it: the first
-/// screen, the single-precision filter, the double screen on what they leave, then the refinement.
+/// screen, the single-precision filter, then the refinement of what they leave (the search in
+/// single precision, and the double screen and search on what that leaves).
 template <class Policy, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_classify(const Q& q, const CcdParams<T>& params) {
   if (certified_first_screen<Policy>(q, params) != ScreenVerdict::passed) return {Certainty::miss, T(0), T(1)};
   if (CertifiedFilter<Policy>::decides_single(q, params)) return {Certainty::miss, T(0), T(1)};
-  if (certified_screen_after_single<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
-  return certified_refine<Policy>(q, params);
+  return certified_refine_after_single<Policy>(q, params, true);
 }
 
 }  // namespace lwsccd::detail

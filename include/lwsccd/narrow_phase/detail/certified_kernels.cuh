@@ -64,6 +64,22 @@ __device__ void settle_refined(const CertifiedAnswer<T>& a, index_t first, index
   }
 }
 
+// FP32 first's search in single precision on a pair the single passes left
+// (Method::refine_single_first): where it decides the pair, its answer is settled and counted
+// (a miss in single precision, or a contact with a double tail) and true returned; `store` false
+// only computes (a warp's other lanes).
+template <class Method, class Q, class T>
+__device__ bool settled_in_single(const Q& q, const CcdParams<T>& params, std::pair<index_t, index_t> p, unsigned long long* counters,
+                                  FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, bool store = true) {
+  bool done = false;
+  const CertifiedAnswer<T> a = Method::template refine_single_first<false>(q, params, done);
+  if (!done || !store) return done;
+  if (a.certainty == Certainty::miss) atomicAdd(counters + kSingleSearchMisses, 1ull);
+  if (a.certainty == Certainty::hit) atomicAdd(counters + kSingleDescents, 1ull);
+  settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  return true;
+}
+
 // CertifiedCcd's refinement of the screened pairs, first part: searches that would halve
 // intervals at kDeferLevel or deeper stop (with a stack only that deep) and are listed in
 // `deferred` (they are the contacts, resolved at the time tolerance, and would hold up whole warps
@@ -85,6 +101,7 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
       }
     }
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
+    if (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided)) continue;  // (as everywhere)
     if (Method::screen_after_single(q, params)) continue;
     bool later = false;
     const CertifiedAnswer<T> a = Method::template refine_until<kDeferLevel, false>(q, params, &later);
@@ -271,13 +288,16 @@ template <class Method, bool kVertexFace, class T, class P>
 __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
                               int kept_counter, std::size_t room, CcdParams<T> params, const unsigned long long* control,
                               unsigned long long* counters, unsigned long long* intervals, std::size_t interval_room,
-                              FeatureHit<T>* undecided, unsigned* deferred) {
+                              FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const std::size_t n = counters[kept_counter] < room ? static_cast<std::size_t>(counters[kept_counter]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
-    if (Method::screen_after_single(q, params)) continue;  // (FP32 first: the double screen runs here)
+    // FP32 first: the search in single precision (its misses, and contacts with a double tail),
+    // as the CPU batch runs it on every pair the single passes leave; then the double screen.
+    if (settled_in_single<Method>(q, params, kept[i], counters, hits, hit_room, undecided)) continue;
+    if (Method::screen_after_single(q, params)) continue;
     std::uint32_t found = 0;
     lwsccd::detail::Noted<T> noted;
     const int count = Filter::intervals(q, params, found, noted);
@@ -370,7 +390,11 @@ __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, con
     const unsigned at = deferred[w];
     const std::pair<index_t, index_t> p = kept[at];
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    if (sent_whole(at, room, counters) && Method::screen_after_single(q, params)) continue;
+    // The pairs sent whole take the search in single precision and the double screen here; the
+    // double filter's pairs took them in filter_kernel (or refine_kernel).
+    if (sent_whole(at, room, counters) &&
+        (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided) || Method::screen_after_single(q, params)))
+      continue;
     settle_refined(Method::template refine<false>(q, params), p.first, p.second, counters, hits, hit_room, undecided);
   }
 }
@@ -432,10 +456,15 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
     const unsigned at = deferred[w];
     const std::pair<index_t, index_t> p = kept[at];
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    if (sent_whole(at, room, counters) && Method::screen_after_single(q, params)) continue;  // (the same on every lane)
     WarpInsideSubtree inside;
     inside.lane = lane;
     inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
+    // (Every lane runs the same single-precision search and double screen on the same values, so
+    // all go on alike; lane 0 stores.)
+    if (sent_whole(at, room, counters) &&
+        (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided, lane == 0) ||
+         Method::screen_after_single(q, params)))
+      continue;
     const CertifiedAnswer<T> a = Method::template refine_with<false>(q, params, inside);
     if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
     __syncwarp();

@@ -37,15 +37,19 @@ LWSCCD_HD LWSCCD_HOST_INLINE Vec3<T> lerp_point(const Vec3<T>& x0, const Vec3<T>
 // most u (|dx| + |dy|) (1 + u) + u |dy - dx|, taken as 4 u (|dx| + |dy|) over |fl(...)| (1 + 2u);
 // features moving together (a sheet falling along its normal) thus keep tight bounds. Over at
 // most `half`, with the products' rounding in the (1 + 8 u).
+// `given`: a perturbation the as-given error covers too (0: rounding alone). A query that is only
+// an approximation of the input (single precision's, bound B9) passes its whole perturbation, so
+// that what it claims "as given" holds for the input.
 template <class T>
 LWSCCD_HD LWSCCD_HOST_INLINE MovingDifference<T> moving_difference(const Vec3<T>& x0, const Vec3<T>& x1, const Vec3<T>& y0, const Vec3<T>& y1,
-                                                T mid, T half, const Vec3<T>& m, T perturbation) {
+                                                T mid, T half, const Vec3<T>& m, T perturbation, T given = T(0)) {
   const Vec3<T> x = lerp_point(x0, x1, mid), y = lerp_point(y0, y1, mid);
   const Vec3<T> dx = vsub(x1, x0), dy = vsub(y1, y0);
   const T u = unit_roundoff<T>();
   const Vec3<T> motion = vadd(vscale(abs(vsub(dy, dx)), T(1) + T(2) * u), vscale(vadd(abs(dx), abs(dy)), T(4) * u));
   const Vec3<T> error = vadd(vscale(m, T(32) * u), vscale(motion, fmul(half, T(1) + T(8) * u)));
-  return {vsub(y, x), error, vadd(error, vscale(m, T(2) * perturbation))};
+  const Vec3<T> as_given = given > T(0) ? vadd(error, vscale(m, T(2) * given)) : error;
+  return {vsub(y, x), as_given, vadd(error, vscale(m, T(2) * perturbation))};
 }
 
 /// outside: no contact in the interval, even perturbed; outside_as_given: none for the query as
@@ -128,16 +132,16 @@ struct InsideVote {
 /// (P x B) . n, (A x P) . n and ((b - p) x (c - p)) . n, with n = A x B.
 template <class Policy, class T>
 LWSCCD_HD InsideVerdict inside_over(const VertexFaceQuery<T>& q, T mid, T half, const Vec3<T>& m, T perturbation,
-                                    T slack) {
-  const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.p0, q.p1, mid, half, m, perturbation);
-  const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation);
-  const MovingDifference<T> B = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation);
+                                    T slack, T given = T(0)) {
+  const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.p0, q.p1, mid, half, m, perturbation, given);
+  const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation, given);
+  const MovingDifference<T> B = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation, given);
   const CrossTerm<T> n(A, B);
   InsideVote<T> vote;
   if (vote.add(SignTest<Policy, T>(CrossTerm<T>(P, B), n, slack))) return InsideVerdict::outside;
   if (vote.add(SignTest<Policy, T>(CrossTerm<T>(A, P), n, slack))) return InsideVerdict::outside;
-  const MovingDifference<T> PB = moving_difference(q.p0, q.p1, q.b0, q.b1, mid, half, m, perturbation);
-  const MovingDifference<T> PC = moving_difference(q.p0, q.p1, q.c0, q.c1, mid, half, m, perturbation);
+  const MovingDifference<T> PB = moving_difference(q.p0, q.p1, q.b0, q.b1, mid, half, m, perturbation, given);
+  const MovingDifference<T> PC = moving_difference(q.p0, q.p1, q.c0, q.c1, mid, half, m, perturbation, given);
   if (vote.add(SignTest<Policy, T>(CrossTerm<T>(PB, PC), n, slack))) return InsideVerdict::outside;
   return vote.verdict();
 }
@@ -152,12 +156,12 @@ LWSCCD_HD InsideVerdict inside_over(const VertexFaceQuery<T>& q, T mid, T half, 
 /// they reuse the other tests' terms: (P x A) . (A x (d - a)) and (P x B) . ((b - c) x B) < 0.
 template <class Policy, class T>
 LWSCCD_HD InsideVerdict inside_over(const EdgeEdgeQuery<T>& q, T mid, T half, const Vec3<T>& m, T perturbation,
-                                    T slack) {
-  const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation);
-  const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation);
-  const MovingDifference<T> B = moving_difference(q.c0, q.c1, q.d0, q.d1, mid, half, m, perturbation);
-  const MovingDifference<T> CB = moving_difference(q.c0, q.c1, q.b0, q.b1, mid, half, m, perturbation);
-  const MovingDifference<T> AD = moving_difference(q.a0, q.a1, q.d0, q.d1, mid, half, m, perturbation);
+                                    T slack, T given = T(0)) {
+  const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation, given);
+  const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation, given);
+  const MovingDifference<T> B = moving_difference(q.c0, q.c1, q.d0, q.d1, mid, half, m, perturbation, given);
+  const MovingDifference<T> CB = moving_difference(q.c0, q.c1, q.b0, q.b1, mid, half, m, perturbation, given);
+  const MovingDifference<T> AD = moving_difference(q.a0, q.a1, q.d0, q.d1, mid, half, m, perturbation, given);
   const CrossTerm<T> n(A, B), pb(P, B), cbb(CB, B), pa(P, A), aad(A, AD);
   InsideVote<T> vote;
   if (vote.add(SignTest<Policy, T>(pb, n, slack))) return InsideVerdict::outside;

@@ -11,6 +11,7 @@
 #include "lwsccd/core/detail/fp.hpp"
 #include "lwsccd/core/detail/rounding.hpp"
 #include "lwsccd/narrow_phase/detail/certified_screen.hpp"
+#include "lwsccd/narrow_phase/detail/certified_single.hpp"
 
 namespace lwsccd::detail {
 
@@ -130,38 +131,84 @@ inline constexpr int kRefineStackMax = 34;
 /// certified_refine's `defer_level` for a search that never defers.
 inline constexpr int kNeverDefer = 1 << 30;
 
-/// The certified classification of a query that certified_screen did not reject (see the file
-/// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
-/// query the screen would reject (it then finds the miss itself, at more cost).
-/// `defer_level`: when an interval that deep would have to be halved, the search stops, answers
-/// undecided and sets *deferred; a second call without the limit then gives the whole answer (the
-/// same as one call without it). A GPU batch uses this to keep the long searches (contacts,
-/// resolved at the tolerance) out of the warps that decide misses in a few levels.
-/// `kStack`: pending intervals held at most (one per level; defer_level + 2 suffice): a GPU
-/// thread keeps them in local memory, so a short search holds a short stack.
-/// `kSettle` false: an undecided answer is returned as it is, for a batch that settles its
-/// undecided queries apart (certified_undecided): the GPU keeps that test's code out of its
-/// refinement kernels, whose registers it would cost on every pair.
-/// `inside_at`: where the inside tests are asked for (InsideOneByOne's contract); any evaluator
-/// that returns each test's own verdict gives the same answer.
-template <class Policy, int kStack = kRefineStackMax, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
-LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = kNeverDefer,
-                                              bool* deferred = nullptr, InsideAt&& inside_at = InsideOneByOne{}) {
-  using W = typename certified_compute<T>::type;
-  const auto q = q_in.template cast<W>();
-  const W perturbation = unit_roundoff<T>();
-  CertifiedAnswer<T> undecided;
-  if (params.min_separation > T(0)) return undecided;  // the cubic only speaks of contact
-  const Vec3<W> m = coordinate_magnitude(q);
-  // The cubic and its coefficient bound (ccd_filters.hpp), plus underflow's share.
-  const W mag = fmul(W(4), max_component(m));  // bounds every difference and its motion
-  BernsteinPiece<W> root;
-  if (!cubic_on_step<Policy>(q, mag, perturbation, root)) return undecided;
-  if (same_sign_beyond(root.c, root.bound)) return {Certainty::miss, T(0), T(1)};
-  const W inside_slack = underflow_slack(mag, 4);
-  if (!finite_value(inside_slack)) return undecided;
+/// How a certain descent ended (certain_descent).
+enum class DescentEnd : std::uint8_t {
+  within_tolerance,  ///< the interval is within the tolerance (or at the finest level): the hit
+  past_limit,        ///< the query's root lies past the caller's time limit
+  too_many_splits,   ///< Policy::kMaxSplits reached
+  on_grid            ///< the middle value is within its as-given error: the interval left as it was
+};
+
+/// Certain descent (docs/NARROW_PHASE.md 3.3, step 6) from `piece`, interval `index` of `level`,
+/// over which every perturbed cubic has exactly one root, f has the certain sign `first` at the
+/// start, and a root is a contact of the query as given. Each halving keeps the half that holds
+/// the query's root, by the sign of f at the middle (the left half's last coefficient): of
+/// `first` beyond the perturbed bound, no perturbed root lies in the left half; beyond only the
+/// as-given bound, the query's root is right of it but a perturbed one may not be (the lower
+/// bound stops there); of the other sign, the query's root is in the left half, and what lies
+/// right is later. Ends with piece, index and level at the last interval: within the tolerance
+/// (its start noted as the lower bound where none was), past the time limit (right of it), or,
+/// for the last two ends, the interval that could not be halved.
+template <class Policy, class W, class T>
+LWSCCD_HD DescentEnd certain_descent(BernsteinPiece<W>& piece, std::uint32_t& index, int& level, int first,
+                                     const CcdParams<T>& params, int max_level, int& splits, T& lower, bool& has_lower) {
+  for (;;) {
+    const T step = exact_pow2_neg<T>(level);
+    const T from = static_cast<T>(index) * step, to = static_cast<T>(index + 1u) * step;
+    // Within the tolerance; an interval past the caller's time limit is narrowed to the leaves,
+    // where the limit cuts as it does in the search (a root past it is no answer).
+    if ((to - from <= params.tolerance && to <= params.time_limit) || level >= max_level) {
+      if (!has_lower) lower = from, has_lower = true;
+      return DescentEnd::within_tolerance;
+    }
+    if (++splits > Policy::kMaxSplits) return DescentEnd::too_many_splits;
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(piece, left, right);
+    const W middle = left.c[3];
+    const int sign = sign_beyond(middle, left.exact);
+    if (sign == 0) return DescentEnd::on_grid;
+    ++level;
+    if (sign == first) {
+      if (sign_beyond(middle, left.bound) == 0 && !has_lower) lower = from, has_lower = true;
+      piece = right;
+      index = 2u * index + 1u;
+      // The query's root is past the caller's time limit; so is everything still stacked.
+      if (static_cast<T>(index) * exact_pow2_neg<T>(level) >= params.time_limit) return DescentEnd::past_limit;
+    } else {
+      piece = left;
+      index = 2u * index;
+    }
+  }
+}
+
+/// Where single precision's search handed a contact to double (FP32 first for contacts,
+/// Policy::kSingleDescent): the interval `index` of `level` over which every query within the
+/// single-precision perturbation (bound B9, so the input as given and every query the double path
+/// covers) has exactly one root of its cubic, f has the certain sign `first` at the interval's
+/// start, a root is a contact of the input as given (inside, with that perturbation counted as
+/// given), and every earlier time is excluded for all of them. docs/NARROW_PHASE.md 3.5.
+struct SingleHandoff {
+  bool valid = false;
+  int level = 0, first = 0;
+  std::uint32_t index = 0;
+};
+
+/// The certified search over [0, 1] from the cubic's piece `root` of the query q (in W, m its
+/// per-axis coordinate bound, `perturbation` the relative perturbation its bounds cover), as
+/// certified_refine documents it. kSingle: q is single precision's query (relative_single), whose
+/// "as given" means nothing of the input; its as-given bounds are then made its perturbed ones
+/// (root.exact = root.bound; inside tests count the perturbation as given), so every claim holds
+/// for the input, and the search stops where double must take over: a certain descent that float
+/// can no longer halve, or one within the tolerance, sets *handoff (the answer is then undecided,
+/// for certified_descend_from); any other end that is not a miss is undecided without it.
+template <class Policy, int kStack, bool kSettle, bool kSingle, class QW, class W, class T, class InsideAt>
+LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W perturbation, const BernsteinPiece<W>& root,
+                                              W inside_slack, const CcdParams<T>& params, int defer_level, bool* deferred,
+                                              InsideAt&& inside_at, SingleHandoff* handoff) {
+  const CertifiedAnswer<T> undecided{Certainty::undecided, T(0), T(1)};
   const int max_level = certified_max_level(params.tolerance);
   const bool set_mode = params.mode == CcdMode::set;
+  const W given = kSingle ? perturbation : W(0);
 
   // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
   // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
@@ -184,9 +231,10 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     if (!has_lower) lower = t, has_lower = true;  // intervals come in time order
   };
   // Undecided from `from` (every earlier time excluded), unless contact within the tolerance
-  // right after it settles the query.
+  // right after it settles the query. (Single precision: undecided, the double search's to answer.)
   auto settle = [&](T from) {
-    if constexpr (kSettle) return certified_undecided<Policy>(q, params, from);
+    if constexpr (kSingle) return undecided;
+    else if constexpr (kSettle) return certified_undecided<Policy>(q, params, from);
     else return CertifiedAnswer<T>{Certainty::undecided, from, T(1)};
   };
   stack[top++] = {root, 0u, 0};
@@ -211,6 +259,11 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
     const bool coarse = Policy::kInsideEvery > 0 && e.level >= Policy::kInsideFrom &&
                         (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
     const bool coplanar = all_within(c, exact);
+    // Single precision leaves coplanar motion (no sign of f to follow, and long searches) and
+    // searches that need many halvings before a descent to double.
+    if constexpr (kSingle) {
+      if (coplanar || splits >= Policy::kSingleSearchSplits) return undecided;
+    }
     // Both halves of one sign (a root of the control polygon, not of the cubic): no root here even
     // perturbed, so the costly inside test is skipped (before it, the interval was only split).
     if (Policy::kLookAhead && coarse && !leaf && !coplanar && halves_keep_sign<Policy>(e.piece)) continue;
@@ -221,7 +274,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
       inside = inside_at(e.level, e.index, [&](int level, std::uint32_t index) {
         const W half_width = exact_pow2_neg<W>(level + 1);
         const T from = static_cast<T>(index) * exact_pow2_neg<T>(level);
-        return inside_over<Policy>(q, fadd(W(from), half_width), half_width, m, perturbation, inside_slack);
+        return inside_over<Policy>(q, fadd(W(from), half_width), half_width, m, perturbation, inside_slack, given);
       });
       if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
         if (inside == InsideVerdict::outside_as_given) note_lower(lo);
@@ -229,14 +282,10 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
         continue;
       }
     }
-    // Certain descent: over this interval every perturbed cubic has one root and a root is a
-    // contact of the query as given. Halving keeps the half that holds the query's root, by the
-    // sign of f at the middle (the left half's last coefficient): of c[0]'s sign beyond the
-    // perturbed bound, no perturbed root lies in the left half; beyond only the as-given bound, the
-    // query's root is right of it but a perturbed one may not be (the lower bound stops there); of
-    // c[3]'s sign, the query's root is in the left half, and what lies right is later. A middle
-    // value within its as-given error (a root on the grid) ends the descent: everything it noted
-    // is undone and this interval is searched as usual.
+    // Certain descent (certain_descent): over this interval every perturbed cubic has one root
+    // and a root is a contact of the query as given. A middle value within its as-given error (a
+    // root on the grid) ends it: everything it noted is undone and this interval is searched as
+    // usual. Single precision hands the interval it reached to double instead.
     if (descent && inside == InsideVerdict::inside && !leaf && !has_open && single_crossing(c, bound)) {
       const int first = c[0] > W(0) ? 1 : -1;
       const T saved_lower = lower;
@@ -245,40 +294,29 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
       BernsteinPiece<W> piece = e.piece;
       std::uint32_t index = e.index;
       int level = e.level;
-      for (;;) {
+      const DescentEnd end = certain_descent<Policy>(piece, index, level, first, params, max_level, splits, lower, has_lower);
+      if constexpr (kSingle) {
+        // Nothing is noted in single precision (its two bounds are one) but at leaves, which come
+        // after any descent: the interval starts right after everything excluded.
+        if (end == DescentEnd::past_limit) return CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
+        if ((end == DescentEnd::within_tolerance || end == DescentEnd::on_grid) && !saved_has_lower && handoff)
+          *handoff = SingleHandoff{true, level, first, index};
+        return undecided;
+      } else {
         const T step = exact_pow2_neg<T>(level);
         const T from = static_cast<T>(index) * step, to = static_cast<T>(index + 1u) * step;
-        // Within the tolerance; an interval past the caller's time limit is narrowed to the leaves,
-        // where the limit cuts as it does in the search (a root past it is no answer).
-        if ((to - from <= params.tolerance && to <= params.time_limit) || level >= max_level) {
-          note_lower(from);
-          return {Certainty::hit, lower, to};
-        }
-        if (++splits > Policy::kMaxSplits) return settle(has_lower ? lower : from);
-        BernsteinPiece<W> left, right;
-        bernstein_halves<Policy>(piece, left, right);
-        const W middle = left.c[3];
-        const int sign = sign_beyond(middle, left.exact);
-        if (sign == 0) break;  // the only way out of the loop but a return
-        ++level;
-        if (sign == first) {
-          if (sign_beyond(middle, left.bound) == 0) note_lower(from);
-          piece = right;
-          index = 2u * index + 1u;
-          // The query's root is past the caller's time limit; so is everything still stacked.
-          if (static_cast<T>(index) * exact_pow2_neg<T>(level) >= params.time_limit)
-            return has_lower ? settle(lower) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
-        } else {
-          piece = left;
-          index = 2u * index;
-        }
+        if (end == DescentEnd::within_tolerance) return {Certainty::hit, lower, to};
+        if (end == DescentEnd::too_many_splits) return settle(has_lower ? lower : from);
+        if (end == DescentEnd::past_limit)
+          return has_lower ? settle(lower) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
+        lower = saved_lower, has_lower = saved_has_lower, splits = saved_splits;
+        descent = false;
+        stack[top++] = e;
+        continue;
       }
-      lower = saved_lower, has_lower = saved_has_lower, splits = saved_splits;
-      descent = false;
-      stack[top++] = e;
-      continue;
     }
     if (try_hit) {
+      if constexpr (kSingle) return undecided;  // leaves: the double search's
       // A root is certain across this leaf, or from the start of the unresolved leaves before it
       // (a root on the grid point between two leaves makes neither a crossing alone); those
       // leaves join the interval, which must stay within the tolerance.
@@ -318,6 +356,219 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
   // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
   if (has_lower) return settle(lower);
   return {Certainty::miss, T(0), T(1)};
+}
+
+/// The certified classification of a query that certified_screen did not reject (see the file
+/// comment); computed in W with the inputs' perturbation of T's unit roundoff. Also correct on a
+/// query the screen would reject (it then finds the miss itself, at more cost).
+/// `defer_level`: when an interval that deep would have to be halved, the search stops, answers
+/// undecided and sets *deferred; a second call without the limit then gives the whole answer (the
+/// same as one call without it). A GPU batch uses this to keep the long searches (contacts,
+/// resolved at the tolerance) out of the warps that decide misses in a few levels.
+/// `kStack`: pending intervals held at most (one per level; defer_level + 2 suffice): a GPU
+/// thread keeps them in local memory, so a short search holds a short stack.
+/// `kSettle` false: an undecided answer is returned as it is, for a batch that settles its
+/// undecided queries apart (certified_undecided): the GPU keeps that test's code out of its
+/// refinement kernels, whose registers it would cost on every pair.
+/// `inside_at`: where the inside tests are asked for (InsideOneByOne's contract); any evaluator
+/// that returns each test's own verdict gives the same answer.
+template <class Policy, int kStack = kRefineStackMax, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
+LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>& params, int defer_level = kNeverDefer,
+                                              bool* deferred = nullptr, InsideAt&& inside_at = InsideOneByOne{}) {
+  using W = typename certified_compute<T>::type;
+  const auto q = q_in.template cast<W>();
+  const W perturbation = unit_roundoff<T>();
+  if (params.min_separation > T(0)) return {};  // the cubic only speaks of contact
+  const Vec3<W> m = coordinate_magnitude(q);
+  // The cubic and its coefficient bound (ccd_filters.hpp), plus underflow's share.
+  const W mag = fmul(W(4), max_component(m));  // bounds every difference and its motion
+  BernsteinPiece<W> root;
+  if (!cubic_on_step<Policy>(q, mag, perturbation, root)) return {};
+  if (same_sign_beyond(root.c, root.bound)) return {Certainty::miss, T(0), T(1)};
+  const W inside_slack = underflow_slack(mag, 4);
+  if (!finite_value(inside_slack)) return {};
+  return certified_search<Policy, kStack, kSettle, false>(q, m, perturbation, root, inside_slack, params, defer_level, deferred,
+                                                          inside_at, static_cast<SingleHandoff*>(nullptr));
+}
+
+/// FP32 first for contacts (Policy::kSingleDescent): the search in single precision on the
+/// pair's float query (relative_single_in_double, bound B12), with its as-given bounds made its perturbed
+/// ones. A certain miss there is the input's (as the single-precision filter's); a certain
+/// descent it can no longer halve (or one within the tolerance) is handed to double through
+/// *handoff; anything else is undecided (the double search decides). Reads CcdParams<float>
+/// (single_params): no double arithmetic.
+template <class Policy, class Q>
+LWSCCD_HD CertifiedAnswer<float> certified_search_single(const Q& q_in, const CcdParams<float>& params, SingleHandoff& handoff) {
+  handoff = {};
+  if (params.min_separation > 0.0f || params.mode == CcdMode::set) return {};
+  const auto s = relative_single_in_double(q_in);
+  const float perturbation = single_input_perturbation<Policy>();
+  const float mag = fmul(4.0f, max_component(s.m));
+  BernsteinPiece<float> root;
+  if (!cubic_on_step<Policy>(s.q, mag, perturbation, root, &s.m)) return {};
+  root.exact = root.bound;  // (nothing is claimed of the float query as given)
+  if (same_sign_beyond(root.c, root.bound)) return {Certainty::miss, 0.0f, 1.0f};
+  const float inside_slack = underflow_slack(mag, 4);
+  if (!finite_value(inside_slack)) return {};
+  return certified_search<Policy, kRefineStackMax, false, true>(s.q, s.m, perturbation, root, inside_slack, params, kNeverDefer,
+                                                                nullptr, InsideOneByOne{}, &handoff);
+}
+
+/// A value of the cubic and two bounds on its error, as a BernsteinPiece's: `bound` covers the
+/// inputs' perturbation, `exact` rounding alone.
+template <class W>
+struct PointValue {
+  W value, bound, exact;
+};
+/// The cubic of a piece at s in [0, 1] (exact in W) by de Casteljau, each of its six
+/// combinations a + s (b - a) rounding three times: at most 5 u M each (M = max |c|; |b - a| <= 2 M),
+/// and the inputs' errors carried as a convex combination: 16 u M + 16 denorm over the three
+/// levels (B11), on top of the piece's own bounds.
+template <class Policy, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE PointValue<W> bernstein_at(const BernsteinPiece<W>& p, W s) {
+  W c[4] = {p.c[0], p.c[1], p.c[2], p.c[3]};
+  W big = W(0);
+  for (int i = 0; i < 4; ++i) big = std::fabs(c[i]) > big ? std::fabs(c[i]) : big;
+  for (int level = 3; level > 0; --level)
+    for (int i = 0; i < level; ++i) c[i] = fadd(c[i], fmul(s, fsub(c[i + 1], c[i])));
+  const W added = fmul(W(Policy::kSplitBound),
+                       fadd(fmul(W(16) * unit_roundoff<W>(), big), W(16) * std::numeric_limits<W>::denorm_min()));
+  return {c[0], fadd(p.bound, added), fadd(p.exact, added)};
+}
+
+/// Where in [0, 1] the piece's cubic has its root (one sign change certain): regula falsi on the
+/// control polygon, then Newton steps, in float. Only where to look: the caller proves the leaf.
+template <class W>
+LWSCCD_HD float estimated_root(const BernsteinPiece<W>& p) {
+  const float c0 = static_cast<float>(p.c[0]), c1 = static_cast<float>(p.c[1]), c2 = static_cast<float>(p.c[2]),
+              c3 = static_cast<float>(p.c[3]);
+  float t = c0 / fsub(c0, c3);
+  for (int k = 0; k < 4; ++k) {
+    if (!(t >= 0.0f && t <= 1.0f)) return 0.5f;
+    const float s = fsub(1.0f, t);
+    // f and f' in the Bernstein basis.
+    const float b0 = fmul(s, fmul(s, s)), b1 = fmul(3.0f, fmul(t, fmul(s, s))), b2 = fmul(3.0f, fmul(fmul(t, t), s)), b3 = fmul(t, fmul(t, t));
+    const float f = fadd(fadd(fmul(c0, b0), fmul(c1, b1)), fadd(fmul(c2, b2), fmul(c3, b3)));
+    const float d = fmul(3.0f, fadd(fadd(fmul(fsub(c1, c0), fmul(s, s)), fmul(fmul(2.0f, fsub(c2, c1)), fmul(t, s))),
+                                    fmul(fsub(c3, c2), fmul(t, t))));
+    if (!(d != 0.0f)) break;
+    t = fsub(t, f / d);
+  }
+  return t >= 0.0f && t <= 1.0f ? t : 0.5f;
+}
+
+/// The double tail of a contact that single precision handed over. What the hand-off states
+/// (SingleHandoff) holds for every query the double path covers, so no stack, no inside test and
+/// no look at earlier time is needed: the double cubic on [0, 1] (B1) and
+/// - with Policy::kDescentJump, the leaf (the first level within the tolerance) that holds the
+///   root, guessed in float (estimated_root) and proved in double by f's signs at its two ends
+///   (bernstein_at, B11): of the hand-off's first sign at its start beyond the perturbed bound (no
+///   perturbed root before it: each has one root in the interval, after a start of that sign), of
+///   the other sign at its end beyond the as-given bound (the query's root is in the leaf); a
+///   guess one leaf off moves over, up to three tries;
+/// - otherwise, or where those signs are not certain or the leaf passes the time limit, the
+///   cubic's piece on the hand-off interval (the search's halvings along its index) and the
+///   certain descent in double (certain_descent).
+/// *whole is set where double must search whole instead (a value not finite, or a middle value
+/// within double's own error: a root on the grid). kSettle as certified_refine's.
+template <class Policy, bool kSettle = true, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdParams<T>& params, const SingleHandoff& handoff,
+                                                    bool& whole) {
+  using W = typename certified_compute<T>::type;
+  whole = true;
+  const auto q = q_in.template cast<W>();
+  const Vec3<W> m = coordinate_magnitude(q);
+  BernsteinPiece<W> piece;
+  if (!cubic_on_step<Policy>(q, fmul(W(4), max_component(m)), W(unit_roundoff<T>()), piece)) return {};
+  const int max_level = certified_max_level(params.tolerance);
+  if constexpr (Policy::kDescentJump) {
+    // The leaves: the first level at or below the hand-off's within the tolerance (or the finest),
+    // as certain_descent stops.
+    int leaf_level = handoff.level;
+    while (leaf_level < max_level && !(exact_pow2_neg<T>(leaf_level) <= params.tolerance)) ++leaf_level;
+    if (leaf_level <= 30) {
+      const T width = exact_pow2_neg<T>(leaf_level);
+      const std::uint32_t per = 1u << (leaf_level - handoff.level), first_leaf = handoff.index * per, last_leaf = first_leaf + per - 1u;
+      const float guess = fmul(estimated_root(piece), exact_pow2_neg<float>(-leaf_level));
+      std::uint32_t k = guess >= static_cast<float>(first_leaf) ? static_cast<std::uint32_t>(guess) : first_leaf;
+      k = k > last_leaf ? last_leaf : k;
+      for (int tries = 0; tries < 3; ++tries) {
+        const T from = static_cast<T>(k) * width, to = static_cast<T>(k + 1u) * width;
+        if (to > params.time_limit) break;  // the descent's rules at the limit
+        const PointValue<W> start = bernstein_at<Policy>(piece, W(from)), end = bernstein_at<Policy>(piece, W(to));
+        const int at_start = sign_beyond(start.value, start.exact), at_end = sign_beyond(end.value, end.exact);
+        if (at_start == -handoff.first && k > first_leaf) {  // the root is left of this leaf
+          --k;
+          continue;
+        }
+        if (at_end == handoff.first && k < last_leaf) {  // right of it
+          ++k;
+          continue;
+        }
+        if (at_start != handoff.first || at_end != -handoff.first || sign_beyond(start.value, start.bound) != handoff.first) break;
+        whole = false;
+        return {Certainty::hit, from, to};
+      }
+    }
+  }
+  for (int d = handoff.level - 1; d >= 0; --d) {
+    BernsteinPiece<W> left, right;
+    bernstein_halves<Policy>(piece, left, right);
+    piece = ((handoff.index >> d) & 1u) ? right : left;
+  }
+  std::uint32_t index = handoff.index;
+  int level = handoff.level, splits = 0;
+  T lower = T(0);
+  bool has_lower = false;
+  const DescentEnd end = certain_descent<Policy>(piece, index, level, handoff.first, params, max_level, splits, lower, has_lower);
+  if (end == DescentEnd::on_grid) return {};
+  whole = false;
+  const T step = exact_pow2_neg<T>(level);
+  if (end == DescentEnd::within_tolerance) return {Certainty::hit, lower, static_cast<T>(index + 1u) * step};
+  if (end == DescentEnd::past_limit && !has_lower) return {Certainty::miss, T(0), T(1)};
+  // (Past the limit with a lower bound noted, or too many splits: undecided from there.)
+  const T from = has_lower ? lower : static_cast<T>(index) * step;
+  if constexpr (kSettle) return certified_undecided<Policy>(q, params, from);
+  else return CertifiedAnswer<T>{Certainty::undecided, from, T(1)};
+}
+
+/// The search in single precision and its double tail, as a batch runs them first on every pair
+/// that the single-precision screen and filter leave (Policy::kSingleDescent): *done is set with
+/// its answer where it decides the pair (a certain miss in float, or a contact handed to double
+/// and settled by certified_descend_from); otherwise the double screen and certified_refine
+/// decide. A hand-off is a certain contact, which no screen rejects. kSettle as certified_refine's.
+template <class Policy, bool kSettle = true, class Q, class T>
+LWSCCD_HD CertifiedAnswer<T> certified_refine_single_first(const Q& q, const CcdParams<T>& params, bool& done) {
+  done = false;
+  if constexpr (Policy::kSingleFirst && Policy::kSingleDescent) {
+    SingleHandoff handoff;
+    const CertifiedAnswer<float> s = certified_search_single<Policy>(q, single_params(params), handoff);
+    if (s.certainty == Certainty::miss) {
+      done = true;
+      return {Certainty::miss, T(0), T(1)};
+    }
+    if (handoff.valid) {
+      bool whole = true;
+      const CertifiedAnswer<T> a = certified_descend_from<Policy, kSettle>(q, params, handoff, whole);
+      done = !whole;
+      return a;
+    }
+  }
+  return {};
+}
+
+/// The refinement of a pair the single-precision screen and filter left, whole:
+/// certified_refine_single_first, then, where it does not decide, the double screen
+/// (`double_screen`: unless the pair already passed it) and certified_refine. kSettle and
+/// inside_at as certified_refine's.
+template <class Policy, bool kSettle = true, class Q, class T, class InsideAt = InsideOneByOne>
+LWSCCD_HD CertifiedAnswer<T> certified_refine_after_single(const Q& q, const CcdParams<T>& params, bool double_screen,
+                                                           InsideAt&& inside_at = InsideOneByOne{}) {
+  bool done = false;
+  const CertifiedAnswer<T> a = certified_refine_single_first<Policy, kSettle>(q, params, done);
+  if (done) return a;
+  if (double_screen && certified_screen_after_single<Policy>(q, params)) return {Certainty::miss, T(0), T(1)};
+  return certified_refine<Policy, kRefineStackMax, kSettle>(q, params, kNeverDefer, nullptr, inside_at);
 }
 
 }  // namespace lwsccd::detail

@@ -48,6 +48,33 @@ LWSCCD_HD LWSCCD_HOST_INLINE auto relative_single(const Q& q_in) {
   return SingleQuery<QF>{r, vadd(relative, vscale(input, 3.0f))};
 }
 
+/// The pair relative to its first point with the differences taken in double, then rounded to
+/// float: the query of the search in single precision (B12), which only pairs that reach the
+/// refinement take, so its 24 double subtractions are few, and its bound does not grow with the
+/// pair's distance from the origin as relative_single's does. With d = x - o computed in double
+/// (error u_d |x - o|) and rounded to float (u_f), every exact relative coordinate is within
+/// (u_f + 2 u_d)(1 + 2 u_f) r <= u_f (1 + 2^-21) r of the float one (r: the largest |f| on the
+/// axis), and the certified path's perturbation of x and o, u_T |x| each, adds at most
+/// 2 u_T (1 + u_f) a (a: the largest |x_f|). So m = r (1 + 2^-20) + 4 (u_T / u_f) a covers both
+/// with single_input_perturbation() (u_f (1 + 2^-18)), with room for m's own rounding.
+template <class Q>
+LWSCCD_HD LWSCCD_HOST_INLINE auto relative_single_in_double(const Q& q_in) {
+  using TIn = typename std::decay_t<decltype(*q_in.points())>::scalar_type;
+  const auto d = q_in.template cast<double>();
+  const auto a = q_in.template cast<float>();
+  using QF = std::decay_t<decltype(a)>;
+  QF r = a;
+  const Vec3<double>* x = d.points();
+  Vec3<float>* out = const_cast<Vec3<float>*>(r.points());
+  for (int i = 0; i < 8; ++i)
+    out[i] = {static_cast<float>(fsub(x[i].x, x[0].x)), static_cast<float>(fsub(x[i].y, x[0].y)),
+              static_cast<float>(fsub(x[i].z, x[0].z))};
+  // 4 u_T / u_f: 2^-27 for double input, 4 for float input.
+  const float input_share = sizeof(TIn) == 8 ? exact_pow2_neg<float>(27) : 4.0f;
+  const Vec3<float> input = coordinate_magnitude(a), relative = coordinate_magnitude(r);
+  return SingleQuery<QF>{r, vadd(vscale(relative, 1.0f + exact_pow2_neg<float>(20)), vscale(input, input_share))};
+}
+
 /// The relative perturbation that covers relative_single's rounding: every exact relative
 /// coordinate lies within this times m_k of its float. u_f (1 + 2^-18) covers the 1 / (1 - u_f)
 /// and the rounding of m's own sum and product (each a factor 1 + u_f) with room.

@@ -81,6 +81,8 @@ enum NarrowCounter : int {
   kSingleExpanded,  // the single-precision filter's second round: intervals whose test was unknown
   kSingleDeepIntervals,  // its intervals listed for the inside test (more than the room: the pair to double)
   kSingleWhole,     // pairs it sends straight to the whole search (listed from the top of the double filter's list)
+  kSingleSearchMisses,  // the search in single precision: certain misses (pairs the single passes left)
+  kSingleDescents,  // its contacts settled by a double tail (certain hits)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.

@@ -257,7 +257,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       }
       detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, kept, kept_counter, l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
-          l.interval_room, l.undecided.data(), l.deferred.data());
+          l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
@@ -385,7 +385,10 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     // Single precision's misses: at once (screen, filter without intervals), and every pair whose
     // listed intervals were all outside in float.
     l.counts.single_misses =
-        kCertified ? static_cast<std::size_t>(c[detail::kSingleMisses] + c[detail::kSingleListed] - c[detail::kSingleFailed]) : 0;
+        kCertified ? static_cast<std::size_t>(c[detail::kSingleMisses] + c[detail::kSingleListed] - c[detail::kSingleFailed] +
+                                              c[detail::kSingleSearchMisses])
+                   : 0;
+    l.counts.single_descents = kCertified ? static_cast<std::size_t>(c[detail::kSingleDescents]) : 0;
     l.counts.certified_hits = static_cast<std::size_t>(c[detail::kCertifiedHits]);
     // As the CPU backend counts (NarrowPhaseCounts): a method without the certified path answers
     // every pair by its own test, its quick rejections included, so every pair is a fallback.
