@@ -1,5 +1,7 @@
 // lwsccd — the certified refinement: contact candidates and the tolerance test, the undecided
-// answer, and certified_refine (time halved until every piece is decided, or the fallback's).
+// answer, the search (time halved until every piece is decided, or the fallback's) in double
+// (certified_refine) and in single precision with a double tail for contacts
+// (certified_refine_single_first), and the order a batch runs them in.
 // Part of certified_ccd.hpp: include <lwsccd/narrow_phase/certified_ccd.hpp>, not this file.
 #pragma once
 
