@@ -4,6 +4,8 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <random>
 #include <string>
@@ -579,4 +581,50 @@ TEST_CASE("inclusion search: time_from drops the time a caller proved free of co
   CHECK(from.toi >= plain.toi);
   params.time_from = 0.5;  // a (false) claim past the only contact: nothing left to find
   CHECK_FALSE(InclusionCcd::vertex_face(through, params).hit);
+}
+
+namespace {
+// underflow_slack against its definition by multiplication, bit for bit, on magnitudes of every
+// size (random bit patterns, integers over small integers, powers of two near 1) and degrees 1-6;
+// returns how many differ.
+template <class T, class Bits>
+std::size_t slack_differences(std::mt19937_64& rng, std::size_t n) {
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    T mag;
+    const Bits bits = static_cast<Bits>(rng());
+    std::memcpy(&mag, &bits, sizeof mag);
+    mag = std::fabs(mag);
+    if (i % 4 == 1) mag = T(rng() % 100000) / T(1 + rng() % 1000);
+    if (i % 4 == 2) mag = std::ldexp(T(1 + rng() % 7), int(rng() % 40) - 20);
+    const int degree = 1 + int(i % 6);
+    const T fast = detail::underflow_slack(mag, degree);
+    const T defined = detail::underflow_slack_by_multiplication(detail::fadd(T(1), mag), degree);
+    Bits a, b;
+    std::memcpy(&a, &fast, sizeof a);
+    std::memcpy(&b, &defined, sizeof b);
+    differ += a != b && !(std::isnan(fast) && std::isnan(defined));
+  }
+  return differ;
+}
+}  // namespace
+
+TEST_CASE("underflow slack: the host's value without denormal multiplications equals the multiplied one",
+          "[narrow][certified]") {
+  // The host computes it in double (float) or in integers (double), where x86 would take a
+  // microcode assist per denormal product; the device multiplies. Both must give the same bits.
+  std::mt19937_64 rng(29);
+  CHECK(slack_differences<float, std::uint32_t>(rng, 200000) == 0);
+  CHECK(slack_differences<double, std::uint64_t>(rng, 200000) == 0);
+  // Around the edges: the normal range reached, a carry into the next binade, overflow.
+  for (const double mag : {0.0, 1.0, 2047.0, 131071.0, 1e10, 1e30, 3.4e38, 1e300, 1.7e308}) {
+    for (int degree = 1; degree <= 6; ++degree) {
+      const float f = detail::underflow_slack(static_cast<float>(mag), degree);
+      const float g = detail::underflow_slack_by_multiplication(detail::fadd(1.0f, static_cast<float>(mag)), degree);
+      CHECK(std::memcmp(&f, &g, sizeof f) == 0);
+      const double d = detail::underflow_slack(mag, degree);
+      const double e = detail::underflow_slack_by_multiplication(detail::fadd(1.0, mag), degree);
+      CHECK(std::memcmp(&d, &e, sizeof d) == 0);
+    }
+  }
 }
