@@ -13,6 +13,7 @@
 
 #include "certified_test_support.hpp"
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/narrow_phase.hpp"
 
 using namespace lwsccd;
 using namespace lwsccd::certified_test;
@@ -627,4 +628,70 @@ TEST_CASE("underflow slack: the host's value without denormal multiplications eq
       CHECK(std::memcmp(&d, &e, sizeof d) == 0);
     }
   }
+}
+
+namespace {
+// Screens `queries` in lanes and one pair at a time; returns how many verdicts differ, and counts
+// the misses (so that a test sees both verdicts exercised).
+template <class Q>
+std::size_t lane_differences(const std::vector<Q>& queries, std::size_t& misses) {
+  std::size_t differ = 0;
+  const CcdParams<float> whole_step;
+  for (std::size_t begin = 0; begin < queries.size(); begin += detail::kScreenLanes) {
+    const int n = static_cast<int>(std::min<std::size_t>(detail::kScreenLanes, queries.size() - begin));
+    bool lanes[detail::kScreenLanes];
+    detail::screen_single_in_lanes<CertifiedPolicy>(queries.data() + begin, n, lanes);
+    for (int lane = 0; lane < n; ++lane) {
+      const bool one = detail::certified_screen_single<CertifiedPolicy>(queries[begin + lane], whole_step);
+      differ += lanes[lane] != one;
+      misses += one;
+    }
+  }
+  return differ;
+}
+}  // namespace
+
+TEST_CASE("single-precision screen: pairs screened in lanes get the one-pair screen's verdicts", "[narrow][certified][single]") {
+  // Near contacts at every scale and distance from the origin, pairs far apart, coordinates whose
+  // products overflow (NaN and infinities inside the screen), denormal and zero motion.
+  std::mt19937_64 rng(31);
+  std::vector<VertexFaceQuery<float>> vf;
+  std::vector<EdgeEdgeQuery<float>> ee;
+  std::uniform_real_distribution<float> unit(-1, 1);
+  for (int i = 0; i < 20000; ++i) {
+    const auto [v, e] = near_contact_pairs(rng, 1 + i % 24);
+    vf.push_back(v.cast<float>());
+    ee.push_back(e.cast<float>());
+    VertexFaceQuery<float> far = vf.back();
+    EdgeEdgeQuery<float> apart = ee.back();
+    const float scale = std::ldexp(1.0f, int(rng() % 260) - 140);  // 2^-140 .. 2^119
+    for (Vec3<float>* p : {&far.p0, &far.a0, &far.b0, &far.c0, &far.p1, &far.a1, &far.b1, &far.c1})
+      *p = {unit(rng) * scale, unit(rng) * scale, unit(rng) * scale};
+    for (Vec3<float>* p : {&apart.a0, &apart.b0, &apart.c0, &apart.d0, &apart.a1, &apart.b1, &apart.c1, &apart.d1})
+      *p = {unit(rng) * scale, unit(rng) * scale, unit(rng) * scale};
+    if (i % 7 == 0) far.p1 = far.p0, apart.a1 = apart.a0;  // a point at rest
+    vf.push_back(far);
+    ee.push_back(apart);
+  }
+  std::size_t vf_misses = 0, ee_misses = 0;
+  CHECK(lane_differences(vf, vf_misses) == 0);
+  CHECK(lane_differences(ee, ee_misses) == 0);
+  std::printf("screen in lanes (%d): %zu vertex-face and %zu edge-edge pairs, %zu and %zu misses, the rest passed\n",
+              detail::kScreenLanes, vf.size(), ee.size(), vf_misses, ee_misses);
+  CHECK(vf_misses > vf.size() / 10);
+  CHECK(vf_misses < vf.size() * 9 / 10);
+  CHECK(ee_misses > ee.size() / 10);
+  CHECK(ee_misses < ee.size() * 9 / 10);
+  // The batch takes them in lanes only for contact over the whole step.
+  CcdParams<double> params;
+#if defined(LWSCCD_SCREEN_IN_LANES)
+  CHECK(detail::screen_in_lanes_applies(params));
+#else
+  CHECK_FALSE(detail::screen_in_lanes_applies(params));  // (a compiler without vector extensions)
+#endif
+  params.time_limit = 0.5;
+  CHECK_FALSE(detail::screen_in_lanes_applies(params));
+  params.time_limit = 1;
+  params.min_separation = 1e-3;
+  CHECK_FALSE(detail::screen_in_lanes_applies(params));
 }

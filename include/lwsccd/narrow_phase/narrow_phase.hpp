@@ -15,6 +15,7 @@
 #include "lwsccd/io/query_io.hpp"
 #include "lwsccd/narrow_phase/ccd_query.hpp"
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
+#include "lwsccd/narrow_phase/detail/certified_screen_lanes.hpp"
 
 namespace lwsccd {
 
@@ -141,6 +142,14 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
       Part& to;
       ~MoveOut() { to = std::move(from); }
     } move_out{out, parts[w]};
+    // FP32 first's screen, kScreenLanes pairs at once where it applies (the same verdicts as one
+    // pair at a time): `screened_miss[i - chunk]` holds the verdicts of the pairs from `chunk` on.
+    constexpr bool kScreenInLanes = lwsccd::detail::single_first_of<Method>::value;
+    const bool in_lanes = kScreenInLanes && undecided && screen_in_lanes_applies(params);
+    using LaneQuery = std::decay_t<decltype(gather_single(std::size_t{0}))>;
+    LaneQuery lane_queries[kScreenLanes];
+    bool screened_miss[kScreenLanes] = {};
+    std::size_t chunk = 0;
     // Runs of consecutive pairs (neighbours in space: they share vertices and cache lines), taken
     // as workers free up (contacts cluster, so a fixed split would leave one worker the hard part).
     for (std::size_t begin = next.fetch_add(kRun); begin < n; begin = next.fetch_add(kRun))
@@ -148,8 +157,16 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
       if constexpr (lwsccd::detail::certified_of<Method>::value) {
         if (undecided) {  // first pass: the screen, then the refinement of what it passes
           if constexpr (lwsccd::detail::single_first_of<Method>::value) {
-            const auto s = gather_single(i);
-            if (Method::screen_verdict(s, params) != lwsccd::detail::ScreenVerdict::passed) {
+            if (in_lanes && (i == begin || i - chunk == kScreenLanes)) {
+              const int lanes = static_cast<int>(std::min<std::size_t>(kScreenLanes, end - i));
+              for (int lane = 0; lane < lanes; ++lane) lane_queries[lane] = gather_single(i + lane);
+              screen_single_in_lanes<typename Method::policy_type>(lane_queries, lanes, screened_miss);
+              chunk = i;
+            }
+            const LaneQuery s = in_lanes ? lane_queries[i - chunk] : gather_single(i);
+            const bool miss = in_lanes ? screened_miss[i - chunk]
+                                       : Method::screen_verdict(s, params) != lwsccd::detail::ScreenVerdict::passed;
+            if (miss) {
               ++out.counts.certified_misses;
               ++out.counts.single_misses;
               continue;

@@ -60,8 +60,9 @@ inline float underflow_slack_without_assist(float f, int degree) {
 }
 
 #if (defined(__GNUC__) || defined(__clang__)) && defined(__SIZEOF_INT128__)
+__extension__ typedef unsigned __int128 SlackWide;  // (a GCC/Clang extension: no -Wpedantic note)
 inline int bit_length(std::uint64_t x) { return x ? 64 - __builtin_clzll(x) : 0; }
-inline int bit_length(unsigned __int128 x) {
+inline int bit_length(SlackWide x) {
   const auto high = static_cast<std::uint64_t>(x >> 64);
   return high ? 64 + bit_length(high) : bit_length(static_cast<std::uint64_t>(x));
 }
@@ -77,7 +78,7 @@ inline double underflow_slack_without_assist(double f, int degree) {
     for (int i = 1; i < degree; ++i) s = fmul(s, f);
     return s;
   }
-  using Wide = unsigned __int128;
+  using Wide = SlackWide;
   std::uint64_t f_bits;
   std::memcpy(&f_bits, &f, sizeof f);
   const Wide significand = (f_bits & ((std::uint64_t(1) << 52) - 1)) | (std::uint64_t(1) << 52);
