@@ -411,3 +411,30 @@ TEST_CASE("cpu::ThreadLimit: the work inside run() gets the limit; the BVH it bu
     REQUIRE(serial.nodes().bvs[i].hi == parallel.nodes().bvs[i].hi);
   }
 }
+
+TEST_CASE("reserve_large and push_back_large: lists past the huge-page size keep every element as they grow",
+          "[pipeline][threads]") {
+  // Large enough that the buffers take the huge-page path (kHugePageListBytes), several times.
+  const std::size_t n = 5 * detail::kHugePageListBytes / sizeof(std::pair<index_t, index_t>);
+  std::vector<std::pair<index_t, index_t>> grown;
+  for (std::size_t i = 0; i < n; ++i) detail::push_back_large(grown, {static_cast<index_t>(i), static_cast<index_t>(n - i)});
+  REQUIRE(grown.size() == n);
+  CHECK(grown.capacity() * sizeof(grown[0]) >= detail::kHugePageListBytes);
+  bool intact = true;
+  for (std::size_t i = 0; i < n; ++i) intact = intact && grown[i].first == index_t(i) && grown[i].second == index_t(n - i);
+  CHECK(intact);
+  // reserve_large keeps the elements too, and never shrinks.
+  const auto* before = grown.data();
+  detail::reserve_large(grown, n / 2);
+  CHECK(grown.data() == before);
+  detail::reserve_large(grown, 3 * n);
+  CHECK(grown.capacity() >= 3 * n);
+  CHECK(grown.size() == n);
+  CHECK(grown[n - 1].first == index_t(n - 1));
+  // The copies that gather threads' lists into one go through it.
+  std::vector<std::vector<std::pair<index_t, index_t>>> lists(3, grown);
+  std::vector<std::pair<index_t, index_t>> all;
+  detail::concatenate_in_parallel(lists, all);
+  REQUIRE(all.size() == 3 * n);
+  CHECK(all[2 * n + 7] == grown[7]);
+}

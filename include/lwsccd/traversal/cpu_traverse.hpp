@@ -27,10 +27,11 @@ struct VectorEmitter {
   std::vector<typename Task::item_type>* items;
   std::vector<typename Task::result_type>* results;
   std::vector<typename Task::item_type>* front;  ///< null: not recorded
-  void push_item(const typename Task::item_type& x) { items->push_back(x); }
-  void push_result(const typename Task::result_type& r) { results->push_back(r); }
+  // (Large lists grow on huge pages: lwsccd::detail::push_back_large.)
+  void push_item(const typename Task::item_type& x) { push_back_large(*items, x); }
+  void push_result(const typename Task::result_type& r) { push_back_large(*results, r); }
   void push_front(const typename Task::item_type& x) {
-    if (front) front->push_back(x);
+    if (front) push_back_large(*front, x);
   }
 };
 

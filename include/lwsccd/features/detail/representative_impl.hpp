@@ -45,6 +45,8 @@ void ordered_parts(std::size_t n, std::vector<Part>& parts, Body body) {
 inline void copy_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out, std::size_t vf_at, std::size_t ee_at) {
   std::size_t vf_total = vf_at, ee_total = ee_at;
   for (const auto& p : parts) vf_total += p.vf.size(), ee_total += p.ee.size();
+  reserve_large(out.vf, vf_total);
+  reserve_large(out.ee, ee_total);
   out.vf.resize(vf_total);
   out.ee.resize(ee_total);
   // Both lists' copies in one parallel loop: part k's vf (j = 2k) or ee (j = 2k + 1) list.
@@ -229,8 +231,8 @@ inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const Tr
       const TrianglePair& p = candidates[i];
       if (p.adjacent) continue;
       emit_triangle_pair(
-          view, p.a, p.b, [&](index_t v, index_t f) { part.vf.emplace_back(v, f); },
-          [&](index_t x, index_t y) { part.ee.emplace_back(x, y); });
+          view, p.a, p.b, [&](index_t v, index_t f) { detail::push_back_large(part.vf, {v, f}); },
+          [&](index_t x, index_t y) { detail::push_back_large(part.ee, {x, y}); });
     }
   });
   detail::copy_parts(part_lists, out, 0, 0);
