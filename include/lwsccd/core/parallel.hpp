@@ -205,11 +205,14 @@ inline void advise_huge_pages(const void* data, std::size_t bytes) {
 /// Below this many bytes a list grows as std::vector grows it.
 inline constexpr std::size_t kHugePageListBytes = std::size_t(4) << 20;
 
-/// v.reserve(n), where a new buffer of at least kHugePageListBytes gets huge pages asked for
-/// before anything touches it (the elements are then copied in).
+/// Room for n elements in v, at least twice v's size as std::vector grows (a list whose length
+/// creeps up from step to step is not moved every step), where a new buffer of at least
+/// kHugePageListBytes gets huge pages asked for before anything touches it (the elements are then
+/// moved in).
 template <class T>
 void reserve_large(std::vector<T>& v, std::size_t n) {
   if (n <= v.capacity()) return;
+  n = std::max(n, 2 * v.size());
   if (n * sizeof(T) < kHugePageListBytes) {
     v.reserve(n);
     return;
