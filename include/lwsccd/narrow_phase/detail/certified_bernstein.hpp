@@ -73,11 +73,7 @@ inline int bit_length(SlackWide x) {
 /// [2^k, 2^(k+1)) units above), to nearest even. Its bits are then j 2^52 + m: a denormal where
 /// j = 0 and m < 2^52, else the exponent field j + 1 (a carry to m = 2^53 reads the same).
 inline double underflow_slack_without_assist(double f, int degree) {
-  if (!(f >= 1.0 && f <= std::numeric_limits<double>::max())) {
-    double s = 64.0 * std::numeric_limits<double>::denorm_min();
-    for (int i = 1; i < degree; ++i) s = fmul(s, f);
-    return s;
-  }
+  if (!(f >= 1.0 && f <= std::numeric_limits<double>::max())) return underflow_slack_by_multiplication(f, degree);
   using Wide = SlackWide;
   std::uint64_t f_bits;
   std::memcpy(&f_bits, &f, sizeof f);
