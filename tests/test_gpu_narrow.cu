@@ -34,6 +34,15 @@ struct DoubleOnlyCertified : CertifiedPolicy {
 struct FirstRoundOnly : gpu::NarrowPhasePolicy {
   static constexpr bool kFilterSecondRound = false;
 };
+// Deferred lists of any length searched a thread per pair, whose searches in double are handed to
+// a warp each, or (NoneHanded) stay on their thread.
+struct HandedToWarps : gpu::NarrowPhasePolicy {
+  static constexpr int kRefineWarpBelow = 0;
+};
+struct NoneHanded : gpu::NarrowPhasePolicy {
+  static constexpr int kRefineWarpBelow = 0;
+  static constexpr bool kHandSearchesToWarps = false;
+};
 // A first run that does not count its survivors first: it starts from the initial capacity and
 // grows where that overflowed.
 struct GrowFromCapacity : gpu::NarrowPhasePolicy {
@@ -44,7 +53,7 @@ struct GrowFromCapacity : gpu::NarrowPhasePolicy {
 template <class Method, class T, class Policy = gpu::NarrowPhasePolicy>
 std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
                              const FeaturePairs& pairs, std::size_t capacity, CcdMode mode = CcdMode::contacts,
-                             std::size_t* reruns = nullptr) {
+                             std::size_t* reruns = nullptr, std::size_t* handed = nullptr) {
   gpu::DeviceMeshFeatures features(mesh);
   gpu::DeviceStep<double> step(mesh, x0, x1);
   gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
@@ -63,6 +72,7 @@ std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>&
   if (!counted_first && mode != CcdMode::earliest && std::max(cpu_result.vf.size(), cpu_result.ee.size()) > capacity)
     REQUIRE(narrow.reruns() > 0);
   if (reruns) *reruns = narrow.reruns();
+  if (handed) *handed = narrow.handed_searches();
   if (lwsccd::detail::certified_of<Method>::value) {
     lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
     lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
@@ -117,6 +127,30 @@ TEST_CASE("GPU narrow phase: the filter's second round leaves fewer pairs to the
   const std::size_t first = compare_backends<Method, double, FirstRoundOnly>(m.mesh, m.x0, m.x1, fp, 1 << 16);
   std::printf("  whole refinements: %zu with the second round, %zu with the first only\n", both, first);
   CHECK(both < first);
+}
+
+TEST_CASE("GPU narrow phase: searches in double handed from a thread to a warp each give the same answers", "[gpu][narrow]") {
+  // The double path alone searches every deferred pair in double, so its thread hands each on;
+  // with FP32 first only the pairs single precision leaves undecided are.
+  using DoubleOnly = CertifiedCcdT<Filtered<InclusionCcd>, DoubleOnlyCertified>;
+  const auto m = lwsccd_test::folded_cloth(40, 4);
+  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
+  const FeaturePairs fp = feature_pairs(m.mesh, pairs);
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set}) {
+    INFO("mode " << int(mode));
+    std::size_t handed = 0, none = 1;
+    const std::size_t whole = compare_backends<DoubleOnly, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, &handed);
+    const std::size_t whole_on_threads =
+        compare_backends<DoubleOnly, double, NoneHanded>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, &none);
+    std::printf("  whole searches %zu, handed to warps %zu\n", whole, handed);
+    CHECK(whole == whole_on_threads);
+    CHECK(handed > 0);
+    CHECK(handed <= whole);
+    CHECK(none == 0);
+    compare_backends<DoubleOnly, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+  }
 }
 
 TEST_CASE("GPU hit sort: by (first, second) over only the bits the feature ids take", "[gpu][narrow]") {

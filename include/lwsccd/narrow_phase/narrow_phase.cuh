@@ -51,6 +51,11 @@ struct NarrowPhasePolicy {
   /// CertifiedCcd: at most this many deferred refinements run a warp each (inside tests by
   /// subtrees: the long coplanar searches' latency ~5x shorter), more a thread each; 0: always a thread.
   static constexpr int kRefineWarpBelow = 1024;
+  /// CertifiedCcd, a deferred list longer than kRefineWarpBelow (a thread per pair): the searches in
+  /// double of the pairs single precision leaves undecided are handed from their thread to a warp
+  /// each (a bit per deferred pair marks them; inside tests by subtrees), so that one long search no
+  /// longer holds up the thread kernel (the same answers). False: they run on their thread.
+  static constexpr bool kHandSearchesToWarps = true;
   /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
   /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.
@@ -196,6 +201,9 @@ class NarrowPhase {
   /// CertifiedCcd: refinements the first pass's filter could not decide, searched whole (all of
   /// them without the filter), in the last run (mode earliest: its last window).
   std::size_t whole_searches() const { return lists_[0].whole_searches + lists_[1].whole_searches; }
+  /// CertifiedCcd: of those, searches in double that a thread handed to a warp each
+  /// (NarrowPhasePolicy::kHandSearchesToWarps), in the last run.
+  std::size_t handed_searches() const { return lists_[0].handed_searches + lists_[1].handed_searches; }
   T earliest_toi() const { return earliest_; }
   std::size_t gave_up() const { return gave_up_; }
   /// Runs enqueued again because an output outgrew its buffer, since construction.
@@ -218,7 +226,7 @@ class NarrowPhase {
                l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes() + l.intervals.capacity_bytes() +
                l.listed.capacity_bytes() + l.expanded.capacity_bytes() + l.deep.capacity_bytes() +
                l.double_kept.capacity_bytes() + l.single_intervals.capacity_bytes() + l.single_failed.capacity_bytes() +
-               l.single_expanded.capacity_bytes() + l.single_deep.capacity_bytes();
+               l.single_expanded.capacity_bytes() + l.single_deep.capacity_bytes() + l.handed.capacity_bytes();
     return bytes;
   }
 
@@ -230,6 +238,7 @@ class NarrowPhase {
     DeviceBuffer<Pair> survivors;                ///< pairs the first pass keeps
     DeviceBuffer<FeatureHit<T>> undecided;       ///< CertifiedCcd: left to the fallback, with the time excluded before
     DeviceBuffer<unsigned> deferred, open;       ///< indices: refinements deferred, searches left to a warp
+    DeviceBuffer<unsigned> handed;               ///< a bit per deferred entry: its search in double handed to a warp
     DeviceBuffer<unsigned long long> intervals;  ///< CertifiedCcd's filter: intervals to test for inside (detail::filter_item)
     DeviceBuffer<unsigned long long> expanded;   ///< the filter's second round: intervals to split further (room: interval_room)
     DeviceBuffer<unsigned long long> deep;       ///< the second round's intervals to test for inside
@@ -245,7 +254,7 @@ class NarrowPhase {
     std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
     std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
-    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0;
+    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0;
     CudaStream stream;
     CudaEvent done;
   };

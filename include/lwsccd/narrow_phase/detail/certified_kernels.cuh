@@ -377,12 +377,18 @@ __global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
   }
 }
 
-// Second part: the deferred searches, whole (a grid-stride loop keeps the warps full).
-template <class Method, bool kVertexFace, class T, class P>
+// Second part: the deferred searches, whole (a grid-stride loop keeps the warps full). kHand: the
+// search in double of a pair single precision left (the double filter's pairs, and those the
+// search in float did not decide) is not run here but handed to a warp (its bit set in `handed`, a
+// bit per deferred entry, zeroed; refine_handed_warp_kernel): those searches are the long ones
+// (cloth-ball: 3.4 K of 106 K edge-edge pairs, up to ~50x the median's work on the CPU), and one of
+// them on a thread held the whole kernel up; the kernel also holds no code for them.
+template <class Method, bool kVertexFace, bool kHand, class T, class P>
 __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                        const std::pair<index_t, index_t>* kept, std::size_t room, const unsigned* deferred,
                                        CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                                       FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
+                                       FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
+                                       unsigned* handed) {
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
   if (n <= warp_below) return;  // refine_deferred_warp_kernel's
@@ -395,7 +401,12 @@ __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, con
     if (sent_whole(at, room, counters) &&
         (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided) || Method::screen_after_single(q, params)))
       continue;
-    settle_refined(Method::template refine<false>(q, params), p.first, p.second, counters, hits, hit_room, undecided);
+    if constexpr (kHand) {
+      atomicOr(handed + w / 32, 1u << (w % 32));
+      append_index(counters + kHandedToWarps);
+    } else {
+      settle_refined(Method::template refine<false>(q, params), p.first, p.second, counters, hits, hit_room, undecided);
+    }
   }
 }
 
@@ -437,6 +448,19 @@ struct WarpInsideSubtree {
   }
 };
 
+// The search in double of pair p by the whole warp (every lane runs it on the same values, the
+// inside tests by subtrees: WarpInsideSubtree); lane 0 stores the answer.
+template <class Method, class Q, class T>
+__device__ void warp_refine(const Q& q, const CcdParams<T>& params, std::pair<index_t, index_t> p, int lane,
+                            unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided) {
+  WarpInsideSubtree inside;
+  inside.lane = lane;
+  inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
+  const CertifiedAnswer<T> a = Method::template refine_with<false>(q, params, inside);
+  if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
+  __syncwarp();
+}
+
 // Second part for a short list (at most `warp_below` deferred pairs): a warp per pair, the inside
 // tests by subtrees (WarpInsideSubtree); the same answers as refine_deferred_kernel. Its pairs are
 // the long searches (cloth-funnel's coplanar edge-edge ones: 96 halvings and ~190 inside tests one
@@ -456,18 +480,34 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
     const unsigned at = deferred[w];
     const std::pair<index_t, index_t> p = kept[at];
     const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    WarpInsideSubtree inside;
-    inside.lane = lane;
-    inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
     // (Every lane runs the same single-precision search and double screen on the same values, so
     // all go on alike; lane 0 stores.)
     if (sent_whole(at, room, counters) &&
         (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided, lane == 0) ||
          Method::screen_after_single(q, params)))
       continue;
-    const CertifiedAnswer<T> a = Method::template refine_with<false>(q, params, inside);
-    if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
-    __syncwarp();
+    warp_refine<Method>(q, params, p, lane, counters, hits, hit_room, undecided);
+  }
+}
+
+// The searches refine_deferred_kernel handed on (the deferred entries whose bit is set in
+// `handed`: past the search in single precision and the double screen), a warp each, as
+// refine_deferred_warp_kernel searches; a warp takes a word of bits at a time.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_handed_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                          const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
+                                          CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                                          FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  if (n <= warp_below) return;  // (refine_deferred_warp_kernel searched them all)
+  const int lane = static_cast<int>(threadIdx.x) % 32;
+  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
+  for (std::size_t word = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; word < (n + 31) / 32; word += warps) {
+    for (unsigned bits = handed[word]; bits != 0; bits &= bits - 1u) {
+      const std::pair<index_t, index_t> p = kept[deferred[32 * word + static_cast<std::size_t>(__ffs(bits) - 1)]];
+      warp_refine<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, lane, counters, hits, hit_room, undecided);
+    }
   }
 }
 

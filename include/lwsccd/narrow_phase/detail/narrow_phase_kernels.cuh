@@ -94,6 +94,9 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     if (kCertified) {
       l.undecided.resize_discard(l.work_room);
       l.deferred.resize_discard(l.work_room);
+      // (Only a deferred list longer than kRefineWarpBelow hands searches on.)
+      if (Policy::kHandSearchesToWarps && l.work_room > static_cast<std::size_t>(Policy::kRefineWarpBelow))
+        l.handed.resize_discard((l.work_room + 31) / 32);
       if (Policy::kRefineFilter && params.mode != CcdMode::set) {  // mode set does not run the filter
         // (FP32 first: the double filter's lists hold only what single precision leaves.)
         const std::size_t filter_percent = kSingleFirst ? Policy::kDoubleAfterSingleRoomPercent : Policy::kFilterRoomPercent;
@@ -287,10 +290,21 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // The deferred pairs: a warp each when they are few (the long searches' latency is the
     // list's), else a thread each; each kernel returns at once where the other one's case holds.
     const auto warp_below = static_cast<std::size_t>(Policy::kRefineWarpBelow);
-    detail::refine_deferred_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+    // (With kHandSearchesToWarps the thread kernel runs only where `handed` has a bit per entry.)
+    constexpr bool kHand = Policy::kHandSearchesToWarps;
+    unsigned* handed = kHand && l.handed.size() > 0 ? l.handed.data() : nullptr;
+    if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
+    detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, kept, l.work_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
-        l.hit_room, l.undecided.data(), warp_below);
+        l.hit_room, l.undecided.data(), warp_below, handed);
     LWSCCD_CUDA_CHECK_LAUNCH();
+    if (handed) {
+      detail::refine_handed_warp_kernel<Method, kVertexFace, T, P>
+          <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
+              l.hit_room, l.undecided.data(), warp_below);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
       detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
@@ -379,6 +393,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.num_full = static_cast<std::size_t>(kCertified ? c[detail::kUndecided] - c[detail::kSettled] : kTwoPass ? c[detail::kSurvivors] : pairs);
     l.warp_searches = static_cast<std::size_t>(c[detail::kOpen]);
     l.whole_searches = static_cast<std::size_t>(c[detail::kDeferred]);
+    l.handed_searches = static_cast<std::size_t>(c[detail::kHandedToWarps]);
     l.counts = {};
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
