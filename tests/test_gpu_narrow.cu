@@ -35,9 +35,13 @@ struct FirstRoundOnly : gpu::NarrowPhasePolicy {
   static constexpr bool kFilterSecondRound = false;
 };
 // Deferred lists of any length searched a thread per pair, whose searches in double are handed to
-// a warp each, or (NoneHanded) stay on their thread.
+// a warp each, to a thread each in a kernel of their own, or (NoneHanded) stay on their thread.
 struct HandedToWarps : gpu::NarrowPhasePolicy {
   static constexpr int kRefineWarpBelow = 0;
+};
+struct HandedToThreads : gpu::NarrowPhasePolicy {
+  static constexpr int kRefineWarpBelow = 0;
+  static constexpr int kHandedWarpsPerSm = 0;
 };
 struct NoneHanded : gpu::NarrowPhasePolicy {
   static constexpr int kRefineWarpBelow = 0;
@@ -147,6 +151,10 @@ TEST_CASE("GPU narrow phase: searches in double handed from a thread to a warp e
     CHECK(handed > 0);
     CHECK(handed <= whole);
     CHECK(none == 0);
+    std::size_t to_threads = 0;
+    compare_backends<DoubleOnly, double, HandedToThreads>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, &to_threads);
+    CHECK(to_threads == handed);
+    compare_backends<CertifiedCcd, float, HandedToThreads>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<DoubleOnly, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);

@@ -56,6 +56,12 @@ struct NarrowPhasePolicy {
   /// each (a bit per deferred pair marks them; inside tests by subtrees), so that one long search no
   /// longer holds up the thread kernel (the same answers). False: they run on their thread.
   static constexpr bool kHandSearchesToWarps = true;
+  /// At most this many handed searches per SM run a warp each; more run a thread each (in a kernel
+  /// of their own, still apart from the short ones): a warp's search costs ~30 lanes' work, which
+  /// pays where a few long searches set the time (cloth-ball: 3.4 K edge-edge, 201 of them
+  /// coplanar ones that end undecided), not where thousands of them do (the built-in scene's
+  /// degenerate motion). 0: always a thread each.
+  static constexpr int kHandedWarpsPerSm = 32;
   /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
   /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.

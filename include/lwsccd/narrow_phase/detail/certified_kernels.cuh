@@ -495,20 +495,46 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
 // refine_deferred_warp_kernel searches. A warp looks at every `warps`-th entry: the handed ones
 // lie close together in the list (the double filter's pairs are appended together), and a warp
 // per word of bits searched up to 32 of them one after the other (cloth-ball: 1.7 ms).
+// At most `warp_limit` handed searches (a few waves of warps): more run a thread each
+// (refine_handed_thread_kernel), since a warp's search costs ~30 lanes' work for a few long ones.
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void refine_handed_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                           const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
                                           CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                                          FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below) {
+                                          FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
+                                          std::size_t warp_limit) {
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
-  if (n <= warp_below) return;  // (refine_deferred_warp_kernel searched them all)
+  if (n <= warp_below || counters[kHandedToWarps] > warp_limit) return;  // (the other kernels' lists)
   const int lane = static_cast<int>(threadIdx.x) % 32;
   const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
   for (std::size_t w = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; w < n; w += warps) {
     if (((handed[w / 32] >> (w % 32)) & 1u) == 0) continue;
     const std::pair<index_t, index_t> p = kept[deferred[w]];
     warp_refine<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, lane, counters, hits, hit_room, undecided);
+  }
+}
+
+// More than `warp_limit` handed searches: a thread each, the warp's lanes taking the set bits of
+// one word of `handed` in order (the handed entries lie together, so the lanes stay busy).
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_handed_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                            const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
+                                            CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                                            FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
+                                            std::size_t warp_limit) {
+  if (control[kSkip]) return;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
+  if (n <= warp_below || counters[kHandedToWarps] <= warp_limit) return;
+  const int lane = static_cast<int>(threadIdx.x) % 32;
+  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
+  for (std::size_t word = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; word < (n + 31) / 32; word += warps) {
+    const unsigned bits = handed[word];
+    if (lane >= __popc(bits)) continue;
+    const std::size_t w = 32 * word + __fns(bits, 0, lane + 1);  // this lane's set bit
+    const std::pair<index_t, index_t> p = kept[deferred[w]];
+    settle_refined(Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params), p.first, p.second,
+                   counters, hits, hit_room, undecided);
   }
 }
 

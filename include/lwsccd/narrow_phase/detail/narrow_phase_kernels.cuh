@@ -298,11 +298,17 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         mesh, x0, x1, kept, l.work_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
         l.hit_room, l.undecided.data(), warp_below, handed);
     LWSCCD_CUDA_CHECK_LAUNCH();
-    if (handed) {
+    if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
+      const std::size_t warp_limit = static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kHandedWarpsPerSm);
       detail::refine_handed_warp_kernel<Method, kVertexFace, T, P>
           <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
               mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
-              l.hit_room, l.undecided.data(), warp_below);
+              l.hit_room, l.undecided.data(), warp_below, warp_limit);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      detail::refine_handed_thread_kernel<Method, kVertexFace, T, P>
+          <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
+              l.hit_room, l.undecided.data(), warp_below, warp_limit);
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
     if (warp_below > 0) {
