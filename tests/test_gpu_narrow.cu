@@ -43,6 +43,11 @@ struct HandedToThreads : gpu::NarrowPhasePolicy {
   static constexpr int kRefineWarpBelow = 0;
   static constexpr int kHandedWarpsPerSm = 0;
 };
+// As on a GPU with little FP64 (any GPU's FP32-to-FP64 ratio is above 1): a thread each.
+struct HandedAsWithLittleFp64 : gpu::NarrowPhasePolicy {
+  static constexpr int kRefineWarpBelow = 0;
+  static constexpr int kHandedWarpsMaxFp64Ratio = 1;
+};
 struct NoneHanded : gpu::NarrowPhasePolicy {
   static constexpr int kRefineWarpBelow = 0;
   static constexpr bool kHandSearchesToWarps = false;
@@ -155,6 +160,7 @@ TEST_CASE("GPU narrow phase: searches in double handed from a thread to a warp e
     compare_backends<DoubleOnly, double, HandedToThreads>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, &to_threads);
     CHECK(to_threads == handed);
     compare_backends<CertifiedCcd, float, HandedToThreads>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<DoubleOnly, double, HandedAsWithLittleFp64>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<DoubleOnly, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);

@@ -62,6 +62,11 @@ struct NarrowPhasePolicy {
   /// coplanar ones that end undecided), not where thousands of them do (the built-in scene's
   /// degenerate motion). 0: always a thread each.
   static constexpr int kHandedWarpsPerSm = 32;
+  /// Handed searches run a warp each only on GPUs whose FP32 throughput is at most this many times
+  /// their FP64 one (cudaDevAttrSingleToDoublePrecisionPerfRatio: 2 on an H100 or H200, 32-64 on
+  /// the RTX and L40 classes): every lane of a warp's search repeats its FP64 instructions, which a
+  /// GPU with little FP64 pays for; there they run a thread each.
+  static constexpr int kHandedWarpsMaxFp64Ratio = 2;
   /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
   /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.
@@ -296,6 +301,7 @@ class NarrowPhase {
   std::size_t gave_up_ = 0, reruns_ = 0;
   T earliest_ = T(1);
   int sms_ = 1;
+  int fp64_ratio_ = 2;  ///< the device's FP32 to FP64 throughput ratio
   bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
   bool rooms_learned_ = false;  ///< a run has sized the lists (count_survivors on the first)
 };

@@ -28,6 +28,7 @@ void NarrowPhase<Method, T, Policy>::ensure_streams() {
   LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
   LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms_, cudaDevAttrMultiProcessorCount, device));
   sms_ = std::max(1, sms_);
+  LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&fp64_ratio_, cudaDevAttrSingleToDoublePrecisionPerfRatio, device));
   control_.resize_discard(detail::kNarrowControlWords);
   for (auto& l : lists_) {
     l.host_counters = PinnedBuffer<unsigned long long>(detail::kNarrowCounters);
@@ -299,7 +300,9 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         l.hit_room, l.undecided.data(), warp_below, handed);
     LWSCCD_CUDA_CHECK_LAUNCH();
     if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
-      const std::size_t warp_limit = static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kHandedWarpsPerSm);
+      const std::size_t warp_limit = fp64_ratio_ <= Policy::kHandedWarpsMaxFp64Ratio
+                                         ? static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kHandedWarpsPerSm)
+                                         : 0;
       detail::refine_handed_warp_kernel<Method, kVertexFace, T, P>
           <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
               mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
