@@ -52,9 +52,10 @@ struct NarrowPhasePolicy {
   /// subtrees: the long coplanar searches' latency ~5x shorter), more a thread each; 0: always a thread.
   static constexpr int kRefineWarpBelow = 1024;
   /// CertifiedCcd, a deferred list longer than kRefineWarpBelow (a thread per pair): the searches in
-  /// double of the pairs single precision leaves undecided are handed from their thread to a warp
-  /// each (a bit per deferred pair marks them; inside tests by subtrees), so that one long search no
-  /// longer holds up the thread kernel (the same answers). False: they run on their thread.
+  /// double of the pairs single precision leaves undecided are handed from their thread to a kernel
+  /// of their own (a bit per deferred pair marks them), a warp each (inside tests by subtrees) or a
+  /// thread each by the two knobs below, so that one long search no longer holds up the thread
+  /// kernel (the same answers). False: they run on their thread.
   static constexpr bool kHandSearchesToWarps = true;
   /// At most this many handed searches per SM run a warp each; more run a thread each (in a kernel
   /// of their own, still apart from the short ones): a warp's search costs ~30 lanes' work, which
@@ -212,7 +213,7 @@ class NarrowPhase {
   /// CertifiedCcd: refinements the first pass's filter could not decide, searched whole (all of
   /// them without the filter), in the last run (mode earliest: its last window).
   std::size_t whole_searches() const { return lists_[0].whole_searches + lists_[1].whole_searches; }
-  /// CertifiedCcd: of those, searches in double that a thread handed to a warp each
+  /// CertifiedCcd: of those, searches in double that a thread handed on to a warp or a thread each
   /// (NarrowPhasePolicy::kHandSearchesToWarps), in the last run.
   std::size_t handed_searches() const { return lists_[0].handed_searches + lists_[1].handed_searches; }
   T earliest_toi() const { return earliest_; }

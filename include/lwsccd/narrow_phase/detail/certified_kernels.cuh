@@ -379,8 +379,9 @@ __global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
 
 // Second part: the deferred searches, whole (a grid-stride loop keeps the warps full). kHand: the
 // search in double of a pair single precision left (the double filter's pairs, and those the
-// search in float did not decide) is not run here but handed to a warp (its bit set in `handed`, a
-// bit per deferred entry, zeroed; refine_handed_warp_kernel): those searches are the long ones
+// search in float did not decide) is not run here but handed on (its bit set in `handed`, a bit
+// per deferred entry, zeroed; refine_handed_warp_kernel or refine_handed_thread_kernel searches
+// it): those searches are the long ones
 // (cloth-ball: 3.4 K of 106 K edge-edge pairs, up to ~50x the median's work on the CPU), and one of
 // them on a thread held the whole kernel up; the kernel also holds no code for them.
 template <class Method, bool kVertexFace, bool kHand, class T, class P>

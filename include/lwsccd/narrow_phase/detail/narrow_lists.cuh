@@ -83,7 +83,7 @@ enum NarrowCounter : int {
   kSingleWhole,     // pairs it sends straight to the whole search (listed from the top of the double filter's list)
   kSingleSearchMisses,  // the search in single precision: certain misses (pairs the single passes left)
   kSingleDescents,  // its contacts settled by a double tail (certain hits)
-  kHandedToWarps,   // deferred searches a thread handed to a warp each (more than the room: searched on their thread)
+  kHandedToWarps,   // deferred searches in double a thread handed on (to a warp each, or a thread each past the limit)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.
