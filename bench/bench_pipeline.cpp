@@ -470,6 +470,8 @@ int main(int argc, char** argv) {
                            {"peak_device_bytes", r.last.peak_device_bytes},
                            {"reruns", r.last.reruns},
                            {"traversal_relaunches", r.last.traversal_relaunches}};
+      if (r.last.device_memory.total())
+        lwsccd::for_each_part(r.last.device_memory, [&](const char* name, std::size_t bytes) { j["device_memory"][name] = bytes; });
       if (r.has_truth) {
         j["false_negatives"] = r.truth.false_negatives;
         j["false_positives"] = r.truth.false_positives;

@@ -77,6 +77,13 @@ inline void print_table(const StepSource& src, const std::string& backend, const
                   s.narrow_warp_searches);
     if (s.gave_up) std::printf("  %zu contacts from the method's work bound (conservative answers)\n", s.gave_up);
     if (s.peak_device_bytes) std::printf("  peak device memory %.1f MiB\n", double(s.peak_device_bytes) / (1 << 20));
+    if (s.device_memory.total()) {
+      std::printf("  device memory held, MiB:");
+      lwsccd::for_each_part(s.device_memory, [](const char* name, std::size_t bytes) {
+        std::printf(" %s %.1f", name, double(bytes) / (1 << 20));
+      });
+      std::printf("\n");
+    }
     if (s.narrow_parts)
       std::printf("  in parts: %zu traversal parts, %zu narrow-phase parts\n", s.traversal_parts,
                   s.narrow_parts);
@@ -130,6 +137,8 @@ inline void print_json(const StepSource& src, const std::string& backend, const 
     step["narrow_warp_searches"] = s.narrow_warp_searches;
     step["earliest_toi"] = r.outcome.contacts.earliest_toi;
     step["peak_device_bytes"] = s.peak_device_bytes;
+    if (s.device_memory.total())
+      lwsccd::for_each_part(s.device_memory, [&](const char* name, std::size_t bytes) { step["device_memory"][name] = bytes; });
     step["traversal_parts"] = s.traversal_parts;
     step["narrow_parts"] = s.narrow_parts;
     // Per feature kind: certified hits, certified misses, fallbacks, screened.

@@ -155,6 +155,14 @@ TEST_CASE("GPU pipeline equals the CPU pipeline over several steps of a folded c
     require_same_contacts(g, c);
     CHECK(g.stats.hits_vf + g.stats.hits_ee > 0);
     CHECK(g.stats.peak_device_bytes > 0);
+    // What the pipeline holds, by purpose, adds up to its count and names every stage's buffers.
+    const DeviceMemoryUse& held = g.stats.device_memory;
+    CHECK(held.total() == gpu_pipeline.device_bytes());
+    CHECK(held.resident() == gpu_pipeline.resident_bytes());
+    CHECK(held.total() <= g.stats.peak_device_bytes);
+    for (std::size_t part : {held.mesh, held.bvh, held.feature_boxes, held.candidates, held.front, held.feature_pairs,
+                             held.narrow_hits, held.narrow_work})
+      CHECK(part > 0);
   }
 }
 

@@ -92,6 +92,9 @@ nb::dict stats_dict(const lwsccd::StepStats& s) {
   d["narrow_vf"] = counts_dict(s.narrow_vf);
   d["narrow_ee"] = counts_dict(s.narrow_ee);
   d["peak_device_bytes"] = s.peak_device_bytes;
+  nb::dict memory;
+  lwsccd::for_each_part(s.device_memory, [&](const char* name, std::size_t bytes) { memory[name] = bytes; });
+  d["device_memory"] = memory;
   d["reruns"] = s.reruns;
   d["traversal_relaunches"] = s.traversal_relaunches;
   d["traversal_parts"] = s.traversal_parts;

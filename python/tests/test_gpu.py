@@ -124,6 +124,7 @@ def test_float32_positions_on_the_device(scene, name, to_device, module):
         r = gpu.step(to_device(f0), to_device(f1), on_device=True)
         assert r.earliest_toi == expected.earliest_toi
         assert r.stats["hits_vf"] + r.stats["hits_ee"] == expected.num_contacts
+        assert all(r.stats["device_memory"][part] > 0 for part in ("mesh", "bvh", "feature_boxes", "narrow_work"))
         contacts += expected.num_contacts
     assert contacts > 0
     x0, x1 = steps[0]

@@ -39,6 +39,11 @@ def test_contacts_are_sorted_structured_and_consistent(cloth_steps):
         assert r.earliest_toi == (tois.min() if len(tois) else 1.0)
         assert r.stats["hits_vf"] == len(vf) and r.stats["hits_ee"] == len(ee)
         assert r.num_contacts == len(vf) + len(ee)
+        # Device memory by purpose: the GPU's parts, none held by the CPU backend.
+        memory = r.stats["device_memory"]
+        assert list(memory) == ["mesh", "bvh", "feature_boxes", "candidates", "front", "scheduler", "feature_pairs",
+                                "narrow_hits", "narrow_work", "other"]
+        assert sum(memory.values()) == 0
         total += r.num_contacts
     assert total > 0, "the built-in scene collides"
 

@@ -111,6 +111,10 @@ struct NarrowPhasePolicy {
   /// capacity and grows where it overflowed (a run again).
   static constexpr bool kCountFirstRun = true;
   static constexpr int kFirstRunHitsPerSurvivors = 8;
+  /// FP32 first: a first run gives the refinement in double's lists (the pairs single precision
+  /// leaves, and the contacts it sends to the whole search) room for one in this many survivors
+  /// (cloth-ball: ~5%, the built-in scene ~3%); more is learned from a run's count (a run again).
+  static constexpr int kFirstRunRefinePerSurvivors = 8;
 };
 
 /// Sorts device hits by (first, second), the order of the CPU backend's results (CUB radix sort
@@ -231,6 +235,12 @@ class NarrowPhase {
   /// The hits of the last collected run on the device (sorted once `stream` reaches them).
   const FeatureHit<T>* vf_hits() const { return lists_[0].hits.data(); }
   const FeatureHit<T>* ee_hits() const { return lists_[1].hits.data(); }
+  /// Of device_bytes(), the hits' lists and their sorting.
+  std::size_t hit_bytes() const {
+    std::size_t bytes = 0;
+    for (const auto& l : lists_) bytes += l.hits.capacity_bytes() + l.sorter.device_bytes();
+    return bytes;
+  }
   std::size_t device_bytes() const {
     std::size_t bytes = control_.capacity_bytes() + single_.capacity_bytes();
     for (const auto& l : lists_)
@@ -262,7 +272,8 @@ class NarrowPhase {
     DeviceBuffer<unsigned long long> single_deep;      ///< the second round's intervals to test for inside
     DeviceBuffer<unsigned long long> counters;   ///< detail::NarrowCounter words
     PinnedBuffer<unsigned long long> host_counters;
-    std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors, undecided, deferred and open
+    std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors
+    std::size_t refine_room = 0;                 ///< room of double_kept, deferred, undecided and open (CertifiedCcd)
     std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
     std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
@@ -277,6 +288,9 @@ class NarrowPhase {
   static constexpr bool second_round(CcdMode mode) { return Policy::kRefineFilter && Policy::kFilterSecondRound && mode == CcdMode::contacts; }
   // The single-precision filter's second round (CertifiedPolicy::kSingleSecondRound) runs wherever
   // its first does, as on the CPU (CertifiedFilter::decides_single).
+  // Whether the refinement's lists (refine_room) hold only what single precision leaves, their
+  // room learned from its count: FP32 first with the filter (any other path refines every survivor).
+  static constexpr bool refine_room_learned(CcdMode mode) { return kSingleFirst && Policy::kRefineFilter && mode != CcdMode::set; }
   static constexpr bool single_second_round(CcdMode mode) {
     if constexpr (kSingleFirst) return Policy::kRefineFilter && mode != CcdMode::set && Method::policy_type::kSingleSecondRound;
     else return false;

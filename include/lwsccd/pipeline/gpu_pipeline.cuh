@@ -182,18 +182,27 @@ class CcdPipeline {
   const PipelineParams& params() const { return params_; }
 
   /// Device bytes this pipeline holds now (every buffer's capacity; they are kept between steps).
-  std::size_t device_bytes() const {
-    return resident_bytes() + traversal_.device_bytes() + seeds_.capacity_bytes() + root_.capacity_bytes() +
-           cut_.capacity_bytes() + next_front_.capacity_bytes() + scratch_.capacity_bytes() + emitter_.list_bytes() +
-           narrow_.device_bytes() + gathered_[0].capacity_bytes() + gathered_[1].capacity_bytes() + gathered_sorter_.device_bytes() +
-           met_.capacity_bytes() + share_cut_.device_bytes();
-  }
+  std::size_t device_bytes() const { return memory_use().total(); }
   /// Of those, what no split of a step can reduce: topology, positions, the BVH, the feature boxes.
-  std::size_t resident_bytes() const {
-    const std::size_t step = step_ ? step_->faces.capacity_bytes() + step_->x0.capacity_bytes() + step_->x1.capacity_bytes() : 0;
-    return step + bvh_.device_bytes() + features_.faces.capacity_bytes() + features_.edges.capacity_bytes() +
-           emitter_.device_bytes() - emitter_.list_bytes() + face_body_.capacity_bytes() + node_body_.capacity_bytes() +
-           body_changes_.capacity_bytes() + self_collides_.capacity_bytes();
+  std::size_t resident_bytes() const { return memory_use().resident(); }
+  /// The same bytes by what they are held for (StepStats::device_memory reports it after a step).
+  DeviceMemoryUse memory_use() const {
+    DeviceMemoryUse m;
+    if (step_) m.mesh = step_->faces.capacity_bytes() + step_->x0.capacity_bytes() + step_->x1.capacity_bytes();
+    m.mesh += face_body_.capacity_bytes() + node_body_.capacity_bytes() + body_changes_.capacity_bytes() +
+              self_collides_.capacity_bytes();
+    m.bvh = bvh_.device_bytes();
+    m.feature_boxes = features_.faces.capacity_bytes() + features_.edges.capacity_bytes() + emitter_.device_bytes() - emitter_.list_bytes();
+    m.candidates = traversal_.results_bytes() + met_.capacity_bytes();
+    m.front = traversal_.front_bytes() + seeds_.capacity_bytes() + root_.capacity_bytes() + cut_.capacity_bytes() +
+              next_front_.capacity_bytes();
+    m.scheduler = traversal_.device_bytes() - traversal_.results_bytes() - traversal_.front_bytes();
+    m.feature_pairs = emitter_.list_bytes();
+    m.narrow_hits = narrow_.hit_bytes();
+    m.narrow_work = narrow_.device_bytes() - narrow_.hit_bytes();
+    m.other = scratch_.capacity_bytes() + gathered_[0].capacity_bytes() + gathered_[1].capacity_bytes() +
+              gathered_sorter_.device_bytes() + share_cut_.device_bytes();
+    return m;
   }
   /// The budget streamed steps keep to (PipelineParams::device_memory_budget; 0: no streaming).
   /// It may change between steps (e.g. as the application's own use of the device changes).
@@ -291,6 +300,7 @@ class CcdPipeline {
     stats.narrow_vf = o.counts[0];
     stats.narrow_ee = o.counts[1];
     stats.peak_device_bytes = memory_stats().peak;
+    stats.device_memory = memory_use();
     stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   }
 

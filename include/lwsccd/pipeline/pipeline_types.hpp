@@ -139,6 +139,41 @@ struct StreamingPolicy {
   static constexpr std::size_t kLeastPartBytes = std::size_t(1) << 20;
 };
 
+/// GPU: the device memory a pipeline holds, by what it holds it for (bytes of every buffer's
+/// capacity; buffers are kept between steps, so this is also what the next step starts with).
+/// The first three are the resident data no split of a step reduces (CcdPipeline::resident_bytes()).
+struct DeviceMemoryUse {
+  std::size_t mesh = 0;           ///< topology, the step's positions, the bodies' tags
+  std::size_t bvh = 0;            ///< the tree: nodes, boxes, build scratch
+  std::size_t feature_boxes = 0;  ///< the edges' and faces' boxes and the feature tables the emission reads
+  std::size_t candidates = 0;     ///< the traversal's results: candidate triangle pairs
+  std::size_t front = 0;          ///< the front being recorded, the seeds (last front), the root's cut
+  std::size_t scheduler = 0;      ///< the traversal scheduler's own lists (deques, work lists)
+  std::size_t feature_pairs = 0;  ///< the emitted vertex-face and edge-edge pairs, their masks and scratch
+  std::size_t narrow_hits = 0;    ///< the narrow phase's hits and their sorting
+  std::size_t narrow_work = 0;    ///< the narrow phase's work lists (survivors, deferred, intervals, ...)
+  std::size_t other = 0;          ///< a step in parts' gathered hits, scratch, a share's cut
+  std::size_t resident() const { return mesh + bvh + feature_boxes; }
+  std::size_t total() const {
+    return mesh + bvh + feature_boxes + candidates + front + scheduler + feature_pairs + narrow_hits + narrow_work + other;
+  }
+};
+
+/// Calls f(name, bytes) for each part of `m` in the order above (the names reports print).
+template <class F>
+void for_each_part(const DeviceMemoryUse& m, F&& f) {
+  f("mesh", m.mesh);
+  f("bvh", m.bvh);
+  f("feature_boxes", m.feature_boxes);
+  f("candidates", m.candidates);
+  f("front", m.front);
+  f("scheduler", m.scheduler);
+  f("feature_pairs", m.feature_pairs);
+  f("narrow_hits", m.narrow_hits);
+  f("narrow_work", m.narrow_work);
+  f("other", m.other);
+}
+
 /// What one step measured.
 struct StepStats {
   double refit_ms = 0, traverse_ms = 0, features_ms = 0, narrow_ms = 0, total_ms = 0;
@@ -148,6 +183,9 @@ struct StepStats {
   std::size_t narrow_warp_searches = 0;  ///< GPU: of those, searched by a warp (still open after the thread's rounds)
   NarrowPhaseCounts narrow_vf, narrow_ee;  ///< certified hits / misses and fallbacks per list (CertifiedCcd)
   std::size_t peak_device_bytes = 0;
+  /// GPU: what the pipeline holds on its device after the step, by purpose (its total is
+  /// CcdPipeline::device_bytes(); the peak above adds the step's passing scratch).
+  DeviceMemoryUse device_memory;
   /// GPU: stages enqueued again in this step because a list outgrew the room earlier steps gave
   /// it (the feature pairs' or the narrow phase's; nothing is lost, the step just costs more).
   std::size_t reruns = 0;

@@ -187,7 +187,9 @@ class TraversalOutput {
   /// Device bytes held (every buffer's capacity).
   std::size_t device_bytes() const { return s_.device_bytes(); }
   /// Of those, the results' and the front's outputs; the lists the seeds are expanded into.
-  std::size_t output_bytes() const { return s_.results_.capacity_bytes() + s_.front_.capacity_bytes(); }
+  std::size_t output_bytes() const { return results_bytes() + front_bytes(); }
+  std::size_t results_bytes() const { return s_.results_.capacity_bytes(); }
+  std::size_t front_bytes() const { return s_.front_.capacity_bytes(); }
   std::size_t seed_list_bytes() const { return s_.work_.capacity_bytes() + s_.next_.capacity_bytes(); }
 
   /// Trades the front's buffer for `buffer` (its contents become the caller's: num_front() items;

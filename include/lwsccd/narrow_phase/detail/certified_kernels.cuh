@@ -144,11 +144,23 @@ __device__ inline void defer_once(unsigned i, unsigned* listed, unsigned long lo
   const unsigned bit = 1u << (i & 31u);
   if (!(atomicOr(listed + (i >> 5), bit) & bit)) deferred[append_index(counters + kDeferred)] = i;
 }
-// Appends a pair to a list whose room holds every pair it can get (the double filter's).
+// Appends a pair at the list's next index (the caller made sure it fits).
 __device__ inline void append_pair(unsigned long long* counter, std::pair<index_t, index_t>* list, const std::pair<index_t, index_t>& p) {
   const unsigned long long at = append_index(counter);
   list[at].first = p.first;  // (std::pair's assignment is host-only before C++20)
   list[at].second = p.second;
+}
+// FP32 first: a slot of the double filter's list (`room` slots, shared by both its ends). Every
+// slot asked for is counted (kKeptSlots); one past the room is not taken, and the host runs the
+// narrow phase again with more (NarrowPhase::collect). The list holds only what single precision
+// leaves (~2-5% of the screened pairs), so it is sized from that count rather than the screen's.
+__device__ inline bool take_kept_slot(unsigned long long* counters, std::size_t room) {
+  return append_index(counters + kKeptSlots) < room;
+}
+// A pair single precision leaves, appended to the double filter's list.
+__device__ inline void keep_for_double(unsigned long long* counters, std::pair<index_t, index_t>* double_kept, std::size_t room,
+                                       const std::pair<index_t, index_t>& p) {
+  if (take_kept_slot(counters, room)) append_pair(counters + kDoubleKept, double_kept, p);
 }
 
 // FP32 first, before the double filter: the single-precision filter's two rounds as the double
@@ -157,15 +169,16 @@ __device__ inline void append_pair(unsigned long long* counter, std::pair<index_
 // kSingleMisses at once, else kSingleListed less kSingleFailed); any other goes once (its bit in
 // `failed`, cleared before the run) to the double filter: appended to `double_kept`. With `whole`
 // (an interval inside in float: a contact, which the double filter would only pass on) it goes
-// straight to the whole search instead: listed from the top of `double_kept` (whose `room` holds
-// every screened pair, so the two ends never meet) and deferred; refine_deferred_kernel runs the
-// double screen on it first, as the double filter would have.
+// straight to the whole search instead: listed from the top of `double_kept` (both ends take
+// their slots from the list's `room`, so they never meet) and deferred; refine_deferred_kernel
+// runs the double screen on it first, as the double filter would have.
 __device__ inline void fail_single(unsigned i, unsigned* failed, unsigned long long* counters,
                                    const std::pair<index_t, index_t>* kept, std::pair<index_t, index_t>* double_kept,
-                                   std::size_t room = 0, unsigned* deferred = nullptr, bool whole = false) {
+                                   std::size_t room, unsigned* deferred = nullptr, bool whole = false) {
   const unsigned bit = 1u << (i & 31u);
   if (atomicOr(failed + (i >> 5), bit) & bit) return;
   append_index(counters + kSingleFailed);
+  if (!take_kept_slot(counters, room)) return;  // (the run is repeated with more room)
   if (!whole) {
     append_pair(counters + kDoubleKept, double_kept, kept[i]);
     return;
@@ -189,7 +202,7 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
                                      const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
                                      const unsigned long long* control, unsigned long long* counters,
                                      unsigned long long* intervals, std::size_t interval_room,
-                                     std::pair<index_t, index_t>* double_kept) {
+                                     std::pair<index_t, index_t>* double_kept, std::size_t kept_room) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const CcdParams<float> single_params = lwsccd::detail::single_params(params);
@@ -213,7 +226,7 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
       decided = Filter::decides_single(q, params);
     }
     if (decided) append_index(counters + kSingleMisses);
-    else append_pair(counters + kDoubleKept, double_kept, kept[i]);
+    else keep_for_double(counters, double_kept, kept_room, kept[i]);
   }
 }
 
@@ -224,7 +237,7 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
 // kInsideWhole, one inside in float straight to the whole search (fail_single).
 template <class Method, bool kVertexFace, class T, bool kInsideWhole>
 __global__ void single_inside_kernel(MeshFeatures mesh, const SingleVertex* single, const std::pair<index_t, index_t>* kept,
-                                     std::size_t room, const unsigned long long* control,
+                                     std::size_t kept_room, const unsigned long long* control,
                                      unsigned long long* counters, int counter, const unsigned long long* intervals,
                                      std::size_t interval_room, unsigned* failed, std::pair<index_t, index_t>* double_kept,
                                      unsigned* deferred, unsigned long long* expanded) {
@@ -242,7 +255,7 @@ __global__ void single_inside_kernel(MeshFeatures mesh, const SingleVertex* sing
     if (expanded && verdict == InsideVerdict::unknown && item_expandable(item) && (node >> Filter::kLevel) == 1u)
       expanded[append_index(counters + kSingleExpanded)] = item;
     else
-      fail_single(i, failed, counters, kept, double_kept, room, deferred, kInsideWhole && verdict == InsideVerdict::inside);
+      fail_single(i, failed, counters, kept, double_kept, kept_room, deferred, kInsideWhole && verdict == InsideVerdict::inside);
   }
 }
 
@@ -255,7 +268,7 @@ __global__ void single_expand_kernel(MeshFeatures mesh, const SingleVertex* sing
                                      const std::pair<index_t, index_t>* kept, CcdParams<T> params,
                                      const unsigned long long* control, unsigned long long* counters,
                                      const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
-                                     unsigned* failed, std::pair<index_t, index_t>* double_kept) {
+                                     unsigned* failed, std::pair<index_t, index_t>* double_kept, std::size_t kept_room) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   if (control[kSkip]) return;
   const CcdParams<float> single_params = lwsccd::detail::single_params(params);
@@ -268,7 +281,7 @@ __global__ void single_expand_kernel(MeshFeatures mesh, const SingleVertex* sing
     const auto q = gather_single_query<kVertexFace>(mesh, single, kept[i]);
     const int count = Filter::expand_single(q, single_params, node, below);
     if (count < 0) {
-      fail_single(i, failed, counters, kept, double_kept);
+      fail_single(i, failed, counters, kept, double_kept, kept_room);
       continue;
     }
     if (count == 0) continue;
@@ -279,7 +292,7 @@ __global__ void single_expand_kernel(MeshFeatures mesh, const SingleVertex* sing
         deep[base + k] = fits ? filter_item(i, false, Filter::deep_node(node, static_cast<unsigned>(__ffs(below) - 1))) : kNoInterval;
     // Pieces that do not fit: the pair decided on this thread (both rounds, the same answer as
     // every interval's test: a miss leaves its other intervals outside too).
-    if (!fits && !Filter::decides_single(q, params)) fail_single(i, failed, counters, kept, double_kept);
+    if (!fits && !Filter::decides_single(q, params)) fail_single(i, failed, counters, kept, double_kept, kept_room);
   }
 }
 

@@ -84,6 +84,8 @@ enum NarrowCounter : int {
   kSingleSearchMisses,  // the search in single precision: certain misses (pairs the single passes left)
   kSingleDescents,  // its contacts settled by a double tail (certain hits)
   kHandedToWarps,   // deferred searches in double a thread handed on (to a warp each, or a thread each past the limit)
+  kKeptSlots,       // FP32 first: slots of the double filter's list asked for (more than the room: the run is repeated with more)
+  kKeptSlotsPeak,   // the most asked for by an earlier window of mode earliest
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.
@@ -165,8 +167,10 @@ __global__ void window_begin_kernel(unsigned long long* control, unsigned long l
   for (int k = 0; k < 2; ++k) {
     unsigned long long* c = lists[k];
     const unsigned long long peak = first ? 0ull : (c[kSurvivors] > c[kSurvivorsPeak] ? c[kSurvivors] : c[kSurvivorsPeak]);
+    const unsigned long long slots_peak = first ? 0ull : (c[kKeptSlots] > c[kKeptSlotsPeak] ? c[kKeptSlots] : c[kKeptSlotsPeak]);
     for (int w = 0; w < kNarrowCounters; ++w) c[w] = 0;
     c[kSurvivorsPeak] = peak;
+    c[kKeptSlotsPeak] = slots_peak;
     c[kPairs] = sizes[k].get();
     c[kEarliestBits] = time_bits(1.0);
   }

@@ -92,25 +92,29 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     if (!kTwoPass) l.work_room = std::max(l.work_room, room);  // one-pass methods test the input itself
     l.hits.resize_discard(l.hit_room);
     if (kTwoPass) l.survivors.resize_discard(l.work_room);
+    // The lists of the refinement in double: FP32 first with the filter, only what single
+    // precision leaves reaches them, so their room is learned from that count (kKeptSlots);
+    // otherwise they may get every survivor.
+    l.refine_room = refine_room_learned(params.mode) ? std::max(l.refine_room, least) : l.work_room;
     if (kCertified) {
-      l.undecided.resize_discard(l.work_room);
-      l.deferred.resize_discard(l.work_room);
+      l.undecided.resize_discard(l.refine_room);
+      l.deferred.resize_discard(l.refine_room);
       // (Only a deferred list longer than kRefineWarpBelow hands searches on.)
-      if (Policy::kHandSearchesToWarps && l.work_room > static_cast<std::size_t>(Policy::kRefineWarpBelow))
-        l.handed.resize_discard((l.work_room + 31) / 32);
+      if (Policy::kHandSearchesToWarps && l.refine_room > static_cast<std::size_t>(Policy::kRefineWarpBelow))
+        l.handed.resize_discard((l.refine_room + 31) / 32);
       if (Policy::kRefineFilter && params.mode != CcdMode::set) {  // mode set does not run the filter
         // (FP32 first: the double filter's lists hold only what single precision leaves.)
         const std::size_t filter_percent = kSingleFirst ? Policy::kDoubleAfterSingleRoomPercent : Policy::kFilterRoomPercent;
         const std::size_t deep_percent = kSingleFirst ? Policy::kDoubleAfterSingleRoomPercent : Policy::kDeepRoomPercent;
         l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * filter_percent, 1));
         l.intervals.resize_discard(l.interval_room);
-        l.listed.resize_discard((l.work_room + 31) / 32);
+        l.listed.resize_discard((l.refine_room + 31) / 32);
         if (kSingleFirst) {
           l.single_interval_room =
               std::max(l.single_interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
           l.single_intervals.resize_discard(l.single_interval_room);
           l.single_failed.resize_discard((l.work_room + 31) / 32);
-          l.double_kept.resize_discard(l.work_room);
+          l.double_kept.resize_discard(l.refine_room);
           if (single_second_round(params.mode)) {
             l.single_expanded.resize_discard(l.single_interval_room);
             l.single_deep_room = std::max(l.single_deep_room, std::max<std::size_t>(l.work_room / 100 * Policy::kDeepRoomPercent, 1));
@@ -124,7 +128,7 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
         }
       }
     }
-    if (lwsccd::detail::inclusion_search_of<FullTest>::value) l.open.resize_discard(l.work_room);
+    if (lwsccd::detail::inclusion_search_of<FullTest>::value) l.open.resize_discard(kCertified ? l.refine_room : l.work_room);
   }
   // Mode earliest with CertifiedCcd: growing time windows (CertifiedPolicy::kEarliestFirst), each
   // screening and refining the pairs and running the fallback up to the window's end; a window
@@ -204,6 +208,7 @@ void NarrowPhase<Method, T, Policy>::count_survivors(const MeshFeatures& mesh, c
       const unsigned long long survivors = l.host_counters.data()[detail::kSurvivors];
       l.work_room = std::max(l.work_room, detail::grown_room(survivors));
       l.hit_room = std::max(l.hit_room, detail::grown_room(survivors / Policy::kFirstRunHitsPerSurvivors));
+      l.refine_room = std::max(l.refine_room, detail::grown_room(survivors / Policy::kFirstRunRefinePerSurvivors));
     }
   }
 }
@@ -234,24 +239,24 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         detail::single_filter_kernel<Method, kVertexFace, T>
             <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                 mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
-                l.single_intervals.data(), l.single_interval_room, l.double_kept.data());
+                l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room);
         LWSCCD_CUDA_CHECK_LAUNCH();
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
         const bool single_deeper = single_second_round(params.mode);
         detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
-            mesh, single_.data(), l.survivors.data(), l.work_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
+            mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
             l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
             single_deeper ? l.single_expanded.data() : nullptr);
         LWSCCD_CUDA_CHECK_LAUNCH();
         if (single_deeper) {
           detail::single_expand_kernel<Method, kVertexFace, T><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
               mesh, single_.data(), l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
-              l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data());
+              l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), l.refine_room);
           LWSCCD_CUDA_CHECK_LAUNCH();
           detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>
               <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                  mesh, single_.data(), l.survivors.data(), l.work_room, control_.data(), l.counters.data(),
+                  mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(),
                   detail::kSingleDeepIntervals, l.single_deep.data(), l.single_deep_room, l.single_failed.data(),
                   l.double_kept.data(), l.deferred.data(), nullptr);
           LWSCCD_CUDA_CHECK_LAUNCH();
@@ -260,7 +265,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         kept_counter = detail::kDoubleKept;
       }
       detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-          mesh, x0, x1, kept, kept_counter, l.work_room, params, control_.data(), l.counters.data(), l.intervals.data(),
+          mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
           l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
@@ -296,7 +301,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     unsigned* handed = kHand && l.handed.size() > 0 ? l.handed.data() : nullptr;
     if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
     detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, kept, l.work_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+        mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
         l.hit_room, l.undecided.data(), warp_below, handed);
     LWSCCD_CUDA_CHECK_LAUNCH();
     if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
@@ -318,13 +323,13 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       const std::size_t warp_room = std::min(room, warp_below);
       detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
           <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, kept, l.work_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+              mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
               l.hit_room, l.undecided.data(), warp_below);
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
     // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
     detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.work_room);
+        mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.refine_room);
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
 }
@@ -358,7 +363,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh,
     LWSCCD_CUDA_CHECK_LAUNCH();
   };
   const unsigned long long* counters = l.counters.data();
-  if constexpr (kCertified) launch(l.undecided.data(), DeviceCount{counters + detail::kUndecided, DeviceCount::Part::whole, l.work_room});
+  if constexpr (kCertified) launch(l.undecided.data(), DeviceCount{counters + detail::kUndecided, DeviceCount::Part::whole, l.refine_room});
   else if constexpr (kTwoPass) launch(l.survivors.data(), DeviceCount{counters + detail::kSurvivors, DeviceCount::Part::whole, l.work_room});
   else launch(in.pairs, in.count);
 }
@@ -380,6 +385,12 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     }
     if (hits > l.hit_room) {
       l.hit_room = detail::grown_room(hits);
+      complete = false;
+    }
+    // FP32 first: pairs single precision left that found no slot in the double filter's list.
+    const unsigned long long slots = std::max(c[detail::kKeptSlots], c[detail::kKeptSlotsPeak]);
+    if (slots > l.refine_room) {
+      l.refine_room = detail::grown_room(slots);
       complete = false;
     }
     // The filter's intervals that did not fit went to the whole search (same answers): more room
