@@ -13,6 +13,8 @@ It reports them per feature pair of the step, and the time the FP64 part alone w
 0.6e12 FP64 instructions per second (a GPU of today's size that runs FP64 at 1/64 of FP32, as the
 RTX and L40 classes do). Several inputs: separate them with '--', e.g.
   fp_instructions.py --json fp.json -- ../shared/data/scenes/cloth-ball -- --triangles 100000
+lwsccd-ccd's options follow an input: '--fp64-ratio 64' counts the path a GPU with FP64 at 1/64 of
+FP32 takes (its searches in double a thread each) on a GPU with more FP64, e.g. an H100.
 """
 import argparse
 import csv

@@ -67,6 +67,9 @@ inline void print_usage(std::FILE* out) {
                "  --part-pairs N   run each step in parts of at most N candidate triangle pairs (both\n"
                "                   devices; same contacts, less memory at once)\n"
                "  --threads N      CPU backend: at most N threads (default: every core)\n"
+               "  --fp64-ratio R   GPU: plan the narrow phase as for a GPU whose FP32 runs R times its\n"
+               "                   FP64 (default: the device's own; e.g. 64 to count on an H100 what an\n"
+               "                   RTX-class GPU runs; same contacts)\n"
                "  --no-front-tracking  traverse from the root every step\n"
                "  --check          also run the CPU oracle (sort-and-sweep, every candidate pair) and\n"
                "                   compare contacts pair for pair (slow on large scenes)\n"
@@ -158,6 +161,8 @@ inline Options parse_options(int argc, char** argv) {
       o.params.part_pairs = static_cast<std::size_t>(parse_integer(a, value(), 1, 1LL << 40));
     } else if (a == "--threads") {
       o.params.threads = static_cast<unsigned>(parse_integer(a, value(), 1, 1 << 16));
+    } else if (a == "--fp64-ratio") {
+      o.params.fp64_ratio = static_cast<int>(parse_integer(a, value(), 1, 1 << 16));
     } else if (a == "--max-iterations") {
       o.params.max_iterations = static_cast<int>(parse_integer(a, value(), 1, 1 << 30));
     } else if (a == "--no-front-tracking") {

@@ -62,13 +62,15 @@ struct GrowFromCapacity : gpu::NarrowPhasePolicy {
 template <class Method, class T, class Policy = gpu::NarrowPhasePolicy>
 std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
                              const FeaturePairs& pairs, std::size_t capacity, CcdMode mode = CcdMode::contacts,
-                             std::size_t* reruns = nullptr, std::size_t* handed = nullptr) {
+                             std::size_t* reruns = nullptr, std::size_t* handed = nullptr, int fp64_ratio = 0,
+                             std::size_t* handed_in_warps = nullptr) {
   gpu::DeviceMeshFeatures features(mesh);
   gpu::DeviceStep<double> step(mesh, x0, x1);
   gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
   vf.upload(pairs.vf);
   ee.upload(pairs.ee);
   gpu::NarrowPhase<Method, T, Policy> narrow(capacity);
+  narrow.plan_for_fp64_ratio(fp64_ratio);
   CcdParams<T> params;
   params.mode = mode;
   narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
@@ -82,6 +84,7 @@ std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>&
     REQUIRE(narrow.reruns() > 0);
   if (reruns) *reruns = narrow.reruns();
   if (handed) *handed = narrow.handed_searches();
+  if (handed_in_warps) *handed_in_warps = narrow.handed_searches_in_warps();
   if (lwsccd::detail::certified_of<Method>::value) {
     lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
     lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
@@ -161,6 +164,22 @@ TEST_CASE("GPU narrow phase: searches in double handed from a thread to a warp e
     CHECK(to_threads == handed);
     compare_backends<CertifiedCcd, float, HandedToThreads>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<DoubleOnly, double, HandedAsWithLittleFp64>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    // Planned as for a GPU whose FP32 runs 64 times its FP64 (PipelineParams::fp64_ratio): the same
+    // answers, every handed search a thread each; planned for 1 (as an H100 or H200 is): a warp each
+    // in a list that hands on at most kHandedWarpsPerSm per SM (all of them where both lists together do).
+    std::size_t planned_64 = 0, in_warps_64 = 1, planned_1 = 0, in_warps_1 = 0;
+    compare_backends<DoubleOnly, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, &planned_64, 64, &in_warps_64);
+    compare_backends<DoubleOnly, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, &planned_1, 1, &in_warps_1);
+    CHECK(planned_64 == handed);
+    CHECK(in_warps_64 == 0);
+    CHECK(planned_1 == handed);
+    int sms = 0;
+    LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, 0));
+    const auto warp_limit = static_cast<std::size_t>(sms) * static_cast<std::size_t>(HandedToWarps::kHandedWarpsPerSm);
+    std::printf("  planned for FP64 at 1/64: %zu handed, %zu a warp each; at 1/1: %zu a warp each (limit %zu a list)\n",
+                planned_64, in_warps_64, in_warps_1, warp_limit);
+    CHECK(in_warps_1 <= handed);
+    if (handed <= warp_limit) CHECK(in_warps_1 == handed);
     compare_backends<DoubleOnly, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, double, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, float, HandedToWarps>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);

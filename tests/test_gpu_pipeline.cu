@@ -147,12 +147,16 @@ TEST_CASE("GPU pipeline equals the CPU pipeline over several steps of a folded c
   auto mesh = std::make_shared<const TriangleMesh>(first.mesh);
   gpu::CcdPipeline<> gpu_pipeline(mesh);
   cpu::CcdPipeline<> cpu_pipeline(mesh);
+  PipelineParams planned;  // as on a GPU with little FP64: the same answers
+  planned.fp64_ratio = 64;
+  gpu::CcdPipeline<> planned_pipeline(mesh, planned);
   for (int s = 0; s < 4; ++s) {
     INFO("step " << s);
     const auto m = lwsccd_test::folded_cloth(50, 1 + s);
     const auto g = gpu_pipeline.step(m.x0, m.x1);
     const auto c = cpu_pipeline.step(m.x0, m.x1);
     require_same_contacts(g, c);
+    require_same_contacts(planned_pipeline.step(m.x0, m.x1), c);
     CHECK(g.stats.hits_vf + g.stats.hits_ee > 0);
     CHECK(g.stats.peak_device_bytes > 0);
     // What the pipeline holds, by purpose, adds up to its count and names every stage's buffers.

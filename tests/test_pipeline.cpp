@@ -162,6 +162,7 @@ TEST_CASE("CPU pipeline rejects bad parameters, layouts and positions with a cle
   CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.front_growth_limit = 0.5; })), InputError);
   CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.front_growth_limit = -1; })), InputError);
   CHECK_NOTHROW(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.front_growth_limit = 0; })));  // the backend's default
+  CHECK_THROWS_AS(cpu::CcdPipeline<>(mesh, with([](PipelineParams& p) { p.fp64_ratio = -1; })), InputError);
   CHECK_THROWS_AS(cpu::CcdPipeline<>(nullptr), InputError);
   BodyLayout short_layout;
   short_layout.face_body = {0};

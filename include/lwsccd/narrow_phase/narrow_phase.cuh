@@ -10,6 +10,7 @@
 #include "lwsccd/bvh/bvh.cuh"
 #include "lwsccd/core/cuda_handles.cuh"
 #include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/core/error.hpp"
 #include "lwsccd/core/host_staging.cuh"
 #include "lwsccd/narrow_phase/ccd_filters.hpp"
 #include "lwsccd/narrow_phase/certified_ccd.hpp"
@@ -220,6 +221,18 @@ class NarrowPhase {
   /// CertifiedCcd: of those, searches in double that a thread handed on to a warp or a thread each
   /// (NarrowPhasePolicy::kHandSearchesToWarps), in the last run.
   std::size_t handed_searches() const { return lists_[0].handed_searches + lists_[1].handed_searches; }
+  /// Of those, the ones the last run searched a warp each (the rest: a thread each).
+  std::size_t handed_searches_in_warps() const { return lists_[0].handed_in_warps + lists_[1].handed_in_warps; }
+  /// Plans the following runs as for a GPU whose FP32 runs `ratio` times faster than its FP64 (0:
+  /// this device's own, cudaDevAttrSingleToDoublePrecisionPerfRatio): past
+  /// kHandedWarpsMaxFp64Ratio the handed searches run a thread each. The answers do not change
+  /// (PipelineParams::fp64_ratio: measuring on one GPU the path another takes).
+  void plan_for_fp64_ratio(int ratio) {
+    if (ratio < 0) throw InputError("gpu::NarrowPhase::plan_for_fp64_ratio", "ratio", "must be >= 0 (0: the device's own)");
+    planned_fp64_ratio_ = ratio;
+  }
+  /// The FP32:FP64 ratio the runs plan for (the device's until the first run, unless planned).
+  int fp64_ratio() const { return planned_fp64_ratio_ > 0 ? planned_fp64_ratio_ : fp64_ratio_; }
   T earliest_toi() const { return earliest_; }
   std::size_t gave_up() const { return gave_up_; }
   /// Runs enqueued again because an output outgrew its buffer, since construction.
@@ -277,7 +290,7 @@ class NarrowPhase {
     std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
     std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
-    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0;
+    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0, handed_in_warps = 0;
     CudaStream stream;
     CudaEvent done;
   };
@@ -317,6 +330,8 @@ class NarrowPhase {
   T earliest_ = T(1);
   int sms_ = 1;
   int fp64_ratio_ = 2;  ///< the device's FP32 to FP64 throughput ratio
+  int planned_fp64_ratio_ = 0;  ///< plan_for_fp64_ratio (0: the device's)
+  std::size_t handed_warp_limit_ = 0;  ///< the last run's: at most this many handed searches went to warps
   bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
   bool rooms_learned_ = false;  ///< a run has sized the lists (count_survivors on the first)
 };

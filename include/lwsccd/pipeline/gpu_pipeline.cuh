@@ -48,6 +48,7 @@ class CcdPipeline {
     // Features that come within min_separation: their boxes, each grown by half of it, overlap.
     bvh_.set_leaf_margin(params_.min_separation / 2);
     emitter_.set_box_margin(params_.min_separation / 2);
+    narrow_.plan_for_fp64_ratio(params_.fp64_ratio);
     const std::vector<unsigned char> self_collides = lwsccd::detail::self_collision_flags(layout_);
     if (!self_collides.empty()) {
       face_body_.upload(layout_.face_body, stream);

@@ -41,6 +41,12 @@ struct PipelineParams {
   /// CPU backend: at most this many threads (0: every core; cpu::ThreadLimit). The GPU backend's
   /// host side is one thread and ignores it.
   unsigned threads = 0;
+  /// GPU backend: plan the narrow phase as for a GPU whose FP32 runs this many times faster than
+  /// its FP64 (0: the device's own ratio). Above 2 the searches in double that the thread kernel
+  /// hands on run a thread each rather than a warp each (NarrowPhasePolicy::kHandedWarpsMaxFp64Ratio);
+  /// the answers are the same for every value. For measuring on one GPU the path another takes
+  /// (e.g. 64, an RTX- or L40-class GPU, counted on an H100: bench/fp_instructions.py).
+  int fp64_ratio = 0;
 
   /// Throws InputError naming the first parameter out of range.
   void validate() const;
@@ -56,6 +62,7 @@ inline void PipelineParams::validate() const {
   require(rebuild_factor >= 1, "rebuild_factor", "must be >= 1 (1: rebuild every step)");
   require(front_growth_limit == 0 || front_growth_limit >= 1, "front_growth_limit",
           "must be >= 1, or 0 for the backend's default");
+  require(fp64_ratio >= 0, "fp64_ratio", "must be >= 0 (0: the device's own)");
 }
 
 /// The CPU backend's front growth limit: a CPU pays as much for an item of a front as for one of a

@@ -305,9 +305,10 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         l.hit_room, l.undecided.data(), warp_below, handed);
     LWSCCD_CUDA_CHECK_LAUNCH();
     if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
-      const std::size_t warp_limit = fp64_ratio_ <= Policy::kHandedWarpsMaxFp64Ratio
+      const std::size_t warp_limit = fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio
                                          ? static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kHandedWarpsPerSm)
                                          : 0;
+      handed_warp_limit_ = warp_limit;
       detail::refine_handed_warp_kernel<Method, kVertexFace, T, P>
           <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
               mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
@@ -414,6 +415,8 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.warp_searches = static_cast<std::size_t>(c[detail::kOpen]);
     l.whole_searches = static_cast<std::size_t>(c[detail::kDeferred]);
     l.handed_searches = static_cast<std::size_t>(c[detail::kHandedToWarps]);
+    // (As the two kernels decide on the device: a warp each up to the limit.)
+    l.handed_in_warps = l.handed_searches <= handed_warp_limit_ ? l.handed_searches : 0;
     l.counts = {};
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
