@@ -299,11 +299,11 @@ class NarrowPhase {
   void join_lists(cudaStream_t stream);
   /// Whether the filter's second round runs (NarrowPhasePolicy::kFilterSecondRound).
   static constexpr bool second_round(CcdMode mode) { return Policy::kRefineFilter && Policy::kFilterSecondRound && mode == CcdMode::contacts; }
-  // The single-precision filter's second round (CertifiedPolicy::kSingleSecondRound) runs wherever
-  // its first does, as on the CPU (CertifiedFilter::decides_single).
   // Whether the refinement's lists (refine_room) hold only what single precision leaves, their
   // room learned from its count: FP32 first with the filter (any other path refines every survivor).
   static constexpr bool refine_room_learned(CcdMode mode) { return kSingleFirst && Policy::kRefineFilter && mode != CcdMode::set; }
+  // The single-precision filter's second round (CertifiedPolicy::kSingleSecondRound) runs wherever
+  // its first does, as on the CPU (CertifiedFilter::decides_single).
   static constexpr bool single_second_round(CcdMode mode) {
     if constexpr (kSingleFirst) return Policy::kRefineFilter && mode != CcdMode::set && Method::policy_type::kSingleSecondRound;
     else return false;

@@ -190,8 +190,9 @@ struct StepStats {
   std::size_t narrow_warp_searches = 0;  ///< GPU: of those, searched by a warp (still open after the thread's rounds)
   NarrowPhaseCounts narrow_vf, narrow_ee;  ///< certified hits / misses and fallbacks per list (CertifiedCcd)
   std::size_t peak_device_bytes = 0;
-  /// GPU: what the pipeline holds on its device after the step, by purpose (its total is
-  /// CcdPipeline::device_bytes(); the peak above adds the step's passing scratch).
+  /// gpu::CcdPipeline: what the pipeline holds on its device after the step, by purpose (its total
+  /// is device_bytes(); the peak above adds the step's passing scratch). Empty from the CPU
+  /// backend and from MultiGpuPipeline (its device_stats() give each GPU's bytes in peak_device_bytes).
   DeviceMemoryUse device_memory;
   /// GPU: stages enqueued again in this step because a list outgrew the room earlier steps gave
   /// it (the feature pairs' or the narrow phase's; nothing is lost, the step just costs more).
