@@ -45,6 +45,9 @@ class Pipeline:
             devices, same contacts, less memory at once.
         threads: CPU backend: at most this many threads (0, the default: every core). The
             GPU backend ignores it.
+        fp64_ratio: GPU backend: plan the narrow phase as for a GPU whose FP32 runs this many
+            times its FP64 (0, the default: the device's own; e.g. 64 to run on an H100 what an
+            RTX-class GPU runs); the same contacts. For measuring; the CPU backend ignores it.
         device: "auto" (the GPU when the package has it and a device is present, else the
             CPU), "gpu" or "cpu".
 
@@ -74,6 +77,7 @@ class Pipeline:
         device_memory_budget: int = 0,
         part_pairs: int = 0,
         threads: int = 0,
+        fp64_ratio: int = 0,
         device: str = "auto",
     ) -> None:
         f = np.asarray(faces)
@@ -99,7 +103,7 @@ class Pipeline:
             int(num_vertices), f, body_list, collides, bv, scheduler, method, precision, mode,
             float(min_separation), float(tolerance), int(max_iterations), bool(front_tracking),
             float(rebuild_factor), float(front_growth_limit), int(device_memory_budget),
-            int(part_pairs), int(threads), device,
+            int(part_pairs), int(threads), int(fp64_ratio), device,
         )
         self.mode = mode
 

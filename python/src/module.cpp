@@ -173,7 +173,8 @@ class Pipeline {
            std::vector<bool> body_self_collides, const std::string& bv, const std::string& scheduler,
            const std::string& method, const std::string& precision, const std::string& mode, double min_separation,
            double tolerance, int max_iterations, bool front_tracking, double rebuild_factor, double front_growth_limit,
-           std::size_t device_memory_budget, std::size_t part_pairs, std::int64_t threads, const std::string& device) {
+           std::size_t device_memory_budget, std::size_t part_pairs, std::int64_t threads, std::int64_t fp64_ratio,
+           const std::string& device) {
     if (num_vertices < 1 || num_vertices > 0x7fffffff)
       throw lwsccd::InputError("lwsccd.Pipeline", "num_vertices", "must be in [1, 2^31), got " + std::to_string(num_vertices));
     std::vector<lwsccd::Face> mesh_faces(faces.shape(0));
@@ -214,6 +215,10 @@ class Pipeline {
     if (threads < 0 || threads > (1 << 16))
       throw lwsccd::InputError("lwsccd.Pipeline", "threads", "must be in [0, 65536] (0: every core), got " + std::to_string(threads));
     params.threads = static_cast<unsigned>(threads);
+    if (fp64_ratio < 0 || fp64_ratio > (1 << 16))
+      throw lwsccd::InputError("lwsccd.Pipeline", "fp64_ratio", "must be in [0, 65536] (0: the device's own), got " +
+                               std::to_string(fp64_ratio));
+    params.fp64_ratio = static_cast<int>(fp64_ratio);
     const lwsccd::PolicyChoice choice{bv, scheduler, method, precision};
     lwsccd::validate(choice);
     if (device == "gpu") pipeline_ = lwsccd_python::make_gpu_pipeline(mesh_, layout, params, choice);
@@ -350,10 +355,11 @@ NB_MODULE(_lwsccd, m) {
   nb::class_<Pipeline>(m, "Pipeline")
       .def(nb::init<std::int64_t, const HostFaces&, std::vector<std::int64_t>, std::vector<bool>, const std::string&,
                     const std::string&, const std::string&, const std::string&, const std::string&, double, double, int, bool,
-                    double, double, std::size_t, std::size_t, std::int64_t, const std::string&>(),
+                    double, double, std::size_t, std::size_t, std::int64_t, std::int64_t, const std::string&>(),
            "num_vertices"_a, "faces"_a, "face_body"_a, "body_self_collides"_a, "bv"_a, "scheduler"_a, "method"_a,
            "precision"_a, "mode"_a, "min_separation"_a, "tolerance"_a, "max_iterations"_a, "front_tracking"_a,
-           "rebuild_factor"_a, "front_growth_limit"_a, "device_memory_budget"_a, "part_pairs"_a, "threads"_a, "device"_a)
+           "rebuild_factor"_a, "front_growth_limit"_a, "device_memory_budget"_a, "part_pairs"_a, "threads"_a, "fp64_ratio"_a,
+           "device"_a)
       .def("step", &Pipeline::step<double>, "x0"_a, "x1"_a)
       .def("step_f32", &Pipeline::step<float>, "x0"_a, "x1"_a)
       .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a, "float32"_a)

@@ -32,7 +32,7 @@ def same(a, b):
 
 
 @pytest.mark.parametrize("policy", [{}, dict(bv="obb", scheduler="static"), dict(precision="float"), dict(mode="earliest"),
-                                    dict(method="filtered-inclusion", scheduler="gproximity")])
+                                    dict(method="filtered-inclusion", scheduler="gproximity"), dict(fp64_ratio=64)])
 def test_gpu_equals_cpu(scene, policy):
     sim, steps = scene
     gpu, cpu = pipelines(sim, **policy)

@@ -113,6 +113,12 @@ def test_thread_counts_give_the_same_contacts(cloth_steps):
         assert a.earliest_toi == b.earliest_toi and len(a.vertex_face) + len(a.edge_edge) > 0
     with pytest.raises(ValueError, match="threads"):
         cpu_pipeline(sim, threads=-2)
+    # fp64_ratio plans the GPU's narrow phase; the CPU backend ignores it, a negative one is refused.
+    planned = cpu_pipeline(sim, fp64_ratio=64).step(*steps[0])
+    reference = cpu_pipeline(sim).step(*steps[0])
+    assert np.array_equal(planned.vertex_face, reference.vertex_face) and np.array_equal(planned.edge_edge, reference.edge_edge)
+    with pytest.raises(ValueError, match="fp64_ratio"):
+        cpu_pipeline(sim, fp64_ratio=-1)
 
 
 def test_restart_from_root_gives_the_same_contacts(cloth_steps):
