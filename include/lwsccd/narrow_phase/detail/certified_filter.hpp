@@ -208,18 +208,23 @@ struct CertifiedFilter {
   template <class Q, class T>
   LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params_in) {
     const CcdParams<float> params = single_params(params_in);
+    // intervals_single, inside_single and expand_single on one thread: the relative query and the
+    // cubic's piece on the step are computed once for all of them (the same values).
+    if (!Policy::kSingleFirst || params.min_separation > 0.0f || params.tolerance >= exact_pow2_neg<float>(kLevel - 1)) return false;
+    const auto s = relative_single(q);
+    BernsteinPiece<float> root;
     std::uint32_t mask = 0;
-    const int count = intervals_single(q, params, mask);
+    const int count = intervals_of(s, params, mask, &root);
     if (count < 0) return false;
     if (mask == 0) return true;
-    const auto s = relative_single(q);  // (once for all its intervals)
     for (unsigned node = 0; node < 32; ++node) {
       if (!((mask >> node) & 1u)) continue;
       const InsideVerdict v = verdict_of(s, node);
       if (v == InsideVerdict::outside) continue;
       std::uint32_t deep = 0;
       if (v != InsideVerdict::unknown || !expandable(count) || !Policy::kSingleSecondRound ||
-          params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1) || expand_of(s, params, node, deep) < 0)
+          params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1) || params.mode == CcdMode::set || node < (1u << kLevel) ||
+          node >= (2u << kLevel) || expand_piece(root, params, node, deep) < 0)
         return false;
       for (unsigned local = 0; local < 32; ++local)
         if (((deep >> local) & 1u) && verdict_of(s, deep_node(node, local)) != InsideVerdict::outside) return false;
@@ -239,10 +244,13 @@ struct CertifiedFilter {
   }
   // (T is float: a deduced parameter keeps the calls below dependent, which GCC 12's host pass of
   // nvcc needs to compile them.)
+  // `root_out`, when given, receives the cubic's piece on the step (expand_piece's start).
   template <class QF, class T>
-  LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask) {
+  LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask,
+                                    BernsteinPiece<float>* root_out = nullptr) {
     BernsteinPiece<float> root;
     if (!single_cubic(s, root)) return -1;
+    if (root_out) *root_out = root;
     if (same_sign_beyond(root.c, root.bound)) return 0;
     if (!finite_value(underflow_slack(fmul(4.0f, max_component(s.m)), 4))) return -1;
     Noted<T> noted;

@@ -58,17 +58,22 @@ LWSCCD_HD LWSCCD_HOST_INLINE MovingDifference<T> moving_difference(const Vec3<T>
 enum class InsideVerdict : std::uint8_t { outside, outside_as_given, inside, unknown };
 
 /// X x Y for two moving differences, with the majorants |X| x |Y| (abs_cross) at the computed
-/// values, at the values widened by their as-given errors, and by their perturbed errors. A sign
-/// test is the dot product of two of these, so terms shared by several tests are computed once.
+/// values and at the values widened by their perturbed errors; as_given() widens them by their
+/// as-given errors, which only a test that does not exclude reads (most exclude). A sign test is
+/// the dot product of two of these, so terms shared by several tests are computed once.
 template <class T>
 struct CrossTerm {
-  Vec3<T> value, majorant, as_given, perturbed;
-  LWSCCD_HD LWSCCD_HOST_INLINE CrossTerm(const MovingDifference<T>& X, const MovingDifference<T>& Y) {
+  const MovingDifference<T>& x;
+  const MovingDifference<T>& y;
+  Vec3<T> value, majorant, perturbed;
+  LWSCCD_HD LWSCCD_HOST_INLINE CrossTerm(const MovingDifference<T>& X, const MovingDifference<T>& Y) : x(X), y(Y) {
     value = vcross(X.value, Y.value);
     const Vec3<T> ax = abs(X.value), ay = abs(Y.value);
     majorant = abs_cross(ax, ay);
-    as_given = abs_cross(vadd(ax, X.error), vadd(ay, Y.error));
     perturbed = abs_cross(vadd(ax, X.perturbed), vadd(ay, Y.perturbed));
+  }
+  LWSCCD_HD LWSCCD_HOST_INLINE Vec3<T> as_given() const {
+    return abs_cross(vadd(abs(x.value), x.error), vadd(abs(y.value), y.error));
   }
 };
 
@@ -90,7 +95,7 @@ struct SignTest {
     bound = fadd(fmul(k, fadd(fsub(mp, m0), fmul(r, mp))), slack);
     finite = finite_value(sigma) && finite_value(bound);
     if (excludes()) return;
-    const T me = vdot(xy.as_given, ab.as_given);
+    const T me = vdot(xy.as_given(), ab.as_given());
     exact = fadd(fmul(k, fadd(fsub(me, m0), fmul(r, me))), slack);
   }
   /// Certainly negative, even for a perturbed query (the values are finite, so nothing overflowed).
@@ -157,16 +162,21 @@ LWSCCD_HD InsideVerdict inside_over(const VertexFaceQuery<T>& q, T mid, T half, 
 template <class Policy, class T>
 LWSCCD_HD InsideVerdict inside_over(const EdgeEdgeQuery<T>& q, T mid, T half, const Vec3<T>& m, T perturbation,
                                     T slack, T given = T(0)) {
+  // Each term is computed where a test first needs it: most intervals are excluded by the first
+  // tests, and the values are the same whatever the order.
   const MovingDifference<T> P = moving_difference(q.a0, q.a1, q.c0, q.c1, mid, half, m, perturbation, given);
   const MovingDifference<T> A = moving_difference(q.a0, q.a1, q.b0, q.b1, mid, half, m, perturbation, given);
   const MovingDifference<T> B = moving_difference(q.c0, q.c1, q.d0, q.d1, mid, half, m, perturbation, given);
-  const MovingDifference<T> CB = moving_difference(q.c0, q.c1, q.b0, q.b1, mid, half, m, perturbation, given);
-  const MovingDifference<T> AD = moving_difference(q.a0, q.a1, q.d0, q.d1, mid, half, m, perturbation, given);
-  const CrossTerm<T> n(A, B), pb(P, B), cbb(CB, B), pa(P, A), aad(A, AD);
+  const CrossTerm<T> n(A, B), pb(P, B);
   InsideVote<T> vote;
   if (vote.add(SignTest<Policy, T>(pb, n, slack))) return InsideVerdict::outside;
+  const MovingDifference<T> CB = moving_difference(q.c0, q.c1, q.b0, q.b1, mid, half, m, perturbation, given);
+  const CrossTerm<T> cbb(CB, B);
   if (vote.add(SignTest<Policy, T>(cbb, n, slack))) return InsideVerdict::outside;
+  const CrossTerm<T> pa(P, A);
   if (vote.add(SignTest<Policy, T>(pa, n, slack))) return InsideVerdict::outside;
+  const MovingDifference<T> AD = moving_difference(q.a0, q.a1, q.d0, q.d1, mid, half, m, perturbation, given);
+  const CrossTerm<T> aad(A, AD);
   if (vote.add(SignTest<Policy, T>(aad, n, slack))) return InsideVerdict::outside;
   if (vote.add_exclusion(SignTest<Policy, T>(pa, aad, slack))) return InsideVerdict::outside;
   if (vote.add_exclusion(SignTest<Policy, T>(pb, cbb, slack))) return InsideVerdict::outside;
