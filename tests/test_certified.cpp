@@ -695,3 +695,84 @@ TEST_CASE("single-precision screen: pairs screened in lanes get the one-pair scr
   params.min_separation = 1e-3;
   CHECK_FALSE(detail::screen_in_lanes_applies(params));
 }
+
+namespace {
+template <int kPercent>
+struct ShrunkSeparationPolicy : CertifiedPolicy {
+  static constexpr double kSeparationBound = kPercent / 100.0;
+};
+
+// Exact double coordinates of a point far from the origin (2^20 .. 2^21 in 64ths: float rounds
+// them), axes permuted and signs flipped as `axes` and `signs` say.
+Vec3<double> far_point(const Vec3<long double>& p, const Vec3<long double>& offset, const int axes[3], int signs) {
+  const Vec3<long double> q = p + offset;
+  Vec3<long double> r;
+  for (int k = 0; k < 3; ++k) r[k] = q[axes[k]] * (((signs >> k) & 1) ? -1 : 1);
+  return r.cast<double>();
+}
+}  // namespace
+
+TEST_CASE("single-precision filter: separating directions only for features apart, within their bound (mutation check)",
+          "[narrow][certified][single]") {
+  // Touching pairs whose hulls meet with a gap of exactly 0 along the direction between the
+  // features' centroids (a vertex sliding in a face's plane onto an edge across that direction; an
+  // edge sliding onto another edge so), far from the origin so that the float query is rounded:
+  // never declared apart; with the bound removed, rounding separates some. Pairs apart (a vertex
+  // passing over a face's plane beside it, an edge passing above another), nearer the origin:
+  // declared apart.
+  std::mt19937 rng(20261127);
+  const int axes[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+  const float perturbation = detail::single_input_perturbation<CertifiedPolicy>();
+  std::size_t touching = 0, claimed = 0, claimed_mutated = 0, apart = 0, separated = 0;
+  auto offset = [&] {
+    auto one = [&] { return std::ldexp(1.0L, 20) + std::ldexp(static_cast<long double>(rng() % (1u << 26)), -6); };
+    return Vec3<long double>{one(), one(), one()};
+  };
+  for (int n = 0; n < 4000; ++n) {
+    const int* axis = axes[rng() % 6];
+    const int signs = static_cast<int>(rng() % 8);
+    const Vec3<long double> o = offset();
+    const long double a = eighth(rng, 8, 128), s = eighth(rng, -7, 7) * a / 8, y = eighth(rng, 1, 128), z = eighth(rng, 0, 64),
+                      c = eighth(rng, 8, 128);
+    // (u, v, z) -> (u + v, u - v, z): the edges the pairs touch lie along (1, 1, 0), so that the
+    // float rounding of x and y breaks the exact tie of the projections either way.
+    auto at_from = [&](const Vec3<long double>& origin) {
+      return [&, origin](long double pu, long double pv, long double pz) { return far_point({pu + pv, pu - pv, pz}, origin, axis, signs); };
+    };
+    const auto at = at_from(o);
+    const auto near = at_from(o * std::ldexp(1.0L, -12));  // 2^8 .. 2^9 from the origin
+    // Vertex from (-s, y, z) to (s, 0, 0), on the edge from (-a, 0, 0) to (a, 0, 0) at t = 1.
+    const VertexFaceQuery<double> vf{at(-s, y, z), at(-a, 0, 0), at(a, 0, 0), at(0, -c, 0),
+                                     at(s, 0, 0),  at(-a, 0, 0), at(a, 0, 0), at(0, -c, 0)};
+    // Edge from (u, y, z)-(-(s + t + u), y + y', z) to (s, 0, 0)-(t, y', 0): its first point on
+    // the edge (-a, 0, 0)-(a, 0, 0) at t = 1; the x of its four points sum to 0.
+    const long double t = eighth(rng, -64, 64), u = eighth(rng, -64, 64), y2 = eighth(rng, 1, 64);
+    const EdgeEdgeQuery<double> ee{at(u, y, z), at(-(s + t + u), y + y2, z), at(-a, 0, 0), at(a, 0, 0),
+                                   at(s, 0, 0), at(t, y2, 0),                at(-a, 0, 0), at(a, 0, 0)};
+    touching += 2;
+    for (bool sound : {true, false}) {
+      const std::size_t vf_claim = sound ? detail::swept_hulls_apart<CertifiedPolicy>(detail::relative_single(vf), perturbation)
+                                         : detail::swept_hulls_apart<ShrunkSeparationPolicy<0>>(detail::relative_single(vf), perturbation);
+      const std::size_t ee_claim = sound ? detail::swept_hulls_apart<CertifiedPolicy>(detail::relative_single(ee), perturbation)
+                                         : detail::swept_hulls_apart<ShrunkSeparationPolicy<0>>(detail::relative_single(ee), perturbation);
+      (sound ? claimed : claimed_mutated) += vf_claim + ee_claim;
+    }
+    // Apart: the vertex moving over the face's plane beside the face; the edge passing above the other.
+    const VertexFaceQuery<double> over{near(-s, y, z + 1), near(-a, 0, 0), near(a, 0, 0), near(0, -c, 0),
+                                       near(s, y / 2, z + 1), near(-a, 0, 0), near(a, 0, 0), near(0, -c, 0)};
+    const EdgeEdgeQuery<double> above{near(u, y, z), near(-(s + t + u), y + y2, z), near(-a, 0, 0), near(a, 0, 0),
+                                      near(s, y / 2, 0), near(t, y2 + y / 2, 0), near(-a, 0, 0), near(a, 0, 0)};
+    apart += 2;
+    separated += detail::swept_hulls_apart<CertifiedPolicy>(detail::relative_single(over), perturbation);
+    separated += detail::swept_hulls_apart<CertifiedPolicy>(detail::relative_single(above), perturbation);
+    // A point of a hull that is not finite: never apart.
+    VertexFaceQuery<double> huge = over;
+    huge.p1 = {3e38, 0, 0};
+    CHECK_FALSE(detail::swept_hulls_apart<CertifiedPolicy>(detail::relative_single(huge), perturbation));
+  }
+  std::printf("  separating directions: %zu touching pairs declared apart %zu times (sound), %zu (bound removed); %zu of %zu "
+              "pairs apart separated\n", touching, claimed, claimed_mutated, separated, apart);
+  CHECK(claimed == 0);
+  CHECK(claimed_mutated > 0);
+  CHECK(separated == apart);
+}

@@ -248,6 +248,7 @@ struct CertifiedFilter {
   template <class QF, class T>
   LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask,
                                     BernsteinPiece<float>* root_out = nullptr) {
+    if (Policy::kSeparatingDirections && swept_hulls_apart<Policy>(s, single_input_perturbation<Policy>())) return 0;
     BernsteinPiece<float> root;
     if (!single_cubic(s, root)) return -1;
     if (root_out) *root_out = root;

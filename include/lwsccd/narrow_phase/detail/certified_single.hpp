@@ -86,6 +86,56 @@ LWSCCD_HD LWSCCD_HOST_INLINE float single_input_perturbation() {
   return fmul(fadd(u, u * exact_pow2_neg<float>(18)), static_cast<float>(Policy::kSingleInputBound));
 }
 
+/// Whether point i of a query (points() order) belongs to its first feature: the vertex of a
+/// vertex-face query (p0, p1), the first edge of an edge-edge one (a0, b0, a1, b1).
+template <class Q>
+LWSCCD_HD LWSCCD_HOST_INLINE constexpr bool first_feature_point(int i) {
+  return std::is_same<Q, VertexFaceQuery<float>>::value ? (i & 3) == 0 : (i & 3) < 2;
+}
+
+/// True when the two features of the single-precision query are apart for the whole step, by a
+/// separating direction of their swept hulls (bound B13, docs/NARROW_PHASE.md): a point of a
+/// moving feature at time t is a convex combination of its vertices at t, each of them one of
+/// (1 - t) x0 + t x1, so it lies in the convex hull of the feature's points at t = 0 and t = 1,
+/// and a direction d with max d.x over one hull's points below min d.y over the other's keeps the
+/// features apart at every t. The directions tried join the features' centroids (of both times,
+/// at t = 0, at t = 1): on the screen's survivors of cloth-ball and armadillo-rollers they
+/// separate a quarter to two fifths. Each dot product is within (gamma_3 + perturbation) S of the
+/// exact one for the exact relative query (S = |d| . m), the sums with E within u (|x| + E), so
+/// E = (perturbation + 6 u) S, plus the smallest normal float for underflow, covers both
+/// (Policy::kSeparationBound scales E: 1 = as derived; the mutation tests show that less is
+/// unsound).
+template <class Policy, class QF>
+LWSCCD_HD LWSCCD_HOST_INLINE bool swept_hulls_apart(const SingleQuery<QF>& s, float perturbation) {
+  const Vec3<float>* x = s.q.points();
+  Vec3<float> first[2] = {{0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}}, second[2] = {{0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}};
+  int first_count = 0;
+  for (int i = 0; i < 8; ++i) {
+    if (first_feature_point<QF>(i)) first[i >> 2] = vadd(first[i >> 2], x[i]), ++first_count;
+    else second[i >> 2] = vadd(second[i >> 2], x[i]);
+  }
+  // Centroids up to a common factor per feature (the direction's length does not matter).
+  const float first_scale = first_count == 2 ? 4.0f : 2.0f, second_scale = first_count == 2 ? 4.0f / 3.0f : 2.0f;
+  const Vec3<float> d0 = vsub(vscale(second[0], second_scale), vscale(first[0], first_scale));
+  const Vec3<float> d1 = vsub(vscale(second[1], second_scale), vscale(first[1], first_scale));
+  const Vec3<float> directions[3] = {vadd(d0, d1), d0, d1};
+  const float factor = fmul(fadd(perturbation, 6.0f * unit_roundoff<float>()), static_cast<float>(Policy::kSeparationBound));
+  for (int k = 0; k < 3; ++k) {
+    const Vec3<float>& d = directions[k];
+    float high = -std::numeric_limits<float>::infinity(), low = std::numeric_limits<float>::infinity();
+    bool finite = true;
+    for (int i = 0; i < 8; ++i) {
+      const float p = vdot(d, x[i]);
+      finite = finite && finite_value(p);
+      if (first_feature_point<QF>(i)) high = p > high ? p : high;
+      else low = p < low ? p : low;
+    }
+    const float margin = fadd(fmul(factor, vabs_dot(d, s.m)), Policy::kSeparationBound > 0 ? std::numeric_limits<float>::min() : 0.0f);
+    if (finite && finite_value(margin) && fadd(high, margin) < fsub(low, margin)) return true;
+  }
+  return false;
+}
+
 /// The parameters the single-precision passes read, in float, so that they need no double
 /// arithmetic: the time limit rounded up (pruning only pieces that start at or after it stays
 /// sound) and the tolerance rounded to nearest (its only use, declining tolerances of at least a
