@@ -50,7 +50,7 @@ struct HandedAsWithLittleFp64 : gpu::NarrowPhasePolicy {
 };
 struct NoneHanded : gpu::NarrowPhasePolicy {
   static constexpr int kRefineWarpBelow = 0;
-  static constexpr bool kHandSearchesToWarps = false;
+  static constexpr bool kHandOnDoubleSearches = false;
 };
 // A first run that does not count its survivors first: it starts from the initial capacity and
 // grows where that overflowed.

@@ -57,7 +57,7 @@ struct NarrowPhasePolicy {
   /// of their own (a bit per deferred pair marks them), a warp each (inside tests by subtrees) or a
   /// thread each by the two knobs below, so that one long search no longer holds up the thread
   /// kernel (the same answers). False: they run on their thread.
-  static constexpr bool kHandSearchesToWarps = true;
+  static constexpr bool kHandOnDoubleSearches = true;
   /// At most this many handed searches per SM run a warp each; more run a thread each (in a kernel
   /// of their own, still apart from the short ones): a warp's search costs ~30 lanes' work, which
   /// pays where a few long searches set the time (cloth-ball: 3.4 K edge-edge, 201 of them
@@ -219,7 +219,7 @@ class NarrowPhase {
   /// them without the filter), in the last run (mode earliest: its last window).
   std::size_t whole_searches() const { return lists_[0].whole_searches + lists_[1].whole_searches; }
   /// CertifiedCcd: of those, searches in double that a thread handed on to a warp or a thread each
-  /// (NarrowPhasePolicy::kHandSearchesToWarps), in the last run.
+  /// (NarrowPhasePolicy::kHandOnDoubleSearches), in the last run.
   std::size_t handed_searches() const { return lists_[0].handed_searches + lists_[1].handed_searches; }
   /// Of those, the ones the last run searched a warp each (the rest: a thread each).
   std::size_t handed_searches_in_warps() const { return lists_[0].handed_in_warps + lists_[1].handed_in_warps; }

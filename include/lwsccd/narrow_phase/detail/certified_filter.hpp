@@ -183,15 +183,25 @@ struct CertifiedFilter {
   /// a GPU batch runs the tests a thread each). They read CcdParams<float> (single_params): no
   /// double arithmetic. True: a certain miss of the input as given (and within the double path's
   /// perturbation); false: the double path decides.
+  /// `separation_tried`: the caller already ran separates_single on the pair (the GPU screen
+  /// does, so that the pairs it separates are never listed), so the directions are not tried again.
   template <class Q>
-  LWSCCD_HD static int intervals_single(const Q& q, const CcdParams<float>& params, std::uint32_t& mask) {
+  LWSCCD_HD static int intervals_single(const Q& q, const CcdParams<float>& params, std::uint32_t& mask, bool separation_tried = false) {
     mask = 0;
     if (!Policy::kSingleFirst || params.min_separation > 0.0f) return -1;
     // Leaves within the filter's levels (certified_max_level <= kLevel, i.e. a tolerance of at
     // least 2^-(kLevel - 1)): the double path's (a tolerance that rounds up to the limit is only
     // declined, which is always sound).
     if (params.tolerance >= exact_pow2_neg<float>(kLevel - 1)) return -1;
-    return intervals_of(relative_single(q), params, mask);
+    return intervals_of(relative_single(q), params, mask, nullptr, !separation_tried);
+  }
+  /// True when decides_single decides the pair by its separating directions alone (B13), before
+  /// any interval: the same conditions and the same test.
+  template <class Q, class T>
+  LWSCCD_HD static bool separates_single(const Q& q, const CcdParams<T>& params_in) {
+    if (!Policy::kSingleFirst || !Policy::kSeparatingDirections || params_in.min_separation > T(0)) return false;
+    if (static_cast<float>(params_in.tolerance) >= exact_pow2_neg<float>(kLevel - 1)) return false;
+    return swept_hulls_apart<Policy>(relative_single(q), single_input_perturbation<Policy>());
   }
   template <class Q>
   LWSCCD_HD static InsideVerdict inside_single(const Q& q, unsigned node) {
@@ -247,8 +257,8 @@ struct CertifiedFilter {
   // `root_out`, when given, receives the cubic's piece on the step (expand_piece's start).
   template <class QF, class T>
   LWSCCD_HD static int intervals_of(const SingleQuery<QF>& s, const CcdParams<T>& params, std::uint32_t& mask,
-                                    BernsteinPiece<float>* root_out = nullptr) {
-    if (Policy::kSeparatingDirections && swept_hulls_apart<Policy>(s, single_input_perturbation<Policy>())) return 0;
+                                    BernsteinPiece<float>* root_out = nullptr, bool try_separation = true) {
+    if (Policy::kSeparatingDirections && try_separation && swept_hulls_apart<Policy>(s, single_input_perturbation<Policy>())) return 0;
     BernsteinPiece<float> root;
     if (!single_cubic(s, root)) return -1;
     if (root_out) *root_out = root;

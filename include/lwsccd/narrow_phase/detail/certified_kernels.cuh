@@ -25,8 +25,9 @@ __device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
 
 // Pass 1: the pairs that the method's cheap first step does not reject, appended to `kept`.
 // FP32 first (CertifiedCcd deciding in single precision): the screen reads only `single`, the
-// vertices rounded to float, and counts its misses; the double screen runs later, on what the
-// single-precision filter leaves.
+// vertices rounded to float, and counts its misses, then the single-precision filter's separating
+// directions (counted apart: screened pairs the filter decides); the double screen runs later, on
+// what the single-precision filter leaves.
 template <class Method, bool kVertexFace, class T, class P>
 __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const SingleVertex* single, PairList in,
                               CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
@@ -36,8 +37,15 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = in.pairs[i];
     if constexpr (lwsccd::detail::single_first_of<Method>::value) {
-      if (Method::screen_verdict(gather_single_query<kVertexFace>(mesh, single, p), params) != lwsccd::detail::ScreenVerdict::passed) {
+      const auto q = gather_single_query<kVertexFace>(mesh, single, p);
+      if (Method::screen_verdict(q, params) != lwsccd::detail::ScreenVerdict::passed) {
         append_index(counters + kSingleMisses);
+        continue;
+      }
+      // The filter's separating directions here, so that the pairs they decide are never kept
+      // (the filter's threads would diverge on them; counted as screened and decided in float).
+      if (lwsccd::detail::CertifiedFilter<typename Method::policy_type>::separates_single(q, params)) {
+        append_index(counters + kSeparated);
         continue;
       }
     } else if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) {
@@ -210,7 +218,7 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
   LWSCCD_GRID_STRIDE(i, n) {
     const auto q = gather_single_query<kVertexFace>(mesh, single, kept[i]);
     std::uint32_t found = 0;
-    const int count = Filter::intervals_single(q, single_params, found);
+    const int count = Filter::intervals_single(q, single_params, found, true);  // (the screen tried the separating directions)
     bool decided = count == 0;
     if (count > 0) {
       bool fits = true;
@@ -393,7 +401,7 @@ __global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
 // Second part: the deferred searches, whole (a grid-stride loop keeps the warps full). kHand: the
 // search in double of a pair single precision left (the double filter's pairs, and those the
 // search in float did not decide) is not run here but handed on (its bit set in `handed`, a bit
-// per deferred entry, zeroed; refine_handed_warp_kernel or refine_handed_thread_kernel searches
+// per deferred entry, zeroed; refine_handed_kernel searches
 // it): those searches are the long ones
 // (cloth-ball: 3.4 K of 106 K edge-edge pairs, up to ~50x the median's work on the CPU), and one of
 // them on a thread held the whole kernel up; the kernel also holds no code for them.
@@ -505,50 +513,41 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
 }
 
 // The searches refine_deferred_kernel handed on (the deferred entries whose bit is set in
-// `handed`: past the search in single precision and the double screen), a warp each, as
-// refine_deferred_warp_kernel searches. A warp looks at every `warps`-th entry: the handed ones
-// lie close together in the list (the double filter's pairs are appended together), and a warp
-// per word of bits searched up to 32 of them one after the other (cloth-ball: 1.7 ms).
-// At most `warp_limit` handed searches (a few waves of warps): more run a thread each
-// (refine_handed_thread_kernel), since a warp's search costs ~30 lanes' work for a few long ones.
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void refine_handed_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                          const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
-                                          CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                                          FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
-                                          std::size_t warp_limit) {
+// `handed`: past the search in single precision and the double screen). At most `warp_limit`
+// handed searches (a few waves of warps) run a warp each (kWarpEach), as
+// refine_deferred_warp_kernel searches: a warp looks at every `warps`-th entry, because the handed
+// ones lie close together in the list (the double filter's pairs are appended together) and a warp
+// per word of bits searched up to 32 of them one after the other (cloth-ball: 1.7 ms). More run a
+// thread each (!kWarpEach), the warp's lanes taking the set bits of one word in order (the lanes
+// stay busy), since a warp's search costs ~30 lanes' work for a few long ones. Both forms are
+// launched; the one whose case does not hold returns at once.
+template <class Method, bool kVertexFace, bool kWarpEach, class T, class P>
+__global__ void refine_handed_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                     const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
+                                     CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
+                                     FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
+                                     std::size_t warp_limit) {
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
-  if (n <= warp_below || counters[kHandedToWarps] > warp_limit) return;  // (the other kernels' lists)
+  if (n <= warp_below || (counters[kHandedToWarps] <= warp_limit) != kWarpEach) return;  // (the other kernels' lists)
   const int lane = static_cast<int>(threadIdx.x) % 32;
   const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
-  for (std::size_t w = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; w < n; w += warps) {
-    if (((handed[w / 32] >> (w % 32)) & 1u) == 0) continue;
-    const std::pair<index_t, index_t> p = kept[deferred[w]];
-    warp_refine<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, lane, counters, hits, hit_room, undecided);
-  }
-}
-
-// More than `warp_limit` handed searches: a thread each, the warp's lanes taking the set bits of
-// one word of `handed` in order (the handed entries lie together, so the lanes stay busy).
-template <class Method, bool kVertexFace, class T, class P>
-__global__ void refine_handed_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                            const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
-                                            CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
-                                            FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
-                                            std::size_t warp_limit) {
-  if (control[kSkip]) return;
-  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
-  if (n <= warp_below || counters[kHandedToWarps] <= warp_limit) return;
-  const int lane = static_cast<int>(threadIdx.x) % 32;
-  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
-  for (std::size_t word = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; word < (n + 31) / 32; word += warps) {
-    const unsigned bits = handed[word];
-    if (lane >= __popc(bits)) continue;
-    const std::size_t w = 32 * word + __fns(bits, 0, lane + 1);  // this lane's set bit
-    const std::pair<index_t, index_t> p = kept[deferred[w]];
-    settle_refined(Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params), p.first, p.second,
-                   counters, hits, hit_room, undecided);
+  const std::size_t first_warp = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32;
+  if constexpr (kWarpEach) {
+    for (std::size_t w = first_warp; w < n; w += warps) {
+      if (((handed[w / 32] >> (w % 32)) & 1u) == 0) continue;
+      const std::pair<index_t, index_t> p = kept[deferred[w]];
+      warp_refine<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, lane, counters, hits, hit_room, undecided);
+    }
+  } else {
+    for (std::size_t word = first_warp; word < (n + 31) / 32; word += warps) {
+      const unsigned bits = handed[word];
+      if (lane >= __popc(bits)) continue;
+      const std::size_t w = 32 * word + __fns(bits, 0, lane + 1);  // this lane's set bit
+      const std::pair<index_t, index_t> p = kept[deferred[w]];
+      settle_refined(Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params), p.first, p.second,
+                     counters, hits, hit_room, undecided);
+    }
   }
 }
 

@@ -86,6 +86,7 @@ enum NarrowCounter : int {
   kHandedToWarps,   // deferred searches in double a thread handed on (to a warp each, or a thread each past the limit)
   kKeptSlots,       // FP32 first: slots of the double filter's list asked for (more than the room: the run is repeated with more)
   kKeptSlotsPeak,   // the most asked for by an earlier window of mode earliest
+  kSeparated,       // FP32 first: pairs the screen passed and the filter's separating directions decided there
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.

@@ -100,7 +100,7 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
       l.undecided.resize_discard(l.refine_room);
       l.deferred.resize_discard(l.refine_room);
       // (Only a deferred list longer than kRefineWarpBelow hands searches on.)
-      if (Policy::kHandSearchesToWarps && l.refine_room > static_cast<std::size_t>(Policy::kRefineWarpBelow))
+      if (Policy::kHandOnDoubleSearches && l.refine_room > static_cast<std::size_t>(Policy::kRefineWarpBelow))
         l.handed.resize_discard((l.refine_room + 31) / 32);
       if (Policy::kRefineFilter && params.mode != CcdMode::set) {  // mode set does not run the filter
         // (FP32 first: the double filter's lists hold only what single precision leaves.)
@@ -296,8 +296,8 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // The deferred pairs: a warp each when they are few (the long searches' latency is the
     // list's), else a thread each; each kernel returns at once where the other one's case holds.
     const auto warp_below = static_cast<std::size_t>(Policy::kRefineWarpBelow);
-    // (With kHandSearchesToWarps the thread kernel runs only where `handed` has a bit per entry.)
-    constexpr bool kHand = Policy::kHandSearchesToWarps;
+    // (With kHandOnDoubleSearches the thread kernel runs only where `handed` has a bit per entry.)
+    constexpr bool kHand = Policy::kHandOnDoubleSearches;
     unsigned* handed = kHand && l.handed.size() > 0 ? l.handed.data() : nullptr;
     if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
     detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
@@ -309,16 +309,14 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
                                          ? static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kHandedWarpsPerSm)
                                          : 0;
       handed_warp_limit_ = warp_limit;
-      detail::refine_handed_warp_kernel<Method, kVertexFace, T, P>
-          <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
-              l.hit_room, l.undecided.data(), warp_below, warp_limit);
-      LWSCCD_CUDA_CHECK_LAUNCH();
-      detail::refine_handed_thread_kernel<Method, kVertexFace, T, P>
-          <<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(),
-              l.hit_room, l.undecided.data(), warp_below, warp_limit);
-      LWSCCD_CUDA_CHECK_LAUNCH();
+      auto launch_handed = [&](auto kernel) {
+        kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
+            l.undecided.data(), warp_below, warp_limit);
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      };
+      launch_handed(detail::refine_handed_kernel<Method, kVertexFace, true, T, P>);
+      launch_handed(detail::refine_handed_kernel<Method, kVertexFace, false, T, P>);
     }
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
@@ -419,12 +417,12 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.handed_in_warps = l.handed_searches <= handed_warp_limit_ ? l.handed_searches : 0;
     l.counts = {};
     l.counts.pairs = pairs;
-    l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors]) : 0;
+    l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors] + c[detail::kSeparated]) : 0;
     // Single precision's misses: at once (screen, filter without intervals), and every pair whose
     // listed intervals were all outside in float.
     l.counts.single_misses =
-        kCertified ? static_cast<std::size_t>(c[detail::kSingleMisses] + c[detail::kSingleListed] - c[detail::kSingleFailed] +
-                                              c[detail::kSingleSearchMisses])
+        kCertified ? static_cast<std::size_t>(c[detail::kSingleMisses] + c[detail::kSeparated] + c[detail::kSingleListed] -
+                                              c[detail::kSingleFailed] + c[detail::kSingleSearchMisses])
                    : 0;
     l.counts.single_descents = kCertified ? static_cast<std::size_t>(c[detail::kSingleDescents]) : 0;
     l.counts.certified_hits = static_cast<std::size_t>(c[detail::kCertifiedHits]);
