@@ -311,7 +311,7 @@ TEST_CASE("GPU pipeline: a front that outgrows its buffer is not kept, the step'
   }
 }
 
-TEST_CASE("GPU pipeline: non-finite positions are an InputError at the step's end, and the next step starts afresh",
+TEST_CASE("GPU pipeline: non-finite positions (infinite or NaN) are an InputError at the step's end, and the next step starts afresh",
           "[gpu][pipeline][front]") {
   const auto m = lwsccd_test::folded_cloth(40, 1);
   auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
@@ -331,6 +331,18 @@ TEST_CASE("GPU pipeline: non-finite positions are an InputError at the step's en
   CHECK(after.stats.restarted_from_root);  // the front recorded over non-finite boxes was dropped
   require_same_contacts(after, expected);
   require_same_contacts(gpu_pipeline.step_from_device(x0.data(), x1.data()), expected);
+  // A NaN coordinate in a refit step (a box's min and max pass over it), from host arrays and
+  // from device memory, at t = 0 and t = 1.
+  for (int at_end = 0; at_end < 2; ++at_end) {
+    std::vector<Vec3d> nan = at_end ? m.x1 : m.x0;
+    nan[11].x = std::numeric_limits<double>::quiet_NaN();
+    CHECK_THROWS_AS(gpu_pipeline.step(at_end ? m.x0 : nan, at_end ? nan : m.x1), InputError);
+    require_same_contacts(gpu_pipeline.step(m.x0, m.x1), expected);
+    (at_end ? x1 : x0).upload(nan);
+    CHECK_THROWS_AS(gpu_pipeline.step_from_device(x0.data(), x1.data()), InputError);
+    (at_end ? x1 : x0).upload(at_end ? m.x1 : m.x0);
+    require_same_contacts(gpu_pipeline.step_from_device(x0.data(), x1.data()), expected);
+  }
 }
 
 TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from device memory equal host ones",

@@ -96,7 +96,10 @@ __global__ void bottom_up_kernel(const Face* faces, const index_t* leaf_primitiv
   BV bv;
   Vec3<P> center;
   lwsccd::detail::leaf_volume(f, x0, x1, bv, center, margin);
-  if (!is_finite(center)) status[0] = 1;
+  // Each vertex checked, not the box: the box's min and max pass over a NaN coordinate.
+  bool finite = is_finite(center);
+  for (int v = 0; v < 3; ++v) finite = finite && is_finite(x0[f.v[v]]) && is_finite(x1[f.v[v]]);
+  if (!finite) status[0] = 1;  // benign race: every writer writes 1
   index_t node = n - 1 + k;
   bvs[node] = bv;
   for (index_t p = parent[node]; p != -1; node = p, p = parent[p]) {
