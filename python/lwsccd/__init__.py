@@ -24,7 +24,7 @@ the contacts in device memory as DLPack-capable arrays.
 from __future__ import annotations
 
 from . import ipc
-from ._device import built_with_gpu, gpu_available, gpu_name, release_cached_memory
+from ._device import built_with_gpu, built_with_nccl, gpu_available, gpu_count, gpu_name, release_cached_memory
 from .io import load_mesh, load_scene, load_sequence, load_step
 from .pipeline import Pipeline
 from .results import EDGE_EDGE_DTYPE, VERTEX_FACE_DTYPE, DeviceStepResult, StepResult
@@ -40,6 +40,8 @@ __all__ = [
     "gpu_available",
     "gpu_name",
     "built_with_gpu",
+    "built_with_nccl",
+    "gpu_count",
     "release_cached_memory",
     "load_mesh",
     "load_step",

@@ -24,3 +24,13 @@ def release_cached_memory() -> None:
 def gpu_available() -> bool:
     """True when the GPU backend is compiled in and a CUDA device is present."""
     return built_with_gpu() and gpu_name() != ""
+
+
+def built_with_nccl() -> bool:
+    """True when this build can split a step over several GPUs (Pipeline(devices=[...]))."""
+    return bool(_lwsccd.built_with_nccl())
+
+
+def gpu_count() -> int:
+    """The number of CUDA devices this build sees (0 without the GPU backend)."""
+    return int(_lwsccd.gpu_count())

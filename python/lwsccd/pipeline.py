@@ -50,10 +50,17 @@ class Pipeline:
             RTX-class GPU runs); the same contacts. For measuring; the CPU backend ignores it.
         device: "auto" (the GPU when the package has it and a device is present, else the
             CPU), "gpu" or "cpu".
+        devices: CUDA device ordinals to split each step over (e.g. [0, 1]: NCCL, one host
+            thread per GPU, the same contacts as one GPU); one ordinal runs the pipeline on that
+            device. Default policies only (aabb, lazy, certified, double) and no
+            device_memory_budget or part_pairs; the first device reads device positions and
+            holds device results. None (the default): the current CUDA device, as before.
 
     Raises:
-        ValueError: bad faces (index out of range, repeated vertex), bodies, or parameters.
-        RuntimeError: device="gpu" without a GPU backend or device.
+        ValueError: bad faces (index out of range, repeated vertex), bodies, or parameters
+            (devices: empty, repeated, not present, with device="cpu" or other policies).
+        RuntimeError: device="gpu" (or devices=) without a GPU backend or device, devices=
+            without NCCL in this build.
     """
 
     def __init__(
@@ -79,6 +86,7 @@ class Pipeline:
         threads: int = 0,
         fp64_ratio: int = 0,
         device: str = "auto",
+        devices: Optional[Sequence[int]] = None,
     ) -> None:
         f = np.asarray(faces)
         if f.dtype.kind not in "iu":
@@ -97,13 +105,18 @@ class Pipeline:
                 raise ValueError(f"lwsccd.Pipeline: bodies must have shape (num_faces,) = ({len(f)},), got {b.shape}")
             body_list = [int(v) for v in b]
         collides = [bool(v) for v in self_collides] if self_collides is not None else []
+        device_list: List[int] = []
+        if devices is not None:
+            device_list = [int(d) for d in devices]
+            if not device_list:
+                raise ValueError("lwsccd.Pipeline: devices must name at least one CUDA device (or be None)")
         if device == "auto":
-            device = "gpu" if gpu_available() else "cpu"
+            device = "gpu" if device_list or gpu_available() else "cpu"
         self._core = _lwsccd.Pipeline(
             int(num_vertices), f, body_list, collides, bv, scheduler, method, precision, mode,
             float(min_separation), float(tolerance), int(max_iterations), bool(front_tracking),
             float(rebuild_factor), float(front_growth_limit), int(device_memory_budget),
-            int(part_pairs), int(threads), int(fp64_ratio), device,
+            int(part_pairs), int(threads), int(fp64_ratio), device, device_list,
         )
         self.mode = mode
 

@@ -4,10 +4,27 @@
 
 #include "gpu_backend.hpp"
 #include "lwsccd/pipeline/any_pipeline.cuh"
+#if defined(LWSCCD_PYTHON_WITH_NCCL)
+#include "lwsccd/pipeline/any_multi_gpu_pipeline.cuh"
+#endif
 
 namespace lwsccd_python {
 
 const bool kBuiltWithGpu = true;
+#if defined(LWSCCD_PYTHON_WITH_NCCL)
+const bool kBuiltWithNccl = true;
+#else
+const bool kBuiltWithNccl = false;
+#endif
+
+int gpu_count() {
+  int n = 0;
+  if (cudaGetDeviceCount(&n) != cudaSuccess) {
+    cudaGetLastError();  // (no driver or no device: not an error here)
+    return 0;
+  }
+  return n;
+}
 
 std::string gpu_name() { return lwsccd::gpu::device_name(); }
 
@@ -17,6 +34,20 @@ std::unique_ptr<lwsccd::AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lws
                                                        const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
                                                        const lwsccd::PolicyChoice& choice) {
   return lwsccd::gpu::make_any_pipeline(std::move(mesh), layout, params, choice);
+}
+
+std::unique_ptr<lwsccd::AnyPipeline> make_multi_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
+                                                             const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
+                                                             const lwsccd::PolicyChoice& choice, std::vector<int> devices) {
+#if defined(LWSCCD_PYTHON_WITH_NCCL)
+  return lwsccd::gpu::make_any_multi_gpu_pipeline(std::move(mesh), layout, params, std::move(devices), choice, "lwsccd.Pipeline",
+                                                  "devices");
+#else
+  (void)mesh, (void)layout, (void)params, (void)choice, (void)devices;
+  throw lwsccd::Error(
+      "lwsccd.Pipeline: devices= needs NCCL, which this build of the Python package was made without (install NCCL, e.g. "
+      "pip install nvidia-nccl-cu12, set LWSCCD_NCCL_ROOT to it and rebuild; see docs/PYTHON.md)");
+#endif
 }
 
 namespace {

@@ -5,12 +5,18 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "lwsccd/pipeline/any_pipeline.hpp"
 
 namespace lwsccd_python {
 
 extern const bool kBuiltWithGpu;
+/// True when the GPU backend can split a step over several GPUs (built with NCCL).
+extern const bool kBuiltWithNccl;
+
+/// The number of CUDA devices (0 without the GPU backend or a driver).
+int gpu_count();
 
 /// The first CUDA device's name; "" when there is none or the module has no GPU backend.
 std::string gpu_name();
@@ -19,6 +25,12 @@ std::string gpu_name();
 std::unique_ptr<lwsccd::AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
                                                        const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
                                                        const lwsccd::PolicyChoice& choice);
+
+/// gpu::make_any_multi_gpu_pipeline over `devices`; throws lwsccd::Error when the module has no GPU
+/// backend or no NCCL, InputError for other policies than the default ones or a device not present.
+std::unique_ptr<lwsccd::AnyPipeline> make_multi_gpu_pipeline(std::shared_ptr<const lwsccd::TriangleMesh> mesh,
+                                                             const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
+                                                             const lwsccd::PolicyChoice& choice, std::vector<int> devices);
 
 /// One list of device hits as new device arrays: `pairs` (n x 2 element indices, int64) and
 /// `toi` (n, float64), each freed by free_device_array (allocated also when n is 0).

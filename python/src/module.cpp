@@ -174,7 +174,7 @@ class Pipeline {
            const std::string& method, const std::string& precision, const std::string& mode, double min_separation,
            double tolerance, int max_iterations, bool front_tracking, double rebuild_factor, double front_growth_limit,
            std::size_t device_memory_budget, std::size_t part_pairs, std::int64_t threads, std::int64_t fp64_ratio,
-           const std::string& device) {
+           const std::string& device, const std::vector<std::int64_t>& devices) {
     if (num_vertices < 1 || num_vertices > 0x7fffffff)
       throw lwsccd::InputError("lwsccd.Pipeline", "num_vertices", "must be in [1, 2^31), got " + std::to_string(num_vertices));
     std::vector<lwsccd::Face> mesh_faces(faces.shape(0));
@@ -221,7 +221,17 @@ class Pipeline {
     params.fp64_ratio = static_cast<int>(fp64_ratio);
     const lwsccd::PolicyChoice choice{bv, scheduler, method, precision};
     lwsccd::validate(choice);
-    if (device == "gpu") pipeline_ = lwsccd_python::make_gpu_pipeline(mesh_, layout, params, choice);
+    if (!devices.empty()) {  // a step split over these CUDA devices (one: a pipeline on that device)
+      if (device != "gpu")
+        throw lwsccd::InputError("lwsccd.Pipeline", "devices", "names CUDA devices: it needs device='gpu' or 'auto', got '" + device + "'");
+      std::vector<int> ordinals;
+      for (const std::int64_t d : devices) {
+        if (d < 0 || d > 0x7fffffff)
+          throw lwsccd::InputError("lwsccd.Pipeline", "devices", std::to_string(d) + " is not a CUDA device ordinal");
+        ordinals.push_back(static_cast<int>(d));
+      }
+      pipeline_ = lwsccd_python::make_multi_gpu_pipeline(mesh_, layout, params, choice, std::move(ordinals));
+    } else if (device == "gpu") pipeline_ = lwsccd_python::make_gpu_pipeline(mesh_, layout, params, choice);
     else if (device == "cpu") pipeline_ = lwsccd::cpu::make_any_pipeline(mesh_, layout, params, choice);
     else throw lwsccd::InputError("lwsccd.Pipeline", "device", "unknown '" + device + "' (accepted: auto, gpu, cpu)");
   }
@@ -355,11 +365,12 @@ NB_MODULE(_lwsccd, m) {
   nb::class_<Pipeline>(m, "Pipeline")
       .def(nb::init<std::int64_t, const HostFaces&, std::vector<std::int64_t>, std::vector<bool>, const std::string&,
                     const std::string&, const std::string&, const std::string&, const std::string&, double, double, int, bool,
-                    double, double, std::size_t, std::size_t, std::int64_t, std::int64_t, const std::string&>(),
+                    double, double, std::size_t, std::size_t, std::int64_t, std::int64_t, const std::string&,
+                    const std::vector<std::int64_t>&>(),
            "num_vertices"_a, "faces"_a, "face_body"_a, "body_self_collides"_a, "bv"_a, "scheduler"_a, "method"_a,
            "precision"_a, "mode"_a, "min_separation"_a, "tolerance"_a, "max_iterations"_a, "front_tracking"_a,
            "rebuild_factor"_a, "front_growth_limit"_a, "device_memory_budget"_a, "part_pairs"_a, "threads"_a, "fp64_ratio"_a,
-           "device"_a)
+           "device"_a, "devices"_a)
       .def("step", &Pipeline::step<double>, "x0"_a, "x1"_a)
       .def("step_f32", &Pipeline::step<float>, "x0"_a, "x1"_a)
       .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a, "float32"_a)
@@ -387,6 +398,8 @@ NB_MODULE(_lwsccd, m) {
     return reinterpret_cast<std::uintptr_t>(a.data());
   }, "array"_a);
   m.def("built_with_gpu", [] { return lwsccd_python::kBuiltWithGpu; });
+  m.def("built_with_nccl", [] { return lwsccd_python::kBuiltWithNccl; });
+  m.def("gpu_count", &lwsccd_python::gpu_count);
   m.def("load_frame", [](const std::string& path) { return frame_dict(lwsccd::load_frame(path)); }, "path"_a);
   m.def("load_step", [](const std::string& t0, const std::string& t1) { return step_dict(lwsccd::load_step(t0, t1)); },
         "path_t0"_a, "path_t1"_a);

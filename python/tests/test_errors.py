@@ -73,6 +73,19 @@ def test_gpu_without_a_gpu_is_a_runtime_error():
         lwsccd.Pipeline(FACES, device="gpu")
 
 
+def test_bad_devices():
+    with pytest.raises(ValueError, match="devices.*at least one"):
+        lwsccd.Pipeline(FACES, devices=[])
+    with pytest.raises(ValueError, match="devices.*device='gpu' or 'auto'.*'cpu'"):
+        pipeline(devices=[0])
+
+
+@pytest.mark.skipif(lwsccd.gpu_available(), reason="a GPU is present")
+def test_devices_without_a_gpu_is_a_runtime_error():
+    with pytest.raises(RuntimeError, match="GPU"):
+        lwsccd.Pipeline(FACES, devices=[0])
+
+
 def test_files(tmp_path):
     with pytest.raises(FileNotFoundError):
         lwsccd.load_mesh(str(tmp_path / "missing.obj"))

@@ -130,3 +130,61 @@ def test_float32_positions_on_the_device(scene, name, to_device, module):
     x0, x1 = steps[0]
     with pytest.raises(TypeError, match="same dtype"):
         gpu.step(to_device(x0), to_device(x1.astype(np.float32)))
+
+
+def test_devices_one_gpu_equals_cpu(scene):
+    """devices=[0]: the split pipeline over one GPU (NCCL) answers as the CPU does."""
+    if not lwsccd.built_with_nccl():
+        with pytest.raises(RuntimeError, match="NCCL"):
+            lwsccd.Pipeline(scene[0].faces, devices=[0])
+        pytest.skip("SKIPPED: this build of lwsccd has no NCCL (devices= refused, as checked)")
+    sim, steps = scene
+    split = lwsccd.Pipeline(sim.faces, bodies=sim.face_body, self_collides=sim.body_self_collides, devices=[0])
+    cpu = lwsccd.Pipeline(sim.faces, bodies=sim.face_body, self_collides=sim.body_self_collides, device="cpu")
+    assert split.device == "gpu"
+    for x0, x1 in steps:
+        same(split.step(x0, x1), cpu.step(x0, x1))
+
+
+def test_devices_two_gpus_equal_one(scene):
+    """devices=[0, 1]: the step split over two GPUs, pair for pair the one-GPU pipeline's contacts."""
+    if not lwsccd.built_with_nccl() or lwsccd.gpu_count() < 2:
+        pytest.skip("SKIPPED: needs NCCL in this build and two CUDA devices, found %d" % lwsccd.gpu_count())
+    sim, steps = scene
+    split, one = (lwsccd.Pipeline(sim.faces, bodies=sim.face_body, self_collides=sim.body_self_collides, **kw)
+                  for kw in (dict(devices=[0, 1]), dict(device="gpu")))
+    contacts = 0
+    for x0, x1 in steps:
+        s, o = split.step(x0, x1), one.step(x0, x1)
+        same(s, o)
+        contacts += s.num_contacts
+    assert contacts > 0
+
+
+def test_bad_devices_on_a_gpu():
+    if not lwsccd.built_with_nccl():
+        pytest.skip("SKIPPED: this build of lwsccd has no NCCL")
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    with pytest.raises(ValueError, match="devices.*not one of the"):
+        lwsccd.Pipeline(faces, devices=[lwsccd.gpu_count()])
+    with pytest.raises(ValueError, match="devices.*listed twice"):
+        lwsccd.Pipeline(faces, devices=[0, 0])
+    with pytest.raises(ValueError, match="devices.*default policies.*obb"):
+        lwsccd.Pipeline(faces, devices=[0], bv="obb")
+    with pytest.raises(ValueError, match="does not stream"):
+        lwsccd.Pipeline(faces, devices=[0], part_pairs=1000)
+
+
+def test_non_finite_positions_in_a_later_step(scene):
+    """A NaN coordinate is refused in a step after the first (the GPU's refit), on both backends,
+    and the next step answers as before."""
+    sim, steps = scene
+    x0, x1 = steps[0]
+    bad = x1.copy()
+    bad[len(bad) // 2, 1] = np.nan
+    gpu, cpu = pipelines(sim)
+    for p in (gpu, cpu):
+        p.step(x0, x1)
+        with pytest.raises(ValueError, match="(?i)nan|finite"):
+            p.step(x0, bad)
+    same(gpu.step(x0, x1), cpu.step(x0, x1))

@@ -233,5 +233,9 @@ def test_the_line_search_example_keeps_the_sheet_above_the_plate():
     example = pathlib.Path(__file__).resolve().parents[2] / "examples" / "python" / "ipc_line_search.py"
     out = subprocess.run([sys.executable, str(example), "--device", "cpu", "--steps", "4", "--resolution", "10"],
                          capture_output=True, text=True, check=True).stdout
-    heights = [float(line.split("z = ")[1]) for line in out.splitlines() if "z = " in line]
-    assert len(heights) == 4 and min(heights) > 0, out
+    heights = [line.split("z = ")[1] for line in out.splitlines() if "z = " in line]
+    assert len(heights) == 4, out
+    if "barrier: ipctk" in out:  # the barrier keeps the sheet away from the plate
+        assert min(float(h) for h in heights) > 0, out
+    else:  # steps bounded by the contacts alone: the sheet may come to rest on the plate, never below
+        assert all(h.startswith("+") for h in heights), out
