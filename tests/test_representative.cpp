@@ -203,3 +203,29 @@ TEST_CASE("representatives: bad input is refused with a message", "[representati
   wrong.face_body = {0, 1};
   CHECK_THROWS_AS(RepresentativeTriangles(m.mesh, wrong), InputError);
 }
+
+TEST_CASE("representatives: candidates read from several lists give the one list's feature pairs, in its order",
+          "[representative]") {
+  const auto m = lwsccd_test::folded_cloth(30, 4);
+  const RepresentativeTriangles rep(m.mesh);
+  const auto boxes = feature_boxes(m.mesh, m.x0, m.x1);
+  const auto all = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbf>(m.mesh, m.x0, m.x1));
+  REQUIRE(all.size() > 600);
+  // Uneven lists, one of them empty, as a traversal's threads leave them.
+  const std::size_t cut1 = all.size() / 7, cut2 = all.size() / 2;
+  const std::vector<std::vector<TrianglePair>> lists{std::vector<TrianglePair>(all.begin(), all.begin() + cut1), {},
+                                                     std::vector<TrianglePair>(all.begin() + cut1, all.begin() + cut2),
+                                                     std::vector<TrianglePair>(all.begin() + cut2, all.end())};
+  for (bool with_orphans : {true, false}) {
+    const FeaturePairs one = emit_feature_pairs(rep, all.data(), all.size(), boxes, with_orphans);
+    FeaturePairs from_lists;
+    std::vector<FeaturePairs> parts;
+    emit_feature_pairs_into(rep, lists, boxes, with_orphans, from_lists, parts);
+    REQUIRE(from_lists.vf == one.vf);
+    REQUIRE(from_lists.ee == one.ee);
+    REQUIRE(one.ee.size() > 0);
+    // Again into the same lists (their memory reused): the same pairs.
+    emit_feature_pairs_into(rep, lists, boxes, with_orphans, from_lists, parts);
+    REQUIRE(from_lists.ee == one.ee);
+  }
+}

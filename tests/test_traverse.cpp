@@ -104,3 +104,74 @@ TEST_CASE("front tracking: restarting from the front gives the fresh traversal's
     front = from_front.front;
   }
 }
+
+TEST_CASE("CPU traversal from the root hands parts of a thread's stack on: same results, front and work as one thread", "[traverse]") {
+  // Large enough that the threads' ranges of the cut below the root run past kHandOnItems.
+  const MovingMesh m = lwsccd_test::folded_cloth(90, 5);
+  const cpu::Bvh<Aabbf> bvh(m.mesh, m.x0, m.x1);
+  SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, m.mesh.faces().data(), false}};
+  const auto serial = cpu::traverse(task, {NodePair{0, 0}}, true);
+  auto front_order = [](const NodePair& x, const NodePair& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; };
+  auto sorted_front = [&](std::vector<NodePair> f) {
+    std::sort(f.begin(), f.end(), front_order);
+    return f;
+  };
+  for (unsigned threads : {2u, 3u, 4u}) {
+    INFO("threads " << threads);
+    const auto stolen = cpu::traverse(task, {NodePair{0, 0}}, true, cpu::WorkStealingScheduler{threads});
+    CHECK(stolen.stats.handed_on > 0);
+    REQUIRE(sorted(stolen.results) == sorted(serial.results));
+    const auto a = sorted_front(stolen.front), b = sorted_front(serial.front);
+    REQUIRE(a.size() == b.size());
+    REQUIRE(std::equal(a.begin(), a.end(), b.begin(), [](const NodePair& x, const NodePair& y) { return x.a == y.a && x.b == y.b; }));
+    CHECK(stolen.stats.items_processed == serial.stats.items_processed);
+    // From a kept front (many seeds) nothing is handed on.
+    CHECK(cpu::traverse(task, serial.front, true, cpu::WorkStealingScheduler{threads}).stats.handed_on == 0);
+  }
+  REQUIRE(serial.results.size() > 1000);
+}
+
+TEST_CASE("CPU traversal into the threads' lists: the results and front of one list, and a front kept in lists as seeds",
+          "[traverse][front]") {
+  MovingMesh m = lwsccd_test::folded_cloth(60, 2);
+  cpu::Bvh<Aabbf> bvh(m.mesh, m.x0, m.x1);
+  SelfCollisionTask<Aabbf> task{bvh.view(), LeafFilter{nullptr, nullptr, m.mesh.faces().data(), false}};
+  auto key = [](const NodePair& p) { return std::make_pair(p.a, p.b); };
+  auto keys = [&](const std::vector<NodePair>& f) {
+    std::vector<std::pair<index_t, index_t>> k;
+    for (const NodePair& p : f) k.push_back(key(p));
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  const auto serial = cpu::traverse(task, {NodePair{0, 0}}, true);
+  cpu::TraversalWorkspace<SelfCollisionTask<Aabbf>> workspace;
+  const cpu::ListsOf<NodePair> root{NodePair{0, 0}};
+  const TraversalStats stats = cpu::traverse_in_lists(task, root, true, cpu::WorkStealingScheduler{3}, workspace);
+  REQUIRE(workspace.results.lists.size() == 3);
+  REQUIRE(sorted(workspace.results.joined()) == sorted(serial.results));
+  REQUIRE(keys(workspace.fronts.joined()) == keys(serial.front));
+  CHECK(stats.results == serial.results.size());
+  CHECK(stats.front == serial.front.size());
+  CHECK(stats.items_processed == serial.stats.items_processed);
+  // The front kept in those lists seeds the next step's traversal, as BasicFrontTracker keeps it.
+  BasicFrontTracker<cpu::ListsOf<NodePair>> tracker(FrontPolicy{1e9});  // (never restarts on growth)
+  REQUIRE(tracker.seeds(bvh.generation()).size() == 1);  // the root first
+  tracker.exchange(workspace.fronts);
+  REQUIRE(tracker.size() == serial.front.size());
+  for (int step = 1; step <= 3; ++step) {
+    const MovingMesh next = lwsccd_test::folded_cloth(60, 2 + step);
+    bvh.refit(next.x0, next.x1);
+    task.bvh = bvh.view();
+    INFO("step " << step);
+    const auto& seeds = tracker.seeds(bvh.generation());
+    REQUIRE_FALSE(tracker.last_was_restart());
+    const auto from_root = cpu::traverse(task, {NodePair{0, 0}}, true);
+    cpu::traverse_in_lists(task, seeds, true, cpu::WorkStealingScheduler{2}, workspace);
+    REQUIRE(sorted(workspace.results.joined()) == sorted(from_root.results));
+    // The same front as a traversal from the old front in one list.
+    std::vector<NodePair> old_front = seeds.joined();
+    const auto from_one_list = cpu::traverse(task, old_front, true);
+    REQUIRE(keys(workspace.fronts.joined()) == keys(from_one_list.front));
+    tracker.exchange(workspace.fronts);
+  }
+}

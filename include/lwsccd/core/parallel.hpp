@@ -27,6 +27,7 @@
 #if LWSCCD_WITH_TBB
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_for_each.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 #endif
@@ -169,6 +170,32 @@ void parallel_ranges(std::size_t n, std::size_t grain, Body body) {
   parallel_ranges_by_worker(n, grain, [&](std::size_t begin, std::size_t end, unsigned) { body(begin, end); });
 }
 
+/// Runs body(work, worker, hand_on) on each element of `work` in parallel and waits, where the
+/// body may call hand_on(W&&) with more work, which any thread may take (oneTBB's feeder; without
+/// oneTBB the same thread takes it after its element). For work whose size is not known up front
+/// (a subtree of a traversal): a thread holding much of it hands part on instead of leaving the
+/// others idle. `worker` as in parallel_ranges_by_worker (no two bodies at once with the same one).
+template <class W, class Body>
+void parallel_for_each_handing_on(std::vector<W>& work, Body body) {
+  if (work.empty()) return;
+#if LWSCCD_WITH_TBB
+  tbb::parallel_for_each(work.begin(), work.end(), [&](W& w, tbb::feeder<W>& feeder) {
+    body(w, static_cast<unsigned>(tbb::this_task_arena::current_thread_index()), [&feeder](W&& more) { feeder.add(std::move(more)); });
+  });
+#else
+  parallel_ranges_by_worker(work.size(), 1, [&](std::size_t begin, std::size_t end, unsigned worker) {
+    std::vector<W> later;
+    auto hand_on = [&later](W&& more) { later.push_back(std::move(more)); };
+    for (std::size_t i = begin; i < end; ++i) body(work[i], worker, hand_on);
+    while (!later.empty()) {
+      W next = std::move(later.back());
+      later.pop_back();
+      body(next, worker, hand_on);
+    }
+  });
+#endif
+}
+
 /// A grain that gives each worker several ranges of [0, n) (load balance) but none shorter than
 /// `at_least` items (overhead).
 inline std::size_t grain_for(std::size_t n, std::size_t at_least = 1024) {
@@ -202,6 +229,28 @@ inline void advise_huge_pages(const void* data, std::size_t bytes) {
 #endif
 }
 
+/// Has the kernel back [data, data + bytes) with pages now, the range shared among the threads
+/// (Linux's MADV_POPULATE_WRITE, kernel 5.14 on; elsewhere nothing: pages fault in as they are
+/// touched). Why: a list about to be filled by a parallel copy is first value-initialised by one
+/// thread (std::vector::resize), which would take every page fault of new memory alone (cloth-ball,
+/// 16 cores: a first step's two traversal lists, 87 MB, 34 ms against 21 populated first).
+inline void populate_in_parallel(void* data, std::size_t bytes) {
+#if defined(__linux__) && defined(MADV_POPULATE_WRITE)
+  constexpr std::uintptr_t kPage = 4096, kChunk = std::uintptr_t(2) << 20;
+  const std::uintptr_t begin = reinterpret_cast<std::uintptr_t>(data) & ~(kPage - 1);
+  const std::uintptr_t end = reinterpret_cast<std::uintptr_t>(data) + bytes;
+  if (end <= begin) return;
+  const std::size_t chunks = static_cast<std::size_t>((end - begin + kChunk - 1) / kChunk);
+  parallel_ranges(chunks, 1, [&](std::size_t first, std::size_t last) {
+    const std::uintptr_t from = begin + first * kChunk, to = std::min<std::uintptr_t>(end, begin + last * kChunk);
+    (void)madvise(reinterpret_cast<void*>(from), to - from, MADV_POPULATE_WRITE);  // (advice: a refusal is no error)
+  });
+#else
+  (void)data;
+  (void)bytes;
+#endif
+}
+
 /// Below this many bytes a list grows as std::vector grows it.
 inline constexpr std::size_t kHugePageListBytes = std::size_t(4) << 20;
 
@@ -209,9 +258,13 @@ inline constexpr std::size_t kHugePageListBytes = std::size_t(4) << 20;
 /// creeps up from step to step is not moved every step), where a new buffer of at least
 /// kHugePageListBytes gets huge pages asked for before anything touches it (the elements are then
 /// moved in).
+/// With `populate` (a caller outside any parallel loop, about to fill the list in parallel), the
+/// new buffer's first n elements' pages are also made present by all threads
+/// (populate_in_parallel).
 template <class T>
-void reserve_large(std::vector<T>& v, std::size_t n) {
+void reserve_large(std::vector<T>& v, std::size_t n, bool populate = false) {
   if (n <= v.capacity()) return;
+  const std::size_t needed = n;
   n = std::max(n, 2 * v.size());
   if (n * sizeof(T) < kHugePageListBytes) {
     v.reserve(n);
@@ -220,6 +273,7 @@ void reserve_large(std::vector<T>& v, std::size_t n) {
   std::vector<T> larger;
   larger.reserve(n);  // allocated, not touched
   advise_huge_pages(larger.data(), n * sizeof(T));
+  if (populate) populate_in_parallel(larger.data(), needed * sizeof(T));
   larger.insert(larger.end(), std::make_move_iterator(v.begin()), std::make_move_iterator(v.end()));
   v.swap(larger);
 }
@@ -238,7 +292,7 @@ template <class T>
 void copy_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out, std::size_t from) {
   std::vector<std::size_t> at(lists.size() + 1, from);
   for (std::size_t k = 0; k < lists.size(); ++k) at[k + 1] = at[k] + lists[k].size();
-  reserve_large(out, at.back());
+  reserve_large(out, at.back(), true);
   out.resize(at.back());
   parallel_ranges(lists.size(), 1, [&](std::size_t first, std::size_t last) {
     for (std::size_t k = first; k < last; ++k) std::copy(lists[k].begin(), lists[k].end(), out.begin() + static_cast<std::ptrdiff_t>(at[k]));
@@ -253,6 +307,19 @@ void append_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>
 template <class T>
 void concatenate_in_parallel(const std::vector<std::vector<T>>& lists, std::vector<T>& out) {
   copy_in_parallel(lists, out, 0);
+}
+
+/// fn(element) for the elements [begin, end) of the lists' concatenation, in order, read where
+/// they lie.
+template <class T, class Fn>
+void for_each_in_lists(const std::vector<std::vector<T>>& lists, std::size_t begin, std::size_t end, Fn&& fn) {
+  std::size_t at = 0;  // the concatenation's index of the current list's first element
+  for (const auto& list : lists) {
+    if (begin >= end) return;
+    const std::size_t list_end = at + list.size();
+    for (; begin < end && begin < list_end; ++begin) fn(list[begin - at]);
+    at = list_end;
+  }
 }
 
 /// std::sort on all cores (a total order gives the same result as std::sort).

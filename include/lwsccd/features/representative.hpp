@@ -211,6 +211,11 @@ FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const Triang
 void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                              const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
                              std::vector<FeaturePairs>& part_lists);
+/// The same with the candidates held in several lists, in their order (a work-stealing
+/// traversal's threads' lists, cpu::traverse_in_lists), read where they lie.
+void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                             std::vector<FeaturePairs>& part_lists);
 
 /// The oracle: every non-incident vertex-face pair and every edge-edge pair without a common
 /// vertex whose feature boxes overlap (and, with a layout, that rep.considers), sorted; vertices

@@ -104,14 +104,17 @@ class CcdPipeline {
     std::size_t cap = 0;  ///< candidates (and seeds) per part; a whole step: no limit
     // Traversal parts: the step's seeds (in parts after a restart, the cut below the root once the
     // expansion made it), the next seed to traverse and how many a part takes.
-    const std::vector<NodePair>* seeds = nullptr;
-    std::vector<NodePair> cut;
+    const ListsOf<NodePair>* seeds = nullptr;
+    ListsOf<NodePair> cut;
     bool seeds_chosen = false, expansion_due = false, traversal_over = false;
     std::size_t next_seed = 0, seeds_per_part = 0;
     std::vector<NodePair> front;  ///< in parts: the front the parts recorded, kept at the end
-    // Narrow-phase parts: the current traversal part's candidates, the next one to test, this
-    // part's range and whether the orphans' pairs (those no candidate emits) go with it.
+    // Narrow-phase parts: the current traversal part's candidates (a whole step: where the
+    // traversal's threads wrote them, `candidate_lists`), the next one to test, this part's range
+    // and whether the orphans' pairs (those no candidate emits) go with it.
     std::vector<TrianglePair> candidates;
+    const ListsOf<TrianglePair>* candidate_lists = nullptr;
+    std::size_t num_candidates = 0;
     std::size_t next_candidate = 0, part_first = 0, part_count = 0;
     bool orphans_due = true, orphans_in_part = false;
     std::vector<Aabbf> boxes;  ///< the step's feature boxes (computed by the first feature pairs)
@@ -163,11 +166,23 @@ class CcdPipeline {
     const bool record = params_.front_tracking;
     TraversalResult<Task>& traversal = traversal_;
     if (!step.in_parts) {
-      cpu::traverse_into(task, *step.seeds, record, WorkStealingScheduler{}, traversal, traversal_workspace_);
-      if (record) tracker_.exchange(traversal.front);  // (the seeds, read no more, become the next front's memory)
+      // The results and front stay in the threads' lists (copying them into one list each would
+      // cost a first step the page faults of 87 MB on cloth-ball): the front is kept as they are,
+      // the feature pairs read the results there.
+      const TraversalStats t = cpu::traverse_in_lists(task, *step.seeds, record, WorkStealingScheduler{}, traversal_workspace_);
+      if (record) tracker_.exchange(traversal_workspace_.fronts);  // (the seeds, read no more, become the next front's memory)
       stats.front_size = tracker_.size();
-    } else if (step.expansion_due) {
-      traversal = expand(task, *step.seeds, StreamingPolicy::kCutItems, record, step.cut);
+      stats.bvtt_nodes += t.items_processed;
+      stats.triangle_pairs += t.results;
+      step.candidate_lists = &traversal_workspace_.results;
+      step.num_candidates = t.results;
+      step.next_candidate = 0;
+      return;
+    }
+    if (step.expansion_due) {
+      std::vector<NodePair> cut;
+      traversal = expand(task, step.seeds->joined(), StreamingPolicy::kCutItems, record, cut);
+      step.cut.lists.assign(1, std::move(cut));
       step.expansion_due = false;
       step.seeds = &step.cut;
       step.seeds_per_part = std::max<std::size_t>(1, std::min(step.cut.size(), step.cap));
@@ -176,8 +191,9 @@ class CcdPipeline {
       std::size_t n = 0;
       while (true) {
         n = std::min(step.seeds_per_part, num_seeds - step.next_seed);
-        const auto first = step.seeds->begin() + static_cast<std::ptrdiff_t>(step.next_seed);
-        const std::vector<NodePair> part_seeds(first, first + static_cast<std::ptrdiff_t>(n));
+        std::vector<NodePair> part_seeds;
+        part_seeds.reserve(n);
+        step.seeds->for_each_in(step.next_seed, step.next_seed + n, [&](const NodePair& seed) { part_seeds.push_back(seed); });
         cpu::traverse_into(task, part_seeds, record, WorkStealingScheduler{}, traversal, traversal_workspace_);
         if (traversal.results.size() <= step.cap || n == 1) break;
         step.seeds_per_part = n / 2;
@@ -187,7 +203,7 @@ class CcdPipeline {
       step.next_seed += n;
       if (traversal.results.size() * 4 < step.cap) step.seeds_per_part = std::min(num_seeds, 2 * step.seeds_per_part);
     }
-    if (step.in_parts) step.front.insert(step.front.end(), traversal.front.begin(), traversal.front.end());
+    step.front.insert(step.front.end(), traversal.front.begin(), traversal.front.end());
     stats.bvtt_nodes += traversal.stats.items_processed;
     stats.triangle_pairs += traversal.results.size();
     step.candidates.swap(traversal.results);  // (the last part's memory goes to the next traversal)
@@ -202,7 +218,7 @@ class CcdPipeline {
       step.orphans_due = false;
       step.orphans_in_part = true;
       step.part_first = 0;
-      step.part_count = step.candidates.size();
+      step.part_count = step.num_candidates;
       return true;
     }
     const bool candidates_left = step.next_candidate < step.candidates.size();
@@ -217,8 +233,12 @@ class CcdPipeline {
   void stage_feature_pairs(StepInProgress& step) {
     if (!step.boxes_ready) step.boxes = feature_boxes(*mesh_, step.x0, step.x1, params_.min_separation / 2);
     step.boxes_ready = true;
-    emit_feature_pairs_into(representatives_, step.candidates.data() + step.part_first, step.part_count, step.boxes,
-                            step.orphans_in_part, step.features, feature_part_lists_);
+    if (step.in_parts)
+      emit_feature_pairs_into(representatives_, step.candidates.data() + step.part_first, step.part_count, step.boxes,
+                              step.orphans_in_part, step.features, feature_part_lists_);
+    else
+      emit_feature_pairs_into(representatives_, step.candidate_lists->lists, step.boxes, step.orphans_in_part, step.features,
+                              feature_part_lists_);
     step.result.stats.feature_pairs_vf += step.features.vf.size();
     step.result.stats.feature_pairs_ee += step.features.ee.size();
   }
@@ -240,7 +260,11 @@ class CcdPipeline {
   void complete_step(StepInProgress& step) {
     StepResult<T>& r = step.result;
     if (step.in_parts) {  // the parts' front kept, their hits in the order a whole step gives them
-      if (params_.front_tracking) tracker_.update(std::move(step.front));
+      if (params_.front_tracking) {
+        ListsOf<NodePair> front;
+        front.lists.push_back(std::move(step.front));
+        tracker_.update(std::move(front));
+      }
       r.stats.front_size = tracker_.size();
       sort_by_pair(r.contacts.vf);
       sort_by_pair(r.contacts.ee);
@@ -258,8 +282,8 @@ class CcdPipeline {
                                         mesh_->faces().data(), true, bodies ? node_body_.data() : nullptr}};
   }
   // The step's seeds: the tracked front, or the root (also when front tracking is off).
-  const std::vector<NodePair>& step_seeds(StepStats& stats) {
-    const std::vector<NodePair>& seeds = params_.front_tracking ? tracker_.seeds(bvh_.generation()) : root_;
+  const ListsOf<NodePair>& step_seeds(StepStats& stats) {
+    const ListsOf<NodePair>& seeds = params_.front_tracking ? tracker_.seeds(bvh_.generation()) : root_;
     stats.restarted_from_root = !params_.front_tracking || tracker_.last_was_restart();
     return seeds;
   }
@@ -276,8 +300,8 @@ class CcdPipeline {
   RepresentativeTriangles representatives_;
   Bvh<BV> bvh_;
   bool built_ = false;
-  FrontTracker tracker_;
-  std::vector<NodePair> root_{NodePair{0, 0}};  // the root alone (never changed; not const: pipelines are assignable)
+  BasicFrontTracker<ListsOf<NodePair>> tracker_;  ///< the front in the lists the traversal's threads wrote
+  ListsOf<NodePair> root_{NodePair{0, 0}};  // the root alone (never changed; not const: pipelines are assignable)
   std::vector<Vec3d> wide0_, wide1_;  ///< float input, widened (kept: the next step reuses the room)
   // Memory kept from step to step (a warm step allocates no large list): the traversal's result
   // and workers' lists, the candidates, the feature pairs and their per-thread lists.

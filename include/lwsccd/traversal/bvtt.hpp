@@ -153,13 +153,16 @@ struct FrontPolicy {
   double growth_limit = 1.5;
 };
 
-/// Keeps a traversal's front between steps and decides where the next traversal starts.
-class FrontTracker {
+/// Keeps a traversal's front between steps and decides where the next traversal starts. `Front`:
+/// the list the front is kept in (std::vector<NodePair>, or cpu::ListsOf<NodePair>: the lists a
+/// work-stealing traversal's threads wrote it in), with size(), empty(), clear() and swap().
+template <class Front>
+class BasicFrontTracker {
  public:
-  explicit FrontTracker(FrontPolicy policy = {}) : policy_(policy) {}
+  explicit BasicFrontTracker(FrontPolicy policy = {}) : policy_(policy) {}
 
   /// Seeds for the next traversal of a BVH of the given generation.
-  const std::vector<NodePair>& seeds(std::uint64_t bvh_generation) {
+  const Front& seeds(std::uint64_t bvh_generation) {
     if (bvh_generation != generation_ || front_.empty() || reset_next_) {
       generation_ = bvh_generation;
       restarted_ = true;
@@ -170,13 +173,13 @@ class FrontTracker {
     return front_;
   }
   /// Records the front the traversal just produced.
-  void update(std::vector<NodePair> front) {
+  void update(Front front) {
     front_ = std::move(front);
     recorded();
   }
   /// The same, taking `front`'s memory: `front` receives the previous front's (a traversal that
   /// writes its next front there allocates nothing).
-  void exchange(std::vector<NodePair>& front) {
+  void exchange(Front& front) {
     front_.swap(front);
     recorded();
   }
@@ -193,11 +196,14 @@ class FrontTracker {
   }
 
   FrontPolicy policy_;
-  std::vector<NodePair> front_, root_seed_;
+  Front front_, root_seed_;
   std::uint64_t generation_ = ~std::uint64_t(0);
   std::size_t size_at_restart_ = 0;
   bool restarted_ = true, reset_next_ = false;
 };
+
+/// The front kept in one list.
+using FrontTracker = BasicFrontTracker<std::vector<NodePair>>;
 
 /// Collision between two BVHs (two bodies with their own trees): pairs (triangle of A, triangle
 /// of B) whose leaf BVs overlap. Results are (a, b) with a from A and b from B (not re-ordered).

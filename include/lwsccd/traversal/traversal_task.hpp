@@ -98,6 +98,8 @@ struct TraversalStats {
   /// GPU, lazy stealing: items of the start processed by one flat launch before the persistent
   /// blocks (LazyStealScheduler::kFlatStartPerBlock; 0: the blocks shared the whole start)
   std::size_t flat_start_items = 0;
+  /// CPU, work stealing from a cut below the root: parts of a thread's stack handed on to the pool
+  std::size_t handed_on = 0;
 };
 
 }  // namespace lwsccd

@@ -41,27 +41,35 @@ void ordered_parts(std::size_t n, std::vector<Part>& parts, Body body) {
   });
 }
 
-// Appends the parts' lists to out's from (vf_at, ee_at) on, in order, copying in parallel.
-inline void copy_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out, std::size_t vf_at, std::size_t ee_at) {
+// Appends the parts' lists, then the extra vf and ee lists, to out's from (vf_at, ee_at) on, in
+// order: one reservation per list (its new pages made present by all threads), the copies in
+// parallel.
+using PairLists = std::vector<std::vector<std::pair<index_t, index_t>>>;
+inline void copy_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out, std::size_t vf_at, std::size_t ee_at,
+                       const PairLists& more_vf = {}, const PairLists& more_ee = {}) {
+  using Pairs = std::vector<std::pair<index_t, index_t>>;
+  struct Source {
+    const Pairs* from;
+    Pairs* to;
+    std::size_t at;
+  };
+  std::vector<Source> sources;
+  sources.reserve(2 * parts.size() + more_vf.size() + more_ee.size());
   std::size_t vf_total = vf_at, ee_total = ee_at;
-  for (const auto& p : parts) vf_total += p.vf.size(), ee_total += p.ee.size();
-  reserve_large(out.vf, vf_total);
-  reserve_large(out.ee, ee_total);
+  auto add = [&](const Pairs& from, Pairs& to, std::size_t& total) {
+    sources.push_back(Source{&from, &to, total});
+    total += from.size();
+  };
+  for (const auto& p : parts) add(p.vf, out.vf, vf_total), add(p.ee, out.ee, ee_total);
+  for (const auto& l : more_vf) add(l, out.vf, vf_total);
+  for (const auto& l : more_ee) add(l, out.ee, ee_total);
+  reserve_large(out.vf, vf_total, true);
+  reserve_large(out.ee, ee_total, true);
   out.vf.resize(vf_total);
   out.ee.resize(ee_total);
-  // Both lists' copies in one parallel loop: part k's vf (j = 2k) or ee (j = 2k + 1) list.
-  std::vector<std::size_t> vf_offset(parts.size() + 1, vf_at), ee_offset(parts.size() + 1, ee_at);
-  for (std::size_t k = 0; k < parts.size(); ++k) {
-    vf_offset[k + 1] = vf_offset[k] + parts[k].vf.size();
-    ee_offset[k + 1] = ee_offset[k] + parts[k].ee.size();
-  }
-  parallel_ranges(2 * parts.size(), 1, [&](std::size_t first, std::size_t last) {
-    for (std::size_t j = first; j < last; ++j) {
-      const std::size_t k = j / 2;
-      const auto& from = j % 2 ? parts[k].ee : parts[k].vf;
-      auto& to = j % 2 ? out.ee : out.vf;
-      std::copy(from.begin(), from.end(), to.begin() + static_cast<std::ptrdiff_t>(j % 2 ? ee_offset[k] : vf_offset[k]));
-    }
+  parallel_ranges(sources.size(), 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t j = first; j < last; ++j)
+      std::copy(sources[j].from->begin(), sources[j].from->end(), sources[j].to->begin() + static_cast<std::ptrdiff_t>(sources[j].at));
   });
 }
 inline void append_parts(const std::vector<FeaturePairs>& parts, FeaturePairs& out) {
@@ -217,36 +225,65 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
   return out;
 }
 
-inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
-                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                                    std::vector<FeaturePairs>& part_lists) {
+namespace detail {
+
+// emit_feature_pairs_into for n candidates, candidates_in(begin, end, fn) calling fn on the
+// candidates [begin, end) in order.
+template <class CandidatesIn>
+void emit_feature_pairs_from(const RepresentativeTriangles& rep, std::size_t n, CandidatesIn&& candidates_in,
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                             std::vector<FeaturePairs>& part_lists) {
   const TriangleMesh& mesh = rep.mesh();
   const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
   if (boxes.size() != features)
     throw InputError("emit_feature_pairs", "boxes",
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
   const EmissionView view = rep.view(boxes.data());
-  detail::ordered_parts(n, part_lists, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
-    for (std::size_t i = begin; i < end; ++i) {
-      const TrianglePair& p = candidates[i];
-      if (p.adjacent) continue;
+  ordered_parts(n, part_lists, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
+    candidates_in(begin, end, [&](const TrianglePair& p) {
+      if (p.adjacent) return;
       emit_triangle_pair(
-          view, p.a, p.b, [&](index_t v, index_t f) { detail::push_back_large(part.vf, {v, f}); },
-          [&](index_t x, index_t y) { detail::push_back_large(part.ee, {x, y}); });
-    }
-  });
-  detail::copy_parts(part_lists, out, 0, 0);
-  if (!with_orphans) return;
-  const OrphanSets& orphans = rep.orphans();
-  for (const auto* list : {&orphans.vf, &orphans.ee}) {
-    auto& target = list == &orphans.vf ? out.vf : out.ee;
-    std::vector<std::vector<std::pair<index_t, index_t>>> kept;
-    detail::ordered_parts(list->size(), kept, [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
-      for (std::size_t i = begin; i < end; ++i)
-        if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
+          view, p.a, p.b, [&](index_t v, index_t f) { push_back_large(part.vf, {v, f}); },
+          [&](index_t x, index_t y) { push_back_large(part.ee, {x, y}); });
     });
-    detail::append_in_parallel(kept, target);
+  });
+  // The orphans' pairs whose boxes overlap, gathered before the copy so that each list is
+  // reserved once (appending them after it would move a first step's lists again).
+  PairLists kept_vf, kept_ee;
+  if (with_orphans) {
+    const OrphanSets& orphans = rep.orphans();
+    for (const auto* list : {&orphans.vf, &orphans.ee})
+      ordered_parts(list->size(), list == &orphans.vf ? kept_vf : kept_ee,
+                    [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
+                      for (std::size_t i = begin; i < end; ++i)
+                        if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
+                    });
   }
+  copy_parts(part_lists, out, 0, 0, kept_vf, kept_ee);
+}
+
+}  // namespace detail
+
+inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
+                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                                    std::vector<FeaturePairs>& part_lists) {
+  detail::emit_feature_pairs_from(
+      rep, n,
+      [candidates](std::size_t begin, std::size_t end, auto&& fn) {
+        for (std::size_t i = begin; i < end; ++i) fn(candidates[i]);
+      },
+      boxes, with_orphans, out, part_lists);
+}
+
+inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
+                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                                    std::vector<FeaturePairs>& part_lists) {
+  std::size_t n = 0;
+  for (const auto& list : candidate_lists) n += list.size();
+  detail::emit_feature_pairs_from(
+      rep, n,
+      [&candidate_lists](std::size_t begin, std::size_t end, auto&& fn) { detail::for_each_in_lists(candidate_lists, begin, end, fn); },
+      boxes, with_orphans, out, part_lists);
 }
 
 namespace detail {
