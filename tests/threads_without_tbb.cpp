@@ -4,6 +4,7 @@
 #undef LWSCCD_WITH_TBB
 #define LWSCCD_WITH_TBB 0
 
+#include <algorithm>
 #include <cstdio>
 
 #include "lwsccd/pipeline/cpu_pipeline.hpp"
@@ -42,6 +43,21 @@ int main() {
     contacts += a.contacts.vf.size() + a.contacts.ee.size();
   }
   check(contacts > 0, "the steps have contacts");
+  // A traversal from the root hands parts of a thread's stack on (here to the same thread, after
+  // its item): the results and work of one thread.
+  {
+    const lwsccd::Step step = simulation.next_step();
+    const lwsccd::cpu::Bvh<lwsccd::Aabbf> bvh(*simulation.mesh(), step.x0, step.x1);
+    const lwsccd::SelfCollisionTask<lwsccd::Aabbf> task{bvh.view(), lwsccd::LeafFilter{nullptr, nullptr, simulation.mesh()->faces().data(), false}};
+    auto serial = lwsccd::cpu::traverse(task, {lwsccd::NodePair{0, 0}}, true);
+    auto stolen = lwsccd::cpu::traverse(task, {lwsccd::NodePair{0, 0}}, true, lwsccd::cpu::WorkStealingScheduler{3});
+    std::sort(serial.results.begin(), serial.results.end());
+    std::sort(stolen.results.begin(), stolen.results.end());
+    check(stolen.stats.handed_on > 0, "parts of a stack handed on");
+    check(stolen.results == serial.results && stolen.front.size() == serial.front.size() &&
+              stolen.stats.items_processed == serial.stats.items_processed,
+          "the traversal's results, front and work");
+  }
   std::printf("CPU backend without oneTBB: %zu contacts over 3 steps, 1 and 3 threads alike; %d failures\n", contacts, failures);
   return failures ? 1 : 0;
 }

@@ -36,8 +36,8 @@ class AnyMultiGpuPipeline final : public AnyPipeline {
   }
   StepOutcome step_from_device(const Vec3d* x0, const Vec3d* x1) override { return outcome(pipeline_.step_from_device(x0, x1)); }
   StepOutcome step_from_device(const Vec3f* x0, const Vec3f* x1) override { return outcome(pipeline_.step_from_device(x0, x1)); }
-  AnyDeviceContacts step_on_device(const Vec3d* x0, const Vec3d* x1) override { return contacts(pipeline_.step_on_device(x0, x1)); }
-  AnyDeviceContacts step_on_device(const Vec3f* x0, const Vec3f* x1) override { return contacts(pipeline_.step_on_device(x0, x1)); }
+  AnyDeviceContacts step_on_device(const Vec3d* x0, const Vec3d* x1) override { return lwsccd::detail::any_device_contacts(pipeline_.step_on_device(x0, x1)); }
+  AnyDeviceContacts step_on_device(const Vec3f* x0, const Vec3f* x1) override { return lwsccd::detail::any_device_contacts(pipeline_.step_on_device(x0, x1)); }
   void restart_from_root() override { pipeline_.restart_from_root(); }
   const TriangleMesh& mesh() const override { return pipeline_.mesh(); }
   const PipelineParams& params() const override { return pipeline_.params(); }
@@ -45,19 +45,6 @@ class AnyMultiGpuPipeline final : public AnyPipeline {
 
  private:
   static StepOutcome outcome(MultiGpuStepResult<double>&& r) { return {r.stats, std::move(r.contacts)}; }
-  static AnyDeviceContacts contacts(const DeviceStepResult<double>& r) {
-    AnyDeviceContacts c;
-    c.stats = r.stats;
-    c.vf = r.contacts.vf;
-    c.ee = r.contacts.ee;
-    c.num_vf = r.contacts.num_vf;
-    c.num_ee = r.contacts.num_ee;
-    c.earliest_toi = r.contacts.earliest_toi;
-    c.gave_up = r.contacts.gave_up;
-    c.vf_counts = r.contacts.vf_counts;
-    c.ee_counts = r.contacts.ee_counts;
-    return c;
-  }
   MultiGpuPipeline<> pipeline_;
 };
 

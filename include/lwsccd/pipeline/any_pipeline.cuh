@@ -52,21 +52,7 @@ class AnyPipelineAdapter final : public PipelineAdapter<Pipeline> {
   }
   template <class Q>
   AnyDeviceContacts on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
-    const auto r = this->pipeline_.step_on_device(device_x0, device_x1);
-    using Hit = std::remove_cv_t<std::remove_pointer_t<decltype(r.contacts.vf)>>;
-    AnyDeviceContacts out;
-    out.stats = r.stats;
-    out.vf = r.contacts.vf;
-    out.ee = r.contacts.ee;
-    out.num_vf = r.contacts.num_vf;
-    out.num_ee = r.contacts.num_ee;
-    out.toi_is_double = std::is_same<decltype(Hit::toi), double>::value;
-    out.hit_bytes = sizeof(Hit);
-    out.earliest_toi = static_cast<double>(r.contacts.earliest_toi);
-    out.gave_up = r.contacts.gave_up;
-    out.vf_counts = r.contacts.vf_counts;
-    out.ee_counts = r.contacts.ee_counts;
-    return out;
+    return lwsccd::detail::any_device_contacts(this->pipeline_.step_on_device(device_x0, device_x1));
   }
 };
 

@@ -109,6 +109,27 @@ class AnyPipeline {
 
 namespace detail {
 
+/// AnyDeviceContacts of a step whose contacts a GPU pipeline left in device memory (its
+/// step_on_device's result: stats and contacts with vf/ee device arrays, their counts, the
+/// earliest time, the answers given up and the narrow phase's counts).
+template <class DeviceStepResult>
+AnyDeviceContacts any_device_contacts(const DeviceStepResult& r) {
+  using Hit = std::remove_cv_t<std::remove_pointer_t<decltype(r.contacts.vf)>>;
+  AnyDeviceContacts out;
+  out.stats = r.stats;
+  out.vf = r.contacts.vf;
+  out.ee = r.contacts.ee;
+  out.num_vf = r.contacts.num_vf;
+  out.num_ee = r.contacts.num_ee;
+  out.toi_is_double = std::is_same<std::remove_cv_t<decltype(Hit::toi)>, double>::value;
+  out.hit_bytes = sizeof(Hit);
+  out.earliest_toi = static_cast<double>(r.contacts.earliest_toi);
+  out.gave_up = r.contacts.gave_up;
+  out.vf_counts = r.contacts.vf_counts;
+  out.ee_counts = r.contacts.ee_counts;
+  return out;
+}
+
 template <class T>
 NarrowPhaseResult<double> to_double(NarrowPhaseResult<T>&& r) {
   if constexpr (std::is_same<T, double>::value) {

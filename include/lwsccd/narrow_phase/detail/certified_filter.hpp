@@ -169,6 +169,13 @@ struct CertifiedFilter {
     return expand_piece(piece, params, node, mask);
   }
 
+  /// Whether the single-precision passes take a pair of these parameters: FP32 first, no
+  /// minimum separation (the cubic speaks of contact only), and leaves below the filter's levels
+  /// (a tolerance of at least 2^-(kLevel - 1) has its leaves within them: the double path's; a
+  /// tolerance that rounds up to the limit is only declined, which is always sound).
+  LWSCCD_HD static bool single_passes_apply(const CcdParams<float>& params) {
+    return Policy::kSingleFirst && !(params.min_separation > 0.0f) && params.tolerance < exact_pow2_neg<float>(kLevel - 1);
+  }
   /// The single-precision filter (FP32 first): both rounds in float, as a proof of a miss on its
   /// own. The pair relative to its first point, rounded to float (relative_single, bound B9);
   /// the cubic's pieces down to kLevel pruned as `intervals` prunes them, with only the perturbed
@@ -188,19 +195,14 @@ struct CertifiedFilter {
   template <class Q>
   LWSCCD_HD static int intervals_single(const Q& q, const CcdParams<float>& params, std::uint32_t& mask, bool separation_tried = false) {
     mask = 0;
-    if (!Policy::kSingleFirst || params.min_separation > 0.0f) return -1;
-    // Leaves within the filter's levels (certified_max_level <= kLevel, i.e. a tolerance of at
-    // least 2^-(kLevel - 1)): the double path's (a tolerance that rounds up to the limit is only
-    // declined, which is always sound).
-    if (params.tolerance >= exact_pow2_neg<float>(kLevel - 1)) return -1;
+    if (!single_passes_apply(params)) return -1;
     return intervals_of(relative_single(q), params, mask, nullptr, !separation_tried);
   }
   /// True when decides_single decides the pair by its separating directions alone (B13), before
   /// any interval: the same conditions and the same test.
   template <class Q, class T>
   LWSCCD_HD static bool separates_single(const Q& q, const CcdParams<T>& params_in) {
-    if (!Policy::kSingleFirst || !Policy::kSeparatingDirections || params_in.min_separation > T(0)) return false;
-    if (static_cast<float>(params_in.tolerance) >= exact_pow2_neg<float>(kLevel - 1)) return false;
+    if (!Policy::kSeparatingDirections || !single_passes_apply(single_params(params_in))) return false;
     return swept_hulls_apart<Policy>(relative_single(q), single_input_perturbation<Policy>());
   }
   template <class Q>
@@ -220,7 +222,7 @@ struct CertifiedFilter {
     const CcdParams<float> params = single_params(params_in);
     // intervals_single, inside_single and expand_single on one thread: the relative query and the
     // cubic's piece on the step are computed once for all of them (the same values).
-    if (!Policy::kSingleFirst || params.min_separation > 0.0f || params.tolerance >= exact_pow2_neg<float>(kLevel - 1)) return false;
+    if (!single_passes_apply(params)) return false;
     const auto s = relative_single(q);
     BernsteinPiece<float> root;
     std::uint32_t mask = 0;
