@@ -303,8 +303,9 @@ class CcdPipeline {
   BasicFrontTracker<ListsOf<NodePair>> tracker_;  ///< the front in the lists the traversal's threads wrote
   ListsOf<NodePair> root_{NodePair{0, 0}};  // the root alone (never changed; not const: pipelines are assignable)
   std::vector<Vec3d> wide0_, wide1_;  ///< float input, widened (kept: the next step reuses the room)
-  // Memory kept from step to step (a warm step allocates no large list): the traversal's result
-  // and workers' lists, the candidates, the feature pairs and their per-thread lists.
+  // Memory kept from step to step (a warm step allocates no large list): the traversal's threads'
+  // lists (a whole step's candidates and front, read there), a step in parts' traversal result and
+  // candidates, the feature pairs and their per-thread lists.
   TraversalResult<Task> traversal_;
   TraversalWorkspace<Task> traversal_workspace_;
   std::vector<TrianglePair> candidates_;
