@@ -216,16 +216,73 @@ TEST_CASE("representatives: candidates read from several lists give the one list
   const std::vector<std::vector<TrianglePair>> lists{std::vector<TrianglePair>(all.begin(), all.begin() + cut1), {},
                                                      std::vector<TrianglePair>(all.begin() + cut1, all.begin() + cut2),
                                                      std::vector<TrianglePair>(all.begin() + cut2, all.end())};
-  for (bool with_orphans : {true, false}) {
+  // One FeaturePairParts throughout: with the orphans, then without (their lists emptied), then
+  // with again (every list's memory reused).
+  FeaturePairParts parts;
+  for (bool with_orphans : {true, false, true}) {
     const FeaturePairs one = emit_feature_pairs(rep, all.data(), all.size(), boxes, with_orphans);
-    FeaturePairs from_lists;
-    std::vector<FeaturePairs> parts;
-    emit_feature_pairs_into(rep, lists, boxes, with_orphans, from_lists, parts);
-    REQUIRE(from_lists.vf == one.vf);
-    REQUIRE(from_lists.ee == one.ee);
     REQUIRE(one.ee.size() > 0);
-    // Again into the same lists (their memory reused): the same pairs.
-    emit_feature_pairs_into(rep, lists, boxes, with_orphans, from_lists, parts);
-    REQUIRE(from_lists.ee == one.ee);
+    emit_feature_pairs_into(rep, lists, boxes, with_orphans, parts);
+    REQUIRE(parts.vf_size() == one.vf.size());
+    REQUIRE(parts.ee_size() == one.ee.size());
+    const FeaturePairs joined = parts.joined();
+    REQUIRE(joined.vf == one.vf);
+    REQUIRE(joined.ee == one.ee);
+    // Indexed where they lie, element for element.
+    const lwsccd::detail::ConcatenatedLists<std::pair<index_t, index_t>> vf(parts.vf_lists()), ee(parts.ee_lists());
+    REQUIRE(vf.size() == one.vf.size());
+    REQUIRE(ee.size() == one.ee.size());
+    std::size_t vf_differ = 0, ee_differ = 0;
+    for (std::size_t i = 0; i < one.vf.size(); ++i) vf_differ += vf[i] != one.vf[i];
+    for (std::size_t i = 0; i < one.ee.size(); ++i) ee_differ += ee[i] != one.ee[i];
+    CHECK(vf_differ == 0);
+    CHECK(ee_differ == 0);
+    // The narrow phase reads them there: the answer over the one list, hit for hit.
+    for (const CcdMode mode : {CcdMode::contacts, CcdMode::earliest}) {
+      CcdParams<double> params;
+      params.mode = mode;
+      const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, one, params);
+      const auto got = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, parts, params);
+      CHECK(got.earliest_toi == expected.earliest_toi);
+      CHECK(got.vf_counts.pairs == expected.vf_counts.pairs);
+      CHECK(got.ee_counts.certified_misses == expected.ee_counts.certified_misses);
+      CHECK(got.ee_counts.screened == expected.ee_counts.screened);
+      REQUIRE(got.vf.size() == expected.vf.size());
+      REQUIRE(got.ee.size() == expected.ee.size());
+      for (std::size_t i = 0; i < got.ee.size(); ++i) {
+        REQUIRE(got.ee[i].first == expected.ee[i].first);
+        REQUIRE(got.ee[i].second == expected.ee[i].second);
+        REQUIRE(got.ee[i].toi == expected.ee[i].toi);
+      }
+      for (std::size_t i = 0; i < got.vf.size(); ++i) REQUIRE(got.vf[i].toi == expected.vf[i].toi);
+      if (mode == CcdMode::contacts) REQUIRE(expected.ee.size() + expected.vf.size() > 0);
+    }
+    // The orphans' pairs come last, and only when asked for.
+    std::size_t orphan_pairs = 0;
+    for (const auto& list : parts.orphans_vf) orphan_pairs += list.size();
+    for (const auto& list : parts.orphans_ee) orphan_pairs += list.size();
+    CHECK((orphan_pairs > 0) == with_orphans);
   }
+}
+
+TEST_CASE("concatenated lists: element i of lists of every size, empty ones included", "[representative]") {
+  // Lists around the index's block size (1,024), empty ones between them and at both ends.
+  const std::vector<std::size_t> sizes{0, 3, 1024, 0, 0, 1, 1023, 2049, 0, 5000, 0};
+  std::vector<std::vector<int>> lists;
+  int next = 0;
+  for (const std::size_t n : sizes) {
+    lists.emplace_back();
+    for (std::size_t k = 0; k < n; ++k) lists.back().push_back(next++);
+  }
+  std::vector<const std::vector<int>*> pointers;
+  for (const auto& l : lists) pointers.push_back(&l);
+  const lwsccd::detail::ConcatenatedLists<int> all(pointers);
+  REQUIRE(all.size() == static_cast<std::size_t>(next));
+  std::size_t wrong = 0;
+  for (std::size_t i = 0; i < all.size(); ++i) wrong += all[i] != static_cast<int>(i);
+  CHECK(wrong == 0);
+  CHECK(lwsccd::detail::ConcatenatedLists<int>().size() == 0);
+  CHECK(lwsccd::detail::ConcatenatedLists<int>(std::vector<const std::vector<int>*>{}).size() == 0);
+  const std::vector<int> none;
+  CHECK(lwsccd::detail::ConcatenatedLists<int>(std::vector<const std::vector<int>*>{&none, &none}).size() == 0);
 }

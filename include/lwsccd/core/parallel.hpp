@@ -322,6 +322,38 @@ void for_each_in_lists(const std::vector<std::vector<T>>& lists, std::size_t beg
   }
 }
 
+/// Element i of the concatenation of several lists, read where they lie, in constant time: for
+/// loops that index a sequence (splitting it into runs, keeping indices of what is left for
+/// later) over lists that threads filled. The lists must outlive it and keep their sizes.
+template <class T>
+class ConcatenatedLists {
+ public:
+  ConcatenatedLists() = default;
+  explicit ConcatenatedLists(std::vector<const std::vector<T>*> lists) : lists_(std::move(lists)) {
+    starts_.assign(lists_.size() + 1, 0);
+    for (std::size_t k = 0; k < lists_.size(); ++k) starts_[k + 1] = starts_[k] + lists_[k]->size();
+    // Per block of kBlock indices, the list holding its first element (empty lists skipped).
+    first_list_.resize((size() + kBlock - 1) / kBlock);
+    std::size_t list = 0;
+    for (std::size_t b = 0; b < first_list_.size(); ++b) {
+      while (b * kBlock >= starts_[list + 1]) ++list;
+      first_list_[b] = list;
+    }
+  }
+  std::size_t size() const { return starts_.empty() ? 0 : starts_.back(); }
+  const T& operator[](std::size_t i) const {
+    std::size_t list = first_list_[i / kBlock];
+    while (i >= starts_[list + 1]) ++list;
+    return (*lists_[list])[i - starts_[list]];
+  }
+
+ private:
+  static constexpr std::size_t kBlock = 1024;
+  std::vector<const std::vector<T>*> lists_;
+  std::vector<std::size_t> starts_;  ///< the concatenation's index of each list's first element, and the size
+  std::vector<std::size_t> first_list_;
+};
+
 /// std::sort on all cores (a total order gives the same result as std::sort).
 template <class It, class Less>
 void parallel_sort(It first, It last, Less less) {

@@ -58,10 +58,11 @@ struct EmissionView {
 template <class P>
 LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_vertices, index_t num_edges,
                             const Vec3<P>* x0, const Vec3<P>* x1, index_t id, float margin = 0) {
-  Aabbf box = Aabbf::empty();
+  Vec3<P> points[6];
+  int n = 0;
   auto add = [&](index_t v) {
-    box.expand(x0[v]);
-    box.expand(x1[v]);
+    points[n++] = x0[v];
+    points[n++] = x1[v];
   };
   if (id < num_vertices) {
     add(id);
@@ -75,6 +76,7 @@ LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_ve
     add(f.v[1]);
     add(f.v[2]);
   }
+  const Aabbf box = bv_traits<Aabbf>::fit(points, n);  // (each coordinate rounded outward once)
   return margin > 0 ? box.inflated(margin) : box;
 }
 
@@ -190,6 +192,38 @@ class RepresentativeTriangles {
   OrphanSets orphans_;
 };
 
+/// Feature pairs left in the lists the threads emitting them filled: the candidates' parts (each
+/// a vf and an ee list), then the kept orphans' parts, in that order; their concatenation, per
+/// kind, is the list emit_feature_pairs gives. Why: copying a step's pairs into one list costs
+/// a pass over them, and on a first step the page faults of new memory (cloth-ball: 55 MB).
+struct FeaturePairParts {
+  using Pairs = std::vector<std::pair<index_t, index_t>>;
+  std::vector<FeaturePairs> candidates;
+  std::vector<Pairs> orphans_vf, orphans_ee;
+
+  /// The vertex-face (edge-edge) lists, in order.
+  std::vector<const Pairs*> vf_lists() const { return lists_of(&FeaturePairs::vf, orphans_vf); }
+  std::vector<const Pairs*> ee_lists() const { return lists_of(&FeaturePairs::ee, orphans_ee); }
+  std::size_t vf_size() const { return size_of(vf_lists()); }
+  std::size_t ee_size() const { return size_of(ee_lists()); }
+  /// Both sequences, each in one list.
+  FeaturePairs joined() const;
+
+ private:
+  std::vector<const Pairs*> lists_of(Pairs FeaturePairs::*kind, const std::vector<Pairs>& orphans) const {
+    std::vector<const Pairs*> out;
+    out.reserve(candidates.size() + orphans.size());
+    for (const FeaturePairs& part : candidates) out.push_back(&(part.*kind));
+    for (const Pairs& part : orphans) out.push_back(&part);
+    return out;
+  }
+  static std::size_t size_of(const std::vector<const Pairs*>& lists) {
+    std::size_t n = 0;
+    for (const Pairs* list : lists) n += list->size();
+    return n;
+  }
+};
+
 /// One swept box per feature id (vertices, edges, faces) from the positions at t0 and t1, each
 /// grown by `margin` (>= 0; a pipeline uses half its minimum separation, as for the BVH's leaves).
 template <class P>
@@ -206,16 +240,17 @@ FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::v
 /// (a step split into parts lists them with one part).
 FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                 const std::vector<Aabbf>& boxes, bool with_orphans);
-/// The same into `out` (its lists' memory reused), with `part_lists` (the per-thread lists) kept
-/// for the next call: a caller that emits every step (a pipeline) allocates nothing once warm.
+/// The same into `out` (its lists' memory reused), through `parts` (the per-thread lists), kept
+/// for the next call: a caller that emits every step allocates nothing once warm.
 void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                              const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                             std::vector<FeaturePairs>& part_lists);
-/// The same with the candidates held in several lists, in their order (a work-stealing
-/// traversal's threads' lists, cpu::traverse_in_lists), read where they lie.
+                             FeaturePairParts& parts);
+/// The feature pairs of candidates held in several lists, in their order (a work-stealing
+/// traversal's threads' lists, cpu::traverse_in_lists), read where they lie, left in the lists
+/// the threads emitting them filled (`out`'s memory reused): nothing is copied into one list.
+/// cpu::test_feature_pairs reads them there; out.joined() is emit_feature_pairs's list.
 void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
-                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                             std::vector<FeaturePairs>& part_lists);
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& out);
 
 /// The oracle: every non-incident vertex-face pair and every edge-edge pair without a common
 /// vertex whose feature boxes overlap (and, with a layout, that rep.considers), sorted; vertices

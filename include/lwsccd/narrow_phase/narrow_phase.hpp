@@ -11,6 +11,7 @@
 #include "lwsccd/core/parallel.hpp"
 #include "lwsccd/features/detail/oracle_impl.hpp"
 #include "lwsccd/features/oracle.hpp"
+#include "lwsccd/features/representative.hpp"
 #include "lwsccd/io/dataset.hpp"
 #include "lwsccd/io/query_io.hpp"
 #include "lwsccd/narrow_phase/ccd_query.hpp"
@@ -230,19 +231,17 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
     gave_up += part.gave_up;
   }
 }
-}  // namespace detail
 
-namespace cpu {
-
-
-/// Runs Method on every pair (vf and ee lists in the dataset's id convention) on all cores, in
-/// the mode params.mode. CertifiedCcd runs in two passes (certified classification, then the
-/// fallback on the undecided pairs); the GPU batch does the same, so both give the same answers.
-template <class Method, class T, class P>
-NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0,
-                                        const std::vector<Vec3<P>>& x1, const FeaturePairs& pairs,
-                                        const CcdParams<T>& params = {}) {
-  static_assert(require_ccd_method<Method>::value, "");
+// test_feature_pairs over any sequences of pairs with size() and operator[] (one list, or the
+// lists threads filled: ConcatenatedLists).
+template <class Method, class T, class P, class VfPairs, class EePairs>
+NarrowPhaseResult<T> test_pair_sequences(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0,
+                                         const std::vector<Vec3<P>>& x1, const VfPairs& vf_pairs,
+                                         const EePairs& ee_pairs, const CcdParams<T>& params) {
+  struct {
+    const VfPairs& vf;
+    const EePairs& ee;
+  } pairs{vf_pairs, ee_pairs};
   const MeshFeatures features = mesh_features(mesh);
   auto vf_query = [&](std::size_t i) {
     return gather_vertex_face<T>(features, x0.data(), x1.data(), pairs.vf[i].first, pairs.vf[i].second);
@@ -314,6 +313,32 @@ NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vec
     for (const auto& h : *list) result.earliest_toi = std::min(result.earliest_toi, h.toi);
   if (params.mode == CcdMode::earliest) result.vf.clear(), result.ee.clear();
   return result;
+}
+}  // namespace detail
+
+namespace cpu {
+
+/// Runs Method on every pair (vf and ee lists in the dataset's id convention) on all cores, in
+/// the mode params.mode. CertifiedCcd runs in two passes (certified classification, then the
+/// fallback on the undecided pairs); the GPU batch does the same, so both give the same answers.
+template <class Method, class T, class P>
+NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0,
+                                        const std::vector<Vec3<P>>& x1, const FeaturePairs& pairs,
+                                        const CcdParams<T>& params = {}) {
+  static_assert(require_ccd_method<Method>::value, "");
+  return lwsccd::detail::test_pair_sequences<Method>(mesh, x0, x1, pairs.vf, pairs.ee, params);
+}
+
+/// The same for feature pairs left in the lists that emitted them (emit_feature_pairs_into over
+/// candidate lists), read where they lie: the answer of test_feature_pairs(pairs.joined()).
+template <class Method, class T, class P>
+NarrowPhaseResult<T> test_feature_pairs(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0,
+                                        const std::vector<Vec3<P>>& x1, const FeaturePairParts& pairs,
+                                        const CcdParams<T>& params = {}) {
+  static_assert(require_ccd_method<Method>::value, "");
+  using Pair = std::pair<index_t, index_t>;
+  return lwsccd::detail::test_pair_sequences<Method>(mesh, x0, x1, lwsccd::detail::ConcatenatedLists<Pair>(pairs.vf_lists()),
+                                                     lwsccd::detail::ConcatenatedLists<Pair>(pairs.ee_lists()), params);
 }
 
 }  // namespace cpu

@@ -233,22 +233,26 @@ class CcdPipeline {
   void stage_feature_pairs(StepInProgress& step) {
     if (!step.boxes_ready) step.boxes = feature_boxes(*mesh_, step.x0, step.x1, params_.min_separation / 2);
     step.boxes_ready = true;
-    if (step.in_parts)
+    StepStats& stats = step.result.stats;
+    if (step.in_parts) {
       emit_feature_pairs_into(representatives_, step.candidates.data() + step.part_first, step.part_count, step.boxes,
-                              step.orphans_in_part, step.features, feature_part_lists_);
-    else
-      emit_feature_pairs_into(representatives_, step.candidate_lists->lists, step.boxes, step.orphans_in_part, step.features,
-                              feature_part_lists_);
-    step.result.stats.feature_pairs_vf += step.features.vf.size();
-    step.result.stats.feature_pairs_ee += step.features.ee.size();
+                              step.orphans_in_part, step.features, feature_parts_);
+      stats.feature_pairs_vf += step.features.vf.size();
+      stats.feature_pairs_ee += step.features.ee.size();
+      return;
+    }
+    // A whole step's pairs stay in the lists the threads filled: the narrow phase reads them there.
+    emit_feature_pairs_into(representatives_, step.candidate_lists->lists, step.boxes, step.orphans_in_part, feature_parts_);
+    stats.feature_pairs_vf += feature_parts_.vf_size();
+    stats.feature_pairs_ee += feature_parts_.ee_size();
   }
   void stage_narrow_phase(StepInProgress& step) {
     StepResult<T>& r = step.result;
-    NarrowPhaseResult<T> found = test_feature_pairs<Method, T>(*mesh_, step.x0, step.x1, step.features, ccd_params());
     if (!step.in_parts) {
-      r.contacts = std::move(found);
+      r.contacts = test_feature_pairs<Method, T>(*mesh_, step.x0, step.x1, feature_parts_, ccd_params());
       return;
     }
+    NarrowPhaseResult<T> found = test_feature_pairs<Method, T>(*mesh_, step.x0, step.x1, step.features, ccd_params());
     add_narrow_phase_part(found, r.contacts);  // sorted once every part is in (complete_step)
     ++r.stats.narrow_parts;
   }
@@ -309,8 +313,8 @@ class CcdPipeline {
   TraversalResult<Task> traversal_;
   TraversalWorkspace<Task> traversal_workspace_;
   std::vector<TrianglePair> candidates_;
-  FeaturePairs features_;
-  std::vector<FeaturePairs> feature_part_lists_;
+  FeaturePairs features_;          ///< a step in parts: a part's feature pairs in one list
+  FeaturePairParts feature_parts_;  ///< the threads' lists of feature pairs (a whole step's pairs)
 };
 
 }  // namespace cpu

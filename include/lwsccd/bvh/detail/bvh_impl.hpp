@@ -238,12 +238,18 @@ void Bvh<BV>::build_tree(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<
   const auto n = static_cast<index_t>(faces_.size());
   const auto size = static_cast<std::size_t>(n);
   std::vector<Vec3<P>> centers(size);
-  detail::parallel_ranges(size, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
-    BV unused_bv;
-    for (std::size_t f = begin; f < end; ++f) detail::leaf_volume(faces_[f], x0.data(), x1.data(), unused_bv, centers[f], leaf_margin_);
+  // The centres and their box in fixed blocks, the blocks' boxes merged in order (exact either way).
+  constexpr std::size_t kBlock = 4096;
+  std::vector<Aabb<P>> block_boxes((size + kBlock - 1) / kBlock, Aabb<P>::empty());
+  detail::parallel_ranges(block_boxes.size(), 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t b = first; b < last; ++b)
+      for (std::size_t f = b * kBlock; f < std::min(size, (b + 1) * kBlock); ++f) {
+        centers[f] = detail::leaf_center(faces_[f], x0.data(), x1.data());
+        block_boxes[b].expand(centers[f]);
+      }
   });
   Aabb<P> scene = Aabb<P>::empty();
-  for (const Vec3<P>& c : centers) scene.expand(c);
+  for (const Aabb<P>& box : block_boxes) scene.expand(box);
   // Sorted by (code, triangle): the order of a stable sort by code, as CUB's radix sort gives on the GPU.
   std::vector<std::pair<std::uint64_t, index_t>> keyed(size);
   detail::parallel_ranges(size, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
@@ -251,20 +257,26 @@ void Bvh<BV>::build_tree(const std::vector<Vec3<P>>& x0, const std::vector<Vec3<
   });
   detail::parallel_sort(keyed.begin(), keyed.end());
 
+  // Every entry of the node arrays is written below (a rebuild of the same mesh resizes nothing).
   BvhNodes<BV>& t = nodes_;
   t.num_leaves = n;
+  const auto nodes = static_cast<std::size_t>(2 * n - 1);
   t.leaf_primitive.resize(size);
   t.leaf_codes.resize(size);
-  for (std::size_t k = 0; k < size; ++k) t.leaf_codes[k] = keyed[k].first, t.leaf_primitive[k] = keyed[k].second;
-  const index_t nodes = 2 * n - 1;
-  t.bvs.assign(static_cast<std::size_t>(nodes), BV{});
-  t.left.assign(static_cast<std::size_t>(n - 1), -1);
-  t.right.assign(static_cast<std::size_t>(n - 1), -1);
-  t.parent.assign(static_cast<std::size_t>(nodes), -1);
-  t.ranges.assign(static_cast<std::size_t>(nodes), LeafRange{0, 0});
-  for (index_t k = 0; k < n; ++k) t.ranges[n - 1 + k] = {k, k};
+  t.bvs.resize(nodes);
+  t.left.resize(size - 1);
+  t.right.resize(size - 1);
+  t.parent.resize(nodes);
+  t.ranges.resize(nodes);
+  t.parent[0] = -1;
+  detail::parallel_ranges(size, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k < end; ++k) {
+      t.leaf_codes[k] = keyed[k].first, t.leaf_primitive[k] = keyed[k].second;
+      t.ranges[size - 1 + k] = {static_cast<index_t>(k), static_cast<index_t>(k)};
+    }
+  });
   // Each node is made from the codes alone (Karras's radix tree), and each child has one parent.
-  detail::parallel_ranges(size > 0 ? size - 1 : 0, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
+  detail::parallel_ranges(size - 1, detail::grain_for(size), [&](std::size_t begin, std::size_t end) {
     for (auto i = static_cast<index_t>(begin); i < static_cast<index_t>(end); ++i) {
       const detail::RadixNode node = detail::radix_tree_node(t.leaf_codes.data(), n, i);
       t.left[i] = node.left;

@@ -30,15 +30,10 @@ __global__ void swept_centers_kernel(const Face* faces, index_t n, const Vec3<P>
   const index_t i = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
   if (i >= n) return;
   const Face f = faces[i];
-  Aabb<P> box = Aabb<P>::empty();
   bool finite = true;
-  for (int k = 0; k < 3; ++k) {
-    finite = finite && is_finite(x0[f.v[k]]) && is_finite(x1[f.v[k]]);
-    box.expand(x0[f.v[k]]);
-    box.expand(x1[f.v[k]]);
-  }
+  for (int k = 0; k < 3; ++k) finite = finite && is_finite(x0[f.v[k]]) && is_finite(x1[f.v[k]]);
   if (!finite) status[0] = 1;  // benign race: every writer writes 1
-  centers[i] = box.center();
+  centers[i] = lwsccd::detail::leaf_center(f, x0, x1);
 }
 
 template <class P>

@@ -75,6 +75,17 @@ LWSCCD_HD inline RadixNode radix_tree_node(const std::uint64_t* codes, index_t n
   return node;
 }
 
+/// The centre of a triangle's swept AABB over the step (for Morton codes).
+template <class P>
+LWSCCD_HD Vec3<P> leaf_center(const Face& f, const Vec3<P>* x0, const Vec3<P>* x1) {
+  Aabb<P> box = Aabb<P>::empty();
+  for (int k = 0; k < 3; ++k) {
+    box.expand(x0[f.v[k]]);
+    box.expand(x1[f.v[k]]);
+  }
+  return box.center();
+}
+
 /// Leaf BV of a triangle over the step, and the centre of its swept AABB (for Morton codes).
 template <class BV, class P>
 LWSCCD_HD void leaf_volume(const Face& f, const Vec3<P>* x0, const Vec3<P>* x1, BV& bv, Vec3<P>& center,
@@ -82,9 +93,7 @@ LWSCCD_HD void leaf_volume(const Face& f, const Vec3<P>* x0, const Vec3<P>* x1, 
   const Vec3<P> pts[6] = {x0[f.v[0]], x0[f.v[1]], x0[f.v[2]], x1[f.v[0]], x1[f.v[1]], x1[f.v[2]]};
   bv = bv_traits<BV>::fit(pts, 6);
   if (margin > 0) bv = bv_traits<BV>::inflate(bv, margin);  // proximity queries: see Bvh::set_leaf_margin
-  Aabb<P> box = Aabb<P>::empty();
-  for (const auto& p : pts) box.expand(p);
-  center = box.center();
+  center = leaf_center(f, x0, x1);
 }
 
 }  // namespace lwsccd::detail

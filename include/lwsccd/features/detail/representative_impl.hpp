@@ -220,26 +220,26 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
 inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                        const std::vector<Aabbf>& boxes, bool with_orphans) {
   FeaturePairs out;
-  std::vector<FeaturePairs> part_lists;
-  emit_feature_pairs_into(rep, candidates, n, boxes, with_orphans, out, part_lists);
+  FeaturePairParts parts;
+  emit_feature_pairs_into(rep, candidates, n, boxes, with_orphans, out, parts);
   return out;
 }
 
 namespace detail {
 
-// emit_feature_pairs_into for n candidates, candidates_in(begin, end, fn) calling fn on the
-// candidates [begin, end) in order.
+// The feature pairs of n candidates, candidates_in(begin, end, fn) calling fn on the candidates
+// [begin, end) in order, left in `parts` (FeaturePairParts: each list emptied first, its memory
+// kept): the candidates' parts, then the orphans' kept pairs when `with_orphans`.
 template <class CandidatesIn>
-void emit_feature_pairs_from(const RepresentativeTriangles& rep, std::size_t n, CandidatesIn&& candidates_in,
-                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                             std::vector<FeaturePairs>& part_lists) {
+void emit_feature_pair_parts(const RepresentativeTriangles& rep, std::size_t n, CandidatesIn&& candidates_in,
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& parts) {
   const TriangleMesh& mesh = rep.mesh();
   const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
   if (boxes.size() != features)
     throw InputError("emit_feature_pairs", "boxes",
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
   const EmissionView view = rep.view(boxes.data());
-  ordered_parts(n, part_lists, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
+  ordered_parts(n, parts.candidates, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
     candidates_in(begin, end, [&](const TrianglePair& p) {
       if (p.adjacent) return;
       emit_triangle_pair(
@@ -247,43 +247,56 @@ void emit_feature_pairs_from(const RepresentativeTriangles& rep, std::size_t n, 
           [&](index_t x, index_t y) { push_back_large(part.ee, {x, y}); });
     });
   });
-  // The orphans' pairs whose boxes overlap, gathered before the copy so that each list is
-  // reserved once (appending them after it would move a first step's lists again).
-  PairLists kept_vf, kept_ee;
-  if (with_orphans) {
-    const OrphanSets& orphans = rep.orphans();
-    for (const auto* list : {&orphans.vf, &orphans.ee})
-      ordered_parts(list->size(), list == &orphans.vf ? kept_vf : kept_ee,
-                    [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
-                      for (std::size_t i = begin; i < end; ++i)
-                        if (orphan_kept(view, (*list)[i].first, (*list)[i].second)) part.push_back((*list)[i]);
-                    });
+  for (auto* kept : {&parts.orphans_vf, &parts.orphans_ee}) {
+    const auto& list = kept == &parts.orphans_vf ? rep.orphans().vf : rep.orphans().ee;
+    if (!with_orphans) {
+      for (auto& part : *kept) part.clear();
+      continue;
+    }
+    ordered_parts(list.size(), *kept, [&](std::size_t begin, std::size_t end, std::vector<std::pair<index_t, index_t>>& part) {
+      for (std::size_t i = begin; i < end; ++i)
+        if (orphan_kept(view, list[i].first, list[i].second)) part.push_back(list[i]);
+    });
   }
-  copy_parts(part_lists, out, 0, 0, kept_vf, kept_ee);
+}
+
+// emit_feature_pairs_into for n candidates (candidates_in as above): the parts, then one copy
+// into `out` (each list reserved once, the orphans' pairs included).
+template <class CandidatesIn>
+void emit_feature_pairs_from(const RepresentativeTriangles& rep, std::size_t n, CandidatesIn&& candidates_in,
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
+                             FeaturePairParts& parts) {
+  emit_feature_pair_parts(rep, n, candidates_in, boxes, with_orphans, parts);
+  copy_parts(parts.candidates, out, 0, 0, parts.orphans_vf, parts.orphans_ee);
 }
 
 }  // namespace detail
 
 inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                     const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                                    std::vector<FeaturePairs>& part_lists) {
+                                    FeaturePairParts& parts) {
   detail::emit_feature_pairs_from(
       rep, n,
       [candidates](std::size_t begin, std::size_t end, auto&& fn) {
         for (std::size_t i = begin; i < end; ++i) fn(candidates[i]);
       },
-      boxes, with_orphans, out, part_lists);
+      boxes, with_orphans, out, parts);
 }
 
 inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
-                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                                    std::vector<FeaturePairs>& part_lists) {
+                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& out) {
   std::size_t n = 0;
   for (const auto& list : candidate_lists) n += list.size();
-  detail::emit_feature_pairs_from(
+  detail::emit_feature_pair_parts(
       rep, n,
       [&candidate_lists](std::size_t begin, std::size_t end, auto&& fn) { detail::for_each_in_lists(candidate_lists, begin, end, fn); },
-      boxes, with_orphans, out, part_lists);
+      boxes, with_orphans, out);
+}
+
+inline FeaturePairs FeaturePairParts::joined() const {
+  FeaturePairs out;
+  detail::copy_parts(candidates, out, 0, 0, orphans_vf, orphans_ee);
+  return out;
 }
 
 namespace detail {
