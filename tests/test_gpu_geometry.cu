@@ -211,6 +211,87 @@ __global__ void late_fill_kernel(unsigned* out, std::size_t n, unsigned value, u
 }
 }  // namespace
 
+TEST_CASE("Small device blocks are cut from shared slabs: their own memory, exact accounting, slabs freed once no piece is held",
+          "[gpu][pool]") {
+  gpu::set_memory_caching(true);
+  gpu::release_cached_memory();
+  REQUIRE(gpu::memory_stats().cached == 0);
+  REQUIRE(gpu::memory_stats().reserved == 0);  // (no object of the process holds a piece here)
+  const std::size_t in_use = gpu::memory_stats().in_use;
+  constexpr std::size_t kSlab = gpu::detail::DevicePool::kSlabBytes;
+  // Odd sizes below the limit, the last ones large enough to need a second slab.
+  std::vector<std::size_t> sizes{1, 255, 257, 4099, 100'003, 1'000'001, 7'000'013, 7'500'007, 7'900'001, 8'000'009, 7'000'001};
+  for (std::size_t& n : sizes) n = std::min(n, gpu::detail::DevicePool::kCarveBelow - 1);
+  std::size_t total = 0;
+  for (const std::size_t n : sizes) total += n;
+  {
+    std::vector<gpu::DeviceBuffer<unsigned char>> buffers;
+    for (const std::size_t n : sizes) buffers.emplace_back(n);
+    CHECK(gpu::memory_stats().in_use == in_use + total);  // what was asked for, byte for byte
+    CHECK(gpu::memory_stats().reserved > 0);
+    CHECK(gpu::memory_stats().reserved < 2 * kSlab - total);  // two slabs at most, the pieces cut from them
+    for (std::size_t k = 0; k < buffers.size(); ++k) {
+      CHECK(reinterpret_cast<std::uintptr_t>(buffers[k].data()) % 256 == 0);
+      CHECK(buffers[k].capacity_bytes() == sizes[k]);
+    }
+    // Each piece its own memory: filled with its own byte, read back whole.
+    for (std::size_t k = 0; k < buffers.size(); ++k)
+      LWSCCD_CUDA_CHECK(cudaMemset(buffers[k].data(), static_cast<int>(k + 1), sizes[k]));
+    std::size_t wrong = 0;
+    for (std::size_t k = 0; k < buffers.size(); ++k) {
+      const std::vector<unsigned char> host = buffers[k].download();
+      wrong += static_cast<std::size_t>(std::count_if(host.begin(), host.end(), [&](unsigned char c) { return c != k + 1; }));
+    }
+    CHECK(wrong == 0);
+    // A piece given back serves the next request of its size (meanwhile slab memory no object holds).
+    const unsigned char* third = buffers[2].data();
+    const std::size_t room = gpu::memory_stats().reserved;
+    buffers[2] = gpu::DeviceBuffer<unsigned char>();
+    CHECK(gpu::memory_stats().cached == 0);
+    CHECK(gpu::memory_stats().reserved == room + sizes[2]);
+    gpu::DeviceBuffer<unsigned char> again(sizes[2]);
+    CHECK(again.data() == third);
+    CHECK(gpu::memory_stats().reserved == room);
+    // Released while other pieces are held: a held slab's pieces given back stay (they cannot be freed alone).
+    buffers[0] = gpu::DeviceBuffer<unsigned char>();
+    gpu::release_cached_memory();
+    CHECK(gpu::memory_stats().reserved == room + sizes[0]);
+    gpu::DeviceBuffer<unsigned char> first_again(sizes[0]);
+    CHECK(gpu::memory_stats().reserved == room);
+  }
+  // Nothing held: the slabs go whole.
+  gpu::release_cached_memory();
+  CHECK(gpu::memory_stats().cached == 0);
+  CHECK(gpu::memory_stats().reserved == 0);
+  CHECK(gpu::memory_stats().in_use == in_use);
+  // Under a memory budget no new slab is made: a small block is cut from the room of a slab held
+  // already, else allocated alone.
+  struct BudgetRestored {
+    std::size_t previous = gpu::memory_budget();
+    ~BudgetRestored() { gpu::set_memory_budget(previous); }
+  } restore;
+  {
+    gpu::DeviceBuffer<unsigned char> opened(1000);  // (no budget yet: opens a slab)
+    const std::size_t room = gpu::memory_stats().reserved;
+    CHECK(room == kSlab - 1024);
+    gpu::set_memory_budget(std::size_t(1) << 40);
+    gpu::DeviceBuffer<unsigned char> cut(2000);
+    CHECK(gpu::memory_stats().reserved == room - 2048);
+  }
+  gpu::release_cached_memory();
+  CHECK(gpu::memory_stats().reserved == 0);
+  { gpu::DeviceBuffer<unsigned char> small(1000); CHECK(gpu::memory_stats().reserved == 0); }
+  gpu::set_memory_budget(restore.previous);
+  gpu::release_cached_memory();
+  gpu::set_memory_caching(false);
+  {
+    gpu::DeviceBuffer<unsigned char> small(1000);
+    CHECK(gpu::memory_stats().reserved == 0);
+  }
+  CHECK(gpu::memory_stats().cached == 0);
+  gpu::set_memory_caching(true);
+}
+
 TEST_CASE("Device blocks given back are kept for the next request of their size, reused only once no earlier work can touch them",
           "[gpu][pool]") {
   gpu::set_memory_caching(true);

@@ -21,11 +21,14 @@
 namespace lwsccd::gpu {
 
 /// Bytes of device memory held by lwsccd objects now, and the most held at once; `cached`: blocks
-/// the objects gave back, kept by the process for the next ones (gpu::release_cached_memory()).
+/// the objects gave back, kept by the process for the next ones (gpu::release_cached_memory());
+/// `reserved`: the process's shared slabs' memory that no object holds (small blocks are cut from
+/// slabs of 32 MiB, one cudaMalloc for many: their room not cut yet and the pieces given back).
 struct MemoryStats {
   std::size_t in_use = 0;
   std::size_t peak = 0;
   std::size_t cached = 0;
+  std::size_t reserved = 0;
 };
 
 namespace detail {
@@ -42,6 +45,10 @@ inline std::atomic<std::size_t>& bytes_budget() {
   return v;
 }
 inline std::atomic<std::size_t>& bytes_cached() {
+  static std::atomic<std::size_t> v{0};
+  return v;
+}
+inline std::atomic<std::size_t>& bytes_reserved() {
   static std::atomic<std::size_t> v{0};
   return v;
 }
@@ -67,12 +74,23 @@ inline void account_free(std::size_t bytes) { bytes_in_use().fetch_sub(bytes); }
 // objects hold stays what they asked for, byte for byte (the budget's accounting). Freed when the
 // process ends, on gpu::release_cached_memory(), when cudaMalloc fails, and where a memory budget
 // needs their room.
+//
+// A new block below kCarveBelow is cut from a slab of kSlabBytes (one cudaMalloc) instead of a
+// cudaMalloc of its own. Why: cudaMalloc costs ~60-100 us a call whatever the size (H200,
+// 1 MiB to 1 GiB), and a pipeline's first step on new memory makes dozens of small requests, each
+// on the step's path. A slab's memory that no object holds (its room not cut yet, its pieces given
+// back) is `reserved`, outside a memory budget's count (under a budget no new slab is made); its
+// pieces given back serve requests of their size as any cached block; a slab is freed
+// (release_all) once none of its pieces is held.
 class DevicePool {
  public:
   struct Block {
     void* ptr = nullptr;
     std::size_t bytes = 0;
   };
+  static constexpr std::size_t kCarveBelow = std::size_t(8) << 20;
+  static constexpr std::size_t kSlabBytes = std::size_t(32) << 20;
+  static constexpr std::size_t kCarveAlign = 256;  // (cudaMalloc's alignment)
 
   // Destroyed at exit before the CUDA runtime's own teardown: its constructor makes a CUDA call
   // first, which registers that teardown earlier (so the blocks are freed; memory checkers see no
@@ -103,7 +121,8 @@ class DevicePool {
         if (safe != range.second) {
           Block b{safe->second.ptr, size};
           d.blocks.erase(safe);
-          bytes_cached().fetch_sub(size);
+          if (Slab* slab = slab_of(d, b.ptr)) ++slab->pieces_held, bytes_reserved().fetch_sub(size);
+          else bytes_cached().fetch_sub(size);
           return b;
         }
         releases = d.releases;
@@ -114,31 +133,34 @@ class DevicePool {
       PerDevice& d = of(device);
       d.synced = std::max(d.synced, releases);  // (what was given back before the wait)
     }
-    void* ptr = nullptr;
-    cudaError_t e = cudaMalloc(&ptr, size);
-    if (e == cudaErrorMemoryAllocation) {  // the cache's blocks first, then once more
-      (void)cudaGetLastError();
-      release_all(device);
-      e = cudaMalloc(&ptr, size);
+    // (Under a memory budget only from a slab's room already held: no new slab.)
+    if (size < kCarveBelow && caching_enabled().load()) {
+      if (void* piece = carve(device, size, bytes_budget().load() == ~std::size_t(0))) return {piece, size};
     }
-    LWSCCD_CUDA_CHECK(e);
-    return {ptr, size};
+    return {new_memory(device, size), size};
   }
 
-  // Takes back a block of `device` (never throws: called from destructors).
+  // Takes back a block of `device` (never throws: called from destructors). A slab's piece is
+  // always cached (it cannot be freed alone; release_all frees its slab).
   void give_back(void* ptr, std::size_t bytes, int device) noexcept {
-    if (!caching_enabled().load()) {
-      cudaFree(ptr);
-      return;
-    }
-    try {
+    bool free_now = false;
+    {
       std::lock_guard<std::mutex> lock(mutex_);
-      PerDevice& d = of(device);
-      d.blocks.emplace(bytes, Cached{ptr, ++d.releases});
-      bytes_cached().fetch_add(bytes);
-    } catch (...) {
-      cudaFree(ptr);  // (no room to remember it)
+      PerDevice& d = of_existing(device);
+      Slab* slab = slab_of(d, ptr);
+      if (slab) --slab->pieces_held;
+      if (!slab && !caching_enabled().load()) {
+        free_now = true;
+      } else {
+        try {
+          d.blocks.emplace(bytes, Cached{ptr, ++d.releases});
+          (slab ? bytes_reserved() : bytes_cached()).fetch_add(bytes);
+        } catch (...) {
+          free_now = !slab;  // (no room to remember it; a slab's piece is lost until its slab is freed)
+        }
+      }
     }
+    if (free_now) cudaFree(ptr);  // (its device-wide wait without the lock: see allocate)
   }
 
   // Frees every cached block of `device` (-1: of every device) after a device-wide wait.
@@ -147,15 +169,33 @@ class DevicePool {
     int current = 0;
     LWSCCD_CUDA_CHECK(cudaGetDevice(&current));
     for (std::size_t k = 0; k < devices_.size(); ++k) {
-      if ((device >= 0 && static_cast<int>(k) != device) || devices_[k].blocks.empty()) continue;
+      if ((device >= 0 && static_cast<int>(k) != device) || (devices_[k].blocks.empty() && devices_[k].slabs.empty())) continue;
       LWSCCD_CUDA_CHECK(cudaSetDevice(static_cast<int>(k)));
       LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
-      for (auto& [size, c] : devices_[k].blocks) {
-        LWSCCD_CUDA_CHECK(cudaFree(c.ptr));
-        bytes_cached().fetch_sub(size);
+      PerDevice& d = devices_[k];
+      // Every cached block goes, but the pieces of a slab that still has pieces held: they stay
+      // cached (they cannot be freed alone); a slab with none held goes whole.
+      for (auto it = d.blocks.begin(); it != d.blocks.end();) {
+        const Slab* slab = slab_of(d, it->second.ptr);
+        if (slab && slab->pieces_held > 0) {
+          ++it;
+          continue;
+        }
+        if (!slab) LWSCCD_CUDA_CHECK(cudaFree(it->second.ptr));
+        (slab ? bytes_reserved() : bytes_cached()).fetch_sub(it->first);
+        it = d.blocks.erase(it);
       }
-      devices_[k].blocks.clear();
-      devices_[k].synced = devices_[k].releases;
+      d.synced = d.releases;
+      for (auto it = d.slabs.begin(); it != d.slabs.end();) {
+        if (it->second.pieces_held > 0) {
+          ++it;
+          continue;
+        }
+        LWSCCD_CUDA_CHECK(cudaFree(it->first));
+        bytes_reserved().fetch_sub(kSlabBytes - it->second.used);
+        if (d.open_slab == it->first) d.open_slab = nullptr;
+        it = d.slabs.erase(it);
+      }
     }
     LWSCCD_CUDA_CHECK(cudaSetDevice(current));
   }
@@ -168,11 +208,68 @@ class DevicePool {
     void* ptr;
     std::uint64_t released;  ///< the device's count of blocks given back, when this one was
   };
+  struct Slab {
+    std::size_t used = 0;         ///< bytes cut from its start
+    std::size_t pieces_held = 0;  ///< pieces held by objects (not in the cache)
+  };
   struct PerDevice {
     std::multimap<std::size_t, Cached> blocks;
     std::uint64_t releases = 0;  ///< blocks given back so far
     std::uint64_t synced = 0;    ///< of those, the ones given back before the last wait
+    std::map<char*, Slab> slabs;  ///< by base address
+    char* open_slab = nullptr;    ///< the slab new pieces are cut from
   };
+
+  // A new cudaMalloc of `size` bytes on the current device (the cache's blocks freed first where
+  // it fails, then once more).
+  void* new_memory(int device, std::size_t size) {
+    void* ptr = nullptr;
+    cudaError_t e = cudaMalloc(&ptr, size);
+    if (e == cudaErrorMemoryAllocation) {
+      (void)cudaGetLastError();
+      release_all(device);
+      e = cudaMalloc(&ptr, size);
+    }
+    LWSCCD_CUDA_CHECK(e);
+    return ptr;
+  }
+  // A piece of `size` bytes cut from the device's open slab; where it has no room, from a new
+  // slab if `may_open`, else null.
+  void* carve(int device, std::size_t size, bool may_open) {
+    const std::size_t cut = (size + kCarveAlign - 1) / kCarveAlign * kCarveAlign;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      PerDevice& d = of(device);
+      if (d.open_slab) {
+        Slab& slab = d.slabs.at(d.open_slab);
+        if (slab.used + cut <= kSlabBytes) return cut_from(d.open_slab, slab, cut);
+      }
+    }
+    if (!may_open) return nullptr;
+    char* base = static_cast<char*>(new_memory(device, kSlabBytes));
+    std::lock_guard<std::mutex> lock(mutex_);
+    PerDevice& d = of(device);
+    Slab& slab = d.slabs[base];
+    bytes_reserved().fetch_add(kSlabBytes);
+    d.open_slab = base;
+    return cut_from(base, slab, cut);
+  }
+  static void* cut_from(char* base, Slab& slab, std::size_t cut) {
+    void* piece = base + slab.used;
+    slab.used += cut;
+    ++slab.pieces_held;
+    bytes_reserved().fetch_sub(cut);
+    return piece;
+  }
+  // The slab holding ptr, or null.
+  static Slab* slab_of(PerDevice& d, const void* ptr) {
+    if (d.slabs.empty()) return nullptr;
+    auto it = d.slabs.upper_bound(static_cast<char*>(const_cast<void*>(ptr)));
+    if (it == d.slabs.begin()) return nullptr;
+    --it;
+    const char* p = static_cast<const char*>(ptr);
+    return p < it->first + kSlabBytes ? &it->second : nullptr;
+  }
   DevicePool() {
     int device = 0;
     (void)cudaGetDevice(&device);  // (initializes the runtime; a failure shows at the first allocation)
@@ -180,8 +277,11 @@ class DevicePool {
   }
   ~DevicePool() {
     alive_flag().store(false);
-    for (auto& d : devices_)
-      for (auto& [size, c] : d.blocks) cudaFree(c.ptr);  // (errors ignored: the process is ending)
+    for (auto& d : devices_) {  // (errors ignored: the process is ending)
+      for (auto& [size, c] : d.blocks)
+        if (!slab_of(d, c.ptr)) cudaFree(c.ptr);
+      for (auto& [base, slab] : d.slabs) cudaFree(base);
+    }
   }
   static std::atomic<bool>& alive_flag() {
     static std::atomic<bool> v{false};
@@ -191,6 +291,8 @@ class DevicePool {
     if (static_cast<std::size_t>(device) >= devices_.size()) devices_.resize(static_cast<std::size_t>(device) + 1);
     return devices_[static_cast<std::size_t>(device)];
   }
+  // A device that allocated before (no allocation: give_back never throws).
+  PerDevice& of_existing(int device) { return devices_[static_cast<std::size_t>(device)]; }
 
   std::mutex mutex_;
   std::vector<PerDevice> devices_;
@@ -209,7 +311,7 @@ inline void check_budget(std::size_t bytes) {
   // may wait for this thread (a collective of gpu::MultiGpuPipeline).
   int device = 0;
   LWSCCD_CUDA_CHECK(cudaGetDevice(&device));
-  if (bytes_cached().load() > 0) DevicePool::instance().release_all(device);
+  if (bytes_cached().load() > 0 || bytes_reserved().load() > 0) DevicePool::instance().release_all(device);
   if (!exceeds()) return;
   const std::size_t in_use = bytes_in_use().load();
   throw Error("lwsccd: device memory budget exceeded: an allocation of " + std::to_string(bytes) + " bytes with " +
@@ -219,12 +321,15 @@ inline void check_budget(std::size_t bytes) {
 }  // namespace detail
 
 inline MemoryStats memory_stats() {
-  return {detail::bytes_in_use().load(), detail::bytes_peak().load(), detail::bytes_cached().load()};
+  return {detail::bytes_in_use().load(), detail::bytes_peak().load(), detail::bytes_cached().load(),
+          detail::bytes_reserved().load()};
 }
 /// Caps the device memory all lwsccd objects may hold together, the process's cached blocks
 /// included (the current device's are freed first where they stand in the way; another device's
 /// only by release_cached_memory(), which waits for that device); an allocation past it throws
-/// lwsccd::Error (nothing is allocated then). Default: no cap.
+/// lwsccd::Error (nothing is allocated then). Default: no cap. Under a cap no new slab is made
+/// (small blocks come only from slabs already held, whose free memory is not counted:
+/// memory_stats().reserved).
 inline void set_memory_budget(std::size_t bytes) { detail::bytes_budget().store(bytes); }
 inline std::size_t memory_budget() { return detail::bytes_budget().load(); }
 /// Restarts the peak at the current use (for measuring one phase).
@@ -232,7 +337,7 @@ inline void reset_peak_memory() { detail::bytes_peak().store(detail::bytes_in_us
 /// Frees the device blocks lwsccd objects gave back and the process kept for later ones (after a
 /// device-wide synchronisation), on every device: for a program that is done with lwsccd for now.
 inline void release_cached_memory() {
-  if (detail::bytes_cached().load() > 0) detail::DevicePool::instance().release_all();
+  if (detail::bytes_cached().load() > 0 || detail::bytes_reserved().load() > 0) detail::DevicePool::instance().release_all();
 }
 /// Whether blocks lwsccd objects give back are kept for later ones (default: true). Off, they are
 /// freed at once (cudaFree, as a program that shares the device tightly may prefer); turning it
