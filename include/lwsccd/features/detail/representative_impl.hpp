@@ -260,27 +260,19 @@ void emit_feature_pair_parts(const RepresentativeTriangles& rep, std::size_t n, 
   }
 }
 
-// emit_feature_pairs_into for n candidates (candidates_in as above): the parts, then one copy
-// into `out` (each list reserved once, the orphans' pairs included).
-template <class CandidatesIn>
-void emit_feature_pairs_from(const RepresentativeTriangles& rep, std::size_t n, CandidatesIn&& candidates_in,
-                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                             FeaturePairParts& parts) {
-  emit_feature_pair_parts(rep, n, candidates_in, boxes, with_orphans, parts);
-  copy_parts(parts.candidates, out, 0, 0, parts.orphans_vf, parts.orphans_ee);
-}
-
 }  // namespace detail
 
 inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                     const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
                                     FeaturePairParts& parts) {
-  detail::emit_feature_pairs_from(
+  detail::emit_feature_pair_parts(
       rep, n,
       [candidates](std::size_t begin, std::size_t end, auto&& fn) {
         for (std::size_t i = begin; i < end; ++i) fn(candidates[i]);
       },
-      boxes, with_orphans, out, parts);
+      boxes, with_orphans, parts);
+  // One copy into `out`, each list reserved once (the orphans' pairs included).
+  detail::copy_parts(parts.candidates, out, 0, 0, parts.orphans_vf, parts.orphans_ee);
 }
 
 inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
