@@ -469,6 +469,7 @@ int main(int argc, char** argv) {
                            {"earliest_toi", r.earliest_toi},
                            {"peak_device_bytes", r.last.peak_device_bytes},
                            {"reruns", r.last.reruns},
+                           {"device_allocations", r.last.device_allocations},
                            {"traversal_relaunches", r.last.traversal_relaunches}};
       if (r.last.device_memory.total())
         lwsccd::for_each_part(r.last.device_memory, [&](const char* name, std::size_t bytes) { j["device_memory"][name] = bytes; });
@@ -507,6 +508,7 @@ int main(int argc, char** argv) {
       list("step_restarted", [](const S& st) { return st.restarted_from_root ? 1 : 0; });
       list("step_rebuilt", [](const S& st) { return st.rebuilt ? 1 : 0; });
       list("step_reruns", [](const S& st) { return st.reruns; });
+      list("step_device_allocations", [](const S& st) { return st.device_allocations; });
       list("step_traversal_relaunches", [](const S& st) { return st.traversal_relaunches; });
       list("step_front_outgrown", [](const S& st) { return st.front_outgrown ? 1 : 0; });
       list("step_front", [](const S& st) { return st.front_size; });

@@ -221,7 +221,7 @@ TEST_CASE("Small device blocks are cut from shared slabs: their own memory, exac
   constexpr std::size_t kSlab = gpu::detail::DevicePool::kSlabBytes;
   // Odd sizes below the limit, the last ones large enough to need a second slab.
   std::vector<std::size_t> sizes{1, 255, 257, 4099, 100'003, 1'000'001, 7'000'013, 7'500'007, 7'900'001, 8'000'009, 7'000'001};
-  for (std::size_t& n : sizes) n = std::min(n, gpu::detail::DevicePool::kCarveBelow - 1);
+  for (std::size_t& n : sizes) n = std::min(n, kSlab / gpu::detail::DevicePool::kCutShare);
   std::size_t total = 0;
   for (const std::size_t n : sizes) total += n;
   {
@@ -229,7 +229,7 @@ TEST_CASE("Small device blocks are cut from shared slabs: their own memory, exac
     for (const std::size_t n : sizes) buffers.emplace_back(n);
     CHECK(gpu::memory_stats().in_use == in_use + total);  // what was asked for, byte for byte
     CHECK(gpu::memory_stats().reserved > 0);
-    CHECK(gpu::memory_stats().reserved < 2 * kSlab - total);  // two slabs at most, the pieces cut from them
+    CHECK(gpu::memory_stats().reserved < 3 * kSlab - total);  // two slabs at most (32 and 64 MiB), the pieces cut from them
     for (std::size_t k = 0; k < buffers.size(); ++k) {
       CHECK(reinterpret_cast<std::uintptr_t>(buffers[k].data()) % 256 == 0);
       CHECK(buffers[k].capacity_bytes() == sizes[k]);
@@ -290,6 +290,57 @@ TEST_CASE("Small device blocks are cut from shared slabs: their own memory, exac
   }
   CHECK(gpu::memory_stats().cached == 0);
   gpu::set_memory_caching(true);
+}
+
+TEST_CASE("Slabs double while a device holds them: larger blocks are cut as it holds more, one cudaMalloc for many",
+          "[gpu][pool]") {
+  using Pool = gpu::detail::DevicePool;
+  gpu::set_memory_caching(true);
+  gpu::release_cached_memory();
+  REQUIRE(gpu::memory_stats().reserved == 0);  // (no slab held: the next one is the first size)
+  const std::size_t in_use = gpu::memory_stats().in_use;
+  constexpr std::size_t MiB = std::size_t(1) << 20;
+  {
+    // No slab held: a block above a quarter of the first slab is allocated alone.
+    const std::size_t calls = gpu::memory_stats().allocations;
+    gpu::DeviceBuffer<unsigned char> alone(Pool::kSlabBytes / Pool::kCutShare + 256);
+    CHECK(gpu::memory_stats().allocations == calls + 1);
+    CHECK(gpu::memory_stats().reserved == 0);
+  }
+  gpu::release_cached_memory();
+  std::vector<gpu::DeviceBuffer<unsigned char>> held;
+  held.emplace_back(1000);  // opens the first slab
+  CHECK(gpu::memory_stats().reserved == Pool::kSlabBytes - 1024);
+  // Holding one slab, the next is twice as large, so blocks of 12 MiB (above a quarter of the
+  // first) are cut: the first slab's room and one new slab hold five, one call for all.
+  const std::size_t calls = gpu::memory_stats().allocations;
+  for (int k = 0; k < 5; ++k) held.emplace_back(12 * MiB);
+  CHECK(gpu::memory_stats().allocations == calls + 1);
+  CHECK(gpu::memory_stats().reserved == (Pool::kSlabBytes - 1024) + (2 * Pool::kSlabBytes - 60 * MiB));
+  // A small block takes room a slab still has: no new call.
+  held.emplace_back(2 * MiB);
+  CHECK(gpu::memory_stats().allocations == calls + 1);
+  // Growth stops at kMaxSlabBytes: past a quarter of it blocks are allocated alone whatever is held.
+  for (int k = 0; k < 8; ++k) held.emplace_back(Pool::kMaxSlabBytes / Pool::kCutShare / 2);
+  const std::size_t before_large = gpu::memory_stats().allocations;
+  held.emplace_back(Pool::kMaxSlabBytes / Pool::kCutShare + 256);
+  CHECK(gpu::memory_stats().allocations == before_large + 1);
+  CHECK(gpu::memory_stats().in_use == in_use + 1000 + 60 * MiB + 2 * MiB + 4 * Pool::kMaxSlabBytes / Pool::kCutShare +
+                                          Pool::kMaxSlabBytes / Pool::kCutShare + 256);
+  // Each block its own memory: filled with its own byte, read back whole.
+  for (std::size_t k = 0; k < held.size(); ++k)
+    LWSCCD_CUDA_CHECK(cudaMemset(held[k].data(), static_cast<int>(k + 1), held[k].capacity_bytes()));
+  std::size_t wrong = 0;
+  for (std::size_t k = 0; k < held.size(); ++k) {
+    const std::vector<unsigned char> host = held[k].download();
+    wrong += static_cast<std::size_t>(std::count_if(host.begin(), host.end(), [&](unsigned char c) { return c != k + 1; }));
+  }
+  CHECK(wrong == 0);
+  held.clear();
+  gpu::release_cached_memory();
+  CHECK(gpu::memory_stats().reserved == 0);
+  CHECK(gpu::memory_stats().cached == 0);
+  CHECK(gpu::memory_stats().in_use == in_use);
 }
 
 TEST_CASE("Device blocks given back are kept for the next request of their size, reused only once no earlier work can touch them",

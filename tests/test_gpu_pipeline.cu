@@ -170,6 +170,27 @@ TEST_CASE("GPU pipeline equals the CPU pipeline over several steps of a folded c
   }
 }
 
+TEST_CASE("A GPU pipeline's first step on new memory counts its cudaMalloc calls; a steady step makes none",
+          "[gpu][pipeline][pool]") {
+  const auto m = lwsccd_test::folded_cloth(60, 2);
+  auto mesh = std::make_shared<const TriangleMesh>(m.mesh);
+  gpu::release_cached_memory();
+  const std::size_t before = gpu::memory_stats().allocations;
+  gpu::CcdPipeline<> pipeline(mesh);
+  std::size_t counted = 0;
+  for (int s = 0; s < 4; ++s) {
+    INFO("step " << s);
+    const auto r = pipeline.step(m.x0, m.x1);
+    CHECK(r.stats.hits_vf + r.stats.hits_ee > 0);
+    counted += r.stats.device_allocations;
+    if (s == 0) CHECK(r.stats.device_allocations > 0);  // (nothing cached: new memory)
+    if (s >= 2) CHECK(r.stats.device_allocations == 0);  // the same positions again: every buffer fits
+  }
+  // The steps' counts are the pool's calls (the pipeline's construction may add its own).
+  CHECK(counted <= gpu::memory_stats().allocations - before);
+  CHECK(counted > 0);
+}
+
 TEST_CASE("GPU pipeline equals the CPU pipeline on the real scenes; ground truth kept", "[gpu][pipeline][data]") {
   if (!lwsccd_test::have_data()) {
     WARN("SKIPPED: shared data not found at " << lwsccd_test::data_dir());

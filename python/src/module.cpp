@@ -96,6 +96,7 @@ nb::dict stats_dict(const lwsccd::StepStats& s) {
   lwsccd::for_each_part(s.device_memory, [&](const char* name, std::size_t bytes) { memory[name] = bytes; });
   d["device_memory"] = memory;
   d["reruns"] = s.reruns;
+  d["device_allocations"] = s.device_allocations;
   d["traversal_relaunches"] = s.traversal_relaunches;
   d["traversal_parts"] = s.traversal_parts;
   d["narrow_parts"] = s.narrow_parts;

@@ -44,6 +44,7 @@ def test_contacts_are_sorted_structured_and_consistent(cloth_steps):
         assert list(memory) == ["mesh", "bvh", "feature_boxes", "candidates", "front", "scheduler", "feature_pairs",
                                 "narrow_hits", "narrow_work", "other"]
         assert sum(memory.values()) == 0
+        assert r.stats["device_allocations"] == 0  # (no device memory on the CPU backend)
         total += r.num_contacts
     assert total > 0, "the built-in scene collides"
 

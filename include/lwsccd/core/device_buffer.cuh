@@ -29,6 +29,9 @@ struct MemoryStats {
   std::size_t peak = 0;
   std::size_t cached = 0;
   std::size_t reserved = 0;
+  /// cudaMalloc calls lwsccd has made in this process (a block from the cache or cut from a slab
+  /// makes none): what a first step on new memory pays for, ~60-100 us each.
+  std::size_t allocations = 0;
 };
 
 namespace detail {
@@ -49,6 +52,10 @@ inline std::atomic<std::size_t>& bytes_cached() {
   return v;
 }
 inline std::atomic<std::size_t>& bytes_reserved() {
+  static std::atomic<std::size_t> v{0};
+  return v;
+}
+inline std::atomic<std::size_t>& allocation_calls() {
   static std::atomic<std::size_t> v{0};
   return v;
 }
@@ -75,21 +82,26 @@ inline void account_free(std::size_t bytes) { bytes_in_use().fetch_sub(bytes); }
 // process ends, on gpu::release_cached_memory(), when cudaMalloc fails, and where a memory budget
 // needs their room.
 //
-// A new block below kCarveBelow is cut from a slab of kSlabBytes (one cudaMalloc) instead of a
-// cudaMalloc of its own. Why: cudaMalloc costs ~60-100 us a call whatever the size (H200,
-// 1 MiB to 1 GiB), and a pipeline's first step on new memory makes dozens of small requests, each
-// on the step's path. A slab's memory that no object holds (its room not cut yet, its pieces given
-// back) is `reserved`, outside a memory budget's count (under a budget no new slab is made); its
-// pieces given back serve requests of their size as any cached block; a slab is freed
-// (release_all) once none of its pieces is held.
+// A new block of at most a quarter of the device's next slab is cut from a slab (one cudaMalloc
+// for many) instead of a cudaMalloc of its own. Why: cudaMalloc costs ~60-100 us a call whatever
+// the size (H200, 1 MiB to 1 GiB), and a pipeline's first step on new memory makes dozens of
+// requests, each on the step's path. A device's slabs double while it holds them (kSlabBytes,
+// then twice that, up to kMaxSlabBytes), so a first step of a larger scene makes a few calls,
+// not one per buffer; a slab is opened only for a block no held slab has room for, so the room not
+// cut is at most the newest slab plus less than half of each older one. A new piece is cut
+// where a held slab has room (the first by address). Slab memory no
+// object holds (room not cut yet, pieces given back) is `reserved`, outside a memory budget's
+// count (under a budget no new slab is made); pieces given back serve requests of their size as
+// any cached block; a slab is freed (release_all) once none of its pieces is held.
 class DevicePool {
  public:
   struct Block {
     void* ptr = nullptr;
     std::size_t bytes = 0;
   };
-  static constexpr std::size_t kCarveBelow = std::size_t(8) << 20;
-  static constexpr std::size_t kSlabBytes = std::size_t(32) << 20;
+  static constexpr std::size_t kSlabBytes = std::size_t(32) << 20;      ///< a device's first slab
+  static constexpr std::size_t kMaxSlabBytes = std::size_t(256) << 20;  ///< the slabs' growth stops here
+  static constexpr std::size_t kCutShare = 4;  ///< blocks up to 1 / kCutShare of the next slab are cut
   static constexpr std::size_t kCarveAlign = 256;  // (cudaMalloc's alignment)
 
   // Destroyed at exit before the CUDA runtime's own teardown: its constructor makes a CUDA call
@@ -134,7 +146,7 @@ class DevicePool {
       d.synced = std::max(d.synced, releases);  // (what was given back before the wait)
     }
     // (Under a memory budget only from a slab's room already held: no new slab.)
-    if (size < kCarveBelow && caching_enabled().load()) {
+    if (caching_enabled().load()) {
       if (void* piece = carve(device, size, bytes_budget().load() == ~std::size_t(0))) return {piece, size};
     }
     return {new_memory(device, size), size};
@@ -192,8 +204,7 @@ class DevicePool {
           continue;
         }
         LWSCCD_CUDA_CHECK(cudaFree(it->first));
-        bytes_reserved().fetch_sub(kSlabBytes - it->second.used);
-        if (d.open_slab == it->first) d.open_slab = nullptr;
+        bytes_reserved().fetch_sub(it->second.bytes - it->second.used);
         it = d.slabs.erase(it);
       }
     }
@@ -209,6 +220,7 @@ class DevicePool {
     std::uint64_t released;  ///< the device's count of blocks given back, when this one was
   };
   struct Slab {
+    std::size_t bytes = 0;        ///< its size
     std::size_t used = 0;         ///< bytes cut from its start
     std::size_t pieces_held = 0;  ///< pieces held by objects (not in the cache)
   };
@@ -217,41 +229,50 @@ class DevicePool {
     std::uint64_t releases = 0;  ///< blocks given back so far
     std::uint64_t synced = 0;    ///< of those, the ones given back before the last wait
     std::map<char*, Slab> slabs;  ///< by base address
-    char* open_slab = nullptr;    ///< the slab new pieces are cut from
+    // The size of the slab it would open next: doubled for each slab it holds, at most kMaxSlabBytes.
+    std::size_t next_slab_bytes() const {
+      std::size_t bytes = kSlabBytes;
+      for (std::size_t k = 0; k < slabs.size() && bytes < kMaxSlabBytes; ++k) bytes *= 2;
+      return bytes;
+    }
   };
 
   // A new cudaMalloc of `size` bytes on the current device (the cache's blocks freed first where
   // it fails, then once more).
   void* new_memory(int device, std::size_t size) {
     void* ptr = nullptr;
+    allocation_calls().fetch_add(1);
     cudaError_t e = cudaMalloc(&ptr, size);
     if (e == cudaErrorMemoryAllocation) {
       (void)cudaGetLastError();
       release_all(device);
+      allocation_calls().fetch_add(1);
       e = cudaMalloc(&ptr, size);
     }
     LWSCCD_CUDA_CHECK(e);
     return ptr;
   }
-  // A piece of `size` bytes cut from the device's open slab; where it has no room, from a new
-  // slab if `may_open`, else null.
+  // A piece of `size` bytes cut from a slab of the device with room; where none has, from a new
+  // slab if `may_open`; null where the block is too large to be cut (more than a kCutShare-th of
+  // the next slab) or no slab may be opened.
   void* carve(int device, std::size_t size, bool may_open) {
     const std::size_t cut = (size + kCarveAlign - 1) / kCarveAlign * kCarveAlign;
+    std::size_t slab_bytes = 0;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       PerDevice& d = of(device);
-      if (d.open_slab) {
-        Slab& slab = d.slabs.at(d.open_slab);
-        if (slab.used + cut <= kSlabBytes) return cut_from(d.open_slab, slab, cut);
-      }
+      slab_bytes = d.next_slab_bytes();
+      if (cut > slab_bytes / kCutShare) return nullptr;
+      for (auto& [base, slab] : d.slabs)
+        if (slab.used + cut <= slab.bytes) return cut_from(base, slab, cut);
     }
     if (!may_open) return nullptr;
-    char* base = static_cast<char*>(new_memory(device, kSlabBytes));
+    char* base = static_cast<char*>(new_memory(device, slab_bytes));
     std::lock_guard<std::mutex> lock(mutex_);
     PerDevice& d = of(device);
     Slab& slab = d.slabs[base];
-    bytes_reserved().fetch_add(kSlabBytes);
-    d.open_slab = base;
+    slab.bytes = slab_bytes;
+    bytes_reserved().fetch_add(slab_bytes);
     return cut_from(base, slab, cut);
   }
   static void* cut_from(char* base, Slab& slab, std::size_t cut) {
@@ -268,7 +289,7 @@ class DevicePool {
     if (it == d.slabs.begin()) return nullptr;
     --it;
     const char* p = static_cast<const char*>(ptr);
-    return p < it->first + kSlabBytes ? &it->second : nullptr;
+    return p < it->first + it->second.bytes ? &it->second : nullptr;
   }
   DevicePool() {
     int device = 0;
@@ -322,7 +343,7 @@ inline void check_budget(std::size_t bytes) {
 
 inline MemoryStats memory_stats() {
   return {detail::bytes_in_use().load(), detail::bytes_peak().load(), detail::bytes_cached().load(),
-          detail::bytes_reserved().load()};
+          detail::bytes_reserved().load(), detail::allocation_calls().load()};
 }
 /// Caps the device memory all lwsccd objects may hold together, the process's cached blocks
 /// included (the current device's are freed first where they stand in the way; another device's

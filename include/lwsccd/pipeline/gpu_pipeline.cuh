@@ -212,7 +212,7 @@ class CcdPipeline {
  private:
   template <class Q>
   void step_from_host(Span<const Vec3<Q>> x0, Span<const Vec3<Q>> x1, StepResult<T>& result, cudaStream_t stream) {
-    reset_peak_memory();
+    begin_step();
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
@@ -221,7 +221,7 @@ class CcdPipeline {
   }
   template <class Q>
   StepResult<T> from_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1, cudaStream_t stream) {
-    reset_peak_memory();
+    begin_step();
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
@@ -232,7 +232,7 @@ class CcdPipeline {
   }
   template <class Q>
   DeviceStepResult<T> on_device(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1, cudaStream_t stream) {
-    reset_peak_memory();
+    begin_step();
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
@@ -291,6 +291,12 @@ class CcdPipeline {
     finish_stats(r.stats, r.contacts.vf.size(), r.contacts.ee.size(), start);
   }
 
+  // A step's counts of memory start here: its peak, its cudaMalloc calls.
+  void begin_step() {
+    reset_peak_memory();
+    allocations_before_ = memory_stats().allocations;
+  }
+
   void finish_stats(StepStats& stats, std::size_t hits_vf, std::size_t hits_ee, std::chrono::steady_clock::time_point start) {
     const Outcome o = outcome();
     stats.hits_vf = hits_vf;
@@ -302,6 +308,7 @@ class CcdPipeline {
     stats.narrow_ee = o.counts[1];
     stats.peak_device_bytes = memory_stats().peak;
     stats.device_memory = memory_use();
+    stats.device_allocations = memory_stats().allocations - allocations_before_;
     stats.total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   }
 
@@ -515,6 +522,7 @@ class CcdPipeline {
   std::uint64_t generation_ = ~std::uint64_t(0);
   bool reset_next_ = false;
   bool emitter_sized_ = false;  ///< the emitter's buffers have been sized by a step
+  std::size_t allocations_before_ = 0;  ///< memory_stats().allocations when this step began
   NarrowPhase<Method, T> narrow_;
   cudaStream_t stream_ = nullptr;  ///< the current (or last) step's stream, the caller's
   CudaEvent mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase

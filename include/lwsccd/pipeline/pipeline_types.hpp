@@ -197,6 +197,10 @@ struct StepStats {
   /// GPU: stages enqueued again in this step because a list outgrew the room earlier steps gave
   /// it (the feature pairs' or the narrow phase's; nothing is lost, the step just costs more).
   std::size_t reruns = 0;
+  /// gpu::CcdPipeline: cudaMalloc calls the process's lwsccd objects made during the step (a first
+  /// step on new memory makes a few; a steady one none: its buffers and the cache's blocks serve
+  /// it). 0 from the CPU backend and from MultiGpuPipeline.
+  std::size_t device_allocations = 0;
   /// GPU: launches of this step's traversal after its first (blocks handed items back: a full
   /// deque, or outputs that filled up and grew; a first step from the root has a few).
   std::size_t traversal_relaunches = 0;
