@@ -49,6 +49,10 @@ std::unique_ptr<AnyPipeline> make_multi_gpu_pipeline(std::shared_ptr<const lwscc
                                                      const lwsccd::BodyLayout& layout, const lwsccd::PipelineParams& params,
                                                      const PolicyChoice& choice, int gpus);
 
+/// Frees the device blocks the process keeps for later GPU pipelines (gpu::release_cached_memory),
+/// so that the next pipeline's first step runs on new memory; nothing without CUDA.
+void release_gpu_cached_memory();
+
 /// GPU pipelines: the step from positions copied to the device beforehand (not timed), contacts
 /// left there (AnyPipeline::step_on_device); nothing for the CPU backend.
 std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline& pipeline, const std::vector<lwsccd::Vec3d>& x0,

@@ -17,6 +17,8 @@ std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline&, const std::v
   return std::nullopt;
 }
 
+void release_gpu_cached_memory() {}
+
 }  // namespace ccd_app
 #endif
 

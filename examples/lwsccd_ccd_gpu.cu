@@ -12,6 +12,8 @@ std::unique_ptr<AnyPipeline> make_gpu_pipeline(std::shared_ptr<const lwsccd::Tri
   return lwsccd::gpu::make_any_pipeline(std::move(mesh), layout, params, choice);
 }
 
+void release_gpu_cached_memory() { lwsccd::gpu::release_cached_memory(); }
+
 std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline& pipeline, const std::vector<lwsccd::Vec3d>& x0,
                                                       const std::vector<lwsccd::Vec3d>& x1) {
   if (pipeline.backend() != "gpu") return std::nullopt;
