@@ -55,6 +55,8 @@ struct Row {
   std::size_t rebuilds = 0, restarts = 0;  // measured steps that rebuilt the BVH / traversed from the root
   std::vector<lwsccd::StepStats> steps;    // every measured step's stats, in order (what the mean averages)
   double front_growth_limit = 0;
+  // first2: medians of making each pipeline (its constructor) and of destroying it after its step.
+  double make_ms = 0, destroy_ms = 0;
   unsigned threads = 0;  // CPU: PipelineParams::threads (0: every core)
   lwsccd::StepStats last;  // counts of the last measured step
   double earliest_toi = 1;
@@ -156,12 +158,25 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     std::vector<ccd_app::StepOutcome> kept = std::move(outcomes);
     outcomes.clear();
     const lwsccd::Step step = sc.step(0);
+    std::vector<double> make_ms, destroy_ms;
+    using clock = std::chrono::steady_clock;
+    auto ms_since = [](clock::time_point t) { return std::chrono::duration<double, std::milli>(clock::now() - t).count(); };
     for (int k = 0; k < kFirstSteps; ++k) {
       ccd_app::release_gpu_cached_memory();
+      clock::time_point t = clock::now();
       auto second = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+      make_ms.push_back(ms_since(t));
       outcomes.push_back(second->step(step.x0, step.x1));
+      t = clock::now();
+      second.reset();
+      destroy_ms.push_back(ms_since(t));
     }
-    rows.push_back(make_row("first2", 0, outcomes.size()));
+    Row r = make_row("first2", 0, outcomes.size());
+    r.make_ms = lwsccd_bench::percentile(make_ms, 0.5);
+    r.destroy_ms = lwsccd_bench::percentile(destroy_ms, 0.5);
+    std::printf("first2 pipelines of %s: made in %.3f ms, destroyed in %.3f ms (medians of %d)\n", sc.name.c_str(), r.make_ms,
+                r.destroy_ms, kFirstSteps);
+    rows.push_back(r);
     outcomes = std::move(kept);
   }
   // Device-resident steps (GPU): a fresh pipeline over the same steps, positions copied to the
@@ -499,6 +514,10 @@ int main(int argc, char** argv) {
       j["rebuilds"] = r.rebuilds;
       j["restarts_from_root"] = r.restarts;
       j["front_growth_limit"] = r.front_growth_limit;
+      if (r.step == "first2") {
+        j["make_ms"] = r.make_ms;
+        j["destroy_ms"] = r.destroy_ms;
+      }
       // Every measured step, in order: its total and stages (ms), whether it traversed from the
       // root, its front and BVTT nodes (what a mean over steps hides).
       auto list = [&](const char* name, auto value) {

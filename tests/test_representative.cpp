@@ -119,6 +119,58 @@ TEST_CASE("representatives: the orphans are exactly the non-incident pairs whose
   }
 }
 
+TEST_CASE("representatives: the orphans found in parallel ranges equal one serial pass over a large mesh, sorted alike",
+          "[representative]") {
+  // Enough vertices and edges for many ranges per thread (ordered_parts), on several thread counts.
+  const MultiBodyStep ball = make_cloth_ball_scene(40000);
+  const TriangleMesh& mesh = *ball.step.mesh;
+  for (const unsigned threads : {1u, 2u, 5u}) {
+    INFO(threads << " threads");
+    const RepresentativeTriangles rep = cpu::ThreadLimit(threads).run([&] { return RepresentativeTriangles(mesh); });
+    // The definition, serially: each vertex with the faces of its representing face's vertex
+    // ring, each edge with the edges that ring's faces represent, sorted at the end.
+    OrphanSets expected;
+    std::vector<index_t> ring;
+    for (index_t v = 0; v < mesh.num_vertices(); ++v) {
+      const index_t owner = rep.vertex_owner(v);
+      if (owner < 0) continue;
+      ring.clear();
+      for (const index_t x : mesh.face(owner).v)
+        for (const index_t g : mesh.vertex_faces(x)) ring.push_back(g);
+      std::sort(ring.begin(), ring.end());
+      ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+      for (const index_t g : ring) {
+        const Face& t = mesh.face(g);
+        if (g == owner || t.v[0] == v || t.v[1] == v || t.v[2] == v) continue;
+        expected.vf.emplace_back(mesh.vertex_feature_id(v), mesh.face_feature_id(g));
+      }
+    }
+    for (index_t e = 0; e < mesh.num_edges(); ++e) {
+      ring.clear();
+      for (const index_t x : mesh.face(rep.edge_owner(e)).v)
+        for (const index_t g : mesh.vertex_faces(x)) ring.push_back(g);
+      std::sort(ring.begin(), ring.end());
+      ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+      for (const index_t g : ring) {
+        if (g == rep.edge_owner(e)) continue;
+        for (const index_t other : mesh.face_edges(g)) {
+          const Edge &a = mesh.edge(e), &b = mesh.edge(other);
+          if (rep.edge_owner(other) != g || other <= e || a.v[0] == b.v[0] || a.v[0] == b.v[1] || a.v[1] == b.v[0] ||
+              a.v[1] == b.v[1])
+            continue;
+          expected.ee.emplace_back(mesh.edge_feature_id(e), mesh.edge_feature_id(other));
+        }
+      }
+    }
+    std::sort(expected.vf.begin(), expected.vf.end());
+    std::sort(expected.ee.begin(), expected.ee.end());
+    INFO(expected.vf.size() << " VF, " << expected.ee.size() << " EE orphans");
+    CHECK(expected.vf.size() > 1000);
+    CHECK(rep.orphans().vf == expected.vf);
+    CHECK(rep.orphans().ee == expected.ee);
+  }
+}
+
 TEST_CASE("representatives: emission equals the brute-force feature oracle, each pair once", "[representative]") {
   SECTION("folded cloth, several motions") {
     for (std::uint64_t seed = 1; seed <= 3; ++seed) {

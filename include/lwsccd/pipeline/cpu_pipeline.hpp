@@ -45,7 +45,7 @@ class CcdPipeline {
   CcdPipeline(std::shared_ptr<const TriangleMesh> mesh, BodyLayout layout, PipelineParams params = {})
       : mesh_(detail::checked_mesh(std::move(mesh), "cpu::CcdPipeline")), layout_(std::move(layout)), self_collides_(detail::self_collision_flags(layout_)),
         params_(detail::validated(params)), threads_(params_.threads),
-        representatives_(*mesh_, layout_),
+        representatives_(threads_.run([&] { return RepresentativeTriangles(*mesh_, layout_); })),  // (on the pipeline's threads)
         tracker_(FrontPolicy{detail::front_growth_limit_of(params, kCpuFrontGrowthLimit)}) {
     // Features that come within min_separation: their boxes, each grown by half of it, overlap.
     bvh_.set_leaf_margin(params_.min_separation / 2);

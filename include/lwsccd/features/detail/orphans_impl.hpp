@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <iterator>
+#include <limits>
 
 #include "lwsccd/features/orphans.hpp"
 
@@ -12,14 +13,22 @@ namespace detail {
 
 // The faces that share a vertex with face f, f excluded, ascending.
 inline void vertex_ring_of_face(const TriangleMesh& mesh, index_t f, std::vector<index_t>& ring) {
+  // The vertices' face lists are sorted (TriangleMesh's rows): merged in one pass, each face once,
+  // f left out (a pipeline's construction makes a ring per vertex and per edge).
   ring.clear();
-  for (const index_t v : mesh.face(f).v) {
-    const auto fs = mesh.vertex_faces(v);
-    ring.insert(ring.end(), fs.begin(), fs.end());
+  const Face& t = mesh.face(f);
+  const Span<const index_t> rows[3] = {mesh.vertex_faces(t.v[0]), mesh.vertex_faces(t.v[1]), mesh.vertex_faces(t.v[2])};
+  std::size_t at[3] = {0, 0, 0};
+  constexpr index_t kDone = std::numeric_limits<index_t>::max();
+  for (;;) {
+    index_t next = kDone;
+    for (int k = 0; k < 3; ++k)
+      if (at[k] < rows[k].size()) next = std::min(next, rows[k][at[k]]);
+    if (next == kDone) return;
+    for (int k = 0; k < 3; ++k)
+      if (at[k] < rows[k].size() && rows[k][at[k]] == next) ++at[k];
+    if (next != f) ring.push_back(next);
   }
-  std::sort(ring.begin(), ring.end());
-  ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
-  ring.erase(std::remove(ring.begin(), ring.end(), f), ring.end());
 }
 
 // For each face, the other faces that share at least one vertex with it (CSR, ascending).

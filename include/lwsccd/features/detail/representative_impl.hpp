@@ -162,32 +162,51 @@ inline RepresentativeTriangles::RepresentativeTriangles(const TriangleMesh& mesh
 
   // Orphans: the pairs whose representing faces share a vertex (the traversal skips those
   // triangle pairs). A vertex's face partners lie in its representing face's vertex ring; an
-  // edge's edge partners are the edges that faces of that ring represent.
-  std::vector<index_t> ring;
-  for (index_t v = 0; v < nv; ++v) {
-    const index_t owner = vertex_owner_[v];
-    if (owner < 0) continue;
-    detail::vertex_ring_of_face(mesh, owner, ring);
-    for (const index_t g : ring) {
-      const Face& t = mesh.face(g);
-      if (t.v[0] == v || t.v[1] == v || t.v[2] == v) continue;  // incident: never a query
-      if (layout_.considers(owner, g)) orphans_.vf.emplace_back(mesh.vertex_feature_id(v), mesh.face_feature_id(g));
-    }
-  }
-  for (index_t e = 0; e < ne; ++e) {
-    const index_t owner = edge_owner_[e];
-    detail::vertex_ring_of_face(mesh, owner, ring);
-    for (const index_t g : ring) {
-      for (int k = 0; k < 3; ++k) {
-        if (!((represents_[g] >> (3 + k)) & 1u)) continue;
-        const index_t other = face_edges_[g].e[k];
-        if (other <= e || detail::edges_share_vertex(mesh.edge(e), mesh.edge(other))) continue;  // listed once; adjacent edges never
-        if (layout_.considers(owner, g)) orphans_.ee.emplace_back(mesh.edge_feature_id(e), mesh.edge_feature_id(other));
+  // edge's edge partners are the edges that faces of that ring represent. Found on all cores in
+  // contiguous ranges of vertices and of edges, each range's pairs in order (a vertex's in its
+  // ring's ascending order, an edge's sorted), so that the ranges joined are sorted: feature ids
+  // grow with vertex, edge and face ids.
+  using Pairs = std::vector<std::pair<index_t, index_t>>;
+  auto joined = [](std::vector<Pairs>& parts, Pairs& out) {
+    std::size_t total = 0;
+    for (const Pairs& p : parts) total += p.size();
+    out.clear();
+    out.reserve(total);
+    for (const Pairs& p : parts) out.insert(out.end(), p.begin(), p.end());
+  };
+  std::vector<Pairs> parts;
+  detail::ordered_parts(static_cast<std::size_t>(nv), parts, [&](std::size_t begin, std::size_t end, Pairs& out) {
+    std::vector<index_t> ring;
+    for (auto v = static_cast<index_t>(begin); v < static_cast<index_t>(end); ++v) {
+      const index_t owner = vertex_owner_[v];
+      if (owner < 0) continue;
+      detail::vertex_ring_of_face(mesh, owner, ring);
+      for (const index_t g : ring) {
+        const Face& t = mesh.face(g);
+        if (t.v[0] == v || t.v[1] == v || t.v[2] == v) continue;  // incident: never a query
+        if (layout_.considers(owner, g)) out.emplace_back(mesh.vertex_feature_id(v), mesh.face_feature_id(g));
       }
     }
-  }
-  std::sort(orphans_.vf.begin(), orphans_.vf.end());
-  std::sort(orphans_.ee.begin(), orphans_.ee.end());
+  });
+  joined(parts, orphans_.vf);
+  detail::ordered_parts(static_cast<std::size_t>(ne), parts, [&](std::size_t begin, std::size_t end, Pairs& out) {
+    std::vector<index_t> ring;
+    for (auto e = static_cast<index_t>(begin); e < static_cast<index_t>(end); ++e) {
+      const index_t owner = edge_owner_[e];
+      detail::vertex_ring_of_face(mesh, owner, ring);
+      const std::size_t first = out.size();
+      for (const index_t g : ring) {
+        for (int k = 0; k < 3; ++k) {
+          if (!((represents_[g] >> (3 + k)) & 1u)) continue;
+          const index_t other = face_edges_[g].e[k];
+          if (other <= e || detail::edges_share_vertex(mesh.edge(e), mesh.edge(other))) continue;  // listed once; adjacent edges never
+          if (layout_.considers(owner, g)) out.emplace_back(mesh.edge_feature_id(e), mesh.edge_feature_id(other));
+        }
+      }
+      std::sort(out.begin() + static_cast<std::ptrdiff_t>(first), out.end());
+    }
+  });
+  joined(parts, orphans_.ee);
 }
 
 inline index_t RepresentativeTriangles::owner_of_feature(index_t id) const {
