@@ -87,12 +87,12 @@ inline void account_free(std::size_t bytes) { bytes_in_use().fetch_sub(bytes); }
 // the size (H200, 1 MiB to 1 GiB), and a pipeline's first step on new memory makes dozens of
 // requests, each on the step's path. A device's slabs double while it holds them (kSlabBytes,
 // then twice that, up to kMaxSlabBytes), so a first step of a larger scene makes a few calls,
-// not one per buffer; a slab is opened only for a block no held slab has room for, so the room not
-// cut is at most the newest slab plus less than half of each older one. A new piece is cut
-// where a held slab has room (the first by address). Slab memory no
-// object holds (room not cut yet, pieces given back) is `reserved`, outside a memory budget's
-// count (under a budget no new slab is made); pieces given back serve requests of their size as
-// any cached block; a slab is freed (release_all) once none of its pieces is held.
+// not one per buffer. A new piece is cut where a held slab has room (the first by address); a
+// slab is opened only for a block none has room for, so the room not cut is at most the newest
+// slab plus less than half of each older one. Slab memory no object holds (room not cut yet,
+// pieces given back) is `reserved`, outside a memory budget's count (under a budget no new slab
+// is made); pieces given back serve requests of their size as any cached block; a slab is freed
+// (release_all) once none of its pieces is held.
 class DevicePool {
  public:
   struct Block {
