@@ -167,13 +167,6 @@ inline RepresentativeTriangles::RepresentativeTriangles(const TriangleMesh& mesh
   // ring's ascending order, an edge's sorted), so that the ranges joined are sorted: feature ids
   // grow with vertex, edge and face ids.
   using Pairs = std::vector<std::pair<index_t, index_t>>;
-  auto joined = [](std::vector<Pairs>& parts, Pairs& out) {
-    std::size_t total = 0;
-    for (const Pairs& p : parts) total += p.size();
-    out.clear();
-    out.reserve(total);
-    for (const Pairs& p : parts) out.insert(out.end(), p.begin(), p.end());
-  };
   std::vector<Pairs> parts;
   detail::ordered_parts(static_cast<std::size_t>(nv), parts, [&](std::size_t begin, std::size_t end, Pairs& out) {
     std::vector<index_t> ring;
@@ -188,7 +181,7 @@ inline RepresentativeTriangles::RepresentativeTriangles(const TriangleMesh& mesh
       }
     }
   });
-  joined(parts, orphans_.vf);
+  detail::concatenate_in_parallel(parts, orphans_.vf);
   detail::ordered_parts(static_cast<std::size_t>(ne), parts, [&](std::size_t begin, std::size_t end, Pairs& out) {
     std::vector<index_t> ring;
     for (auto e = static_cast<index_t>(begin); e < static_cast<index_t>(end); ++e) {
@@ -206,7 +199,7 @@ inline RepresentativeTriangles::RepresentativeTriangles(const TriangleMesh& mesh
       std::sort(out.begin() + static_cast<std::ptrdiff_t>(first), out.end());
     }
   });
-  joined(parts, orphans_.ee);
+  detail::concatenate_in_parallel(parts, orphans_.ee);
 }
 
 inline index_t RepresentativeTriangles::owner_of_feature(index_t id) const {
