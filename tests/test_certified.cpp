@@ -634,15 +634,14 @@ namespace {
 // Screens `queries` in lanes and one pair at a time; returns how many verdicts differ, and counts
 // the misses (so that a test sees both verdicts exercised).
 template <class Q>
-std::size_t lane_differences(const std::vector<Q>& queries, std::size_t& misses) {
+std::size_t lane_differences(const std::vector<Q>& queries, std::size_t& misses, const CcdParams<double>& params = {}) {
   std::size_t differ = 0;
-  const CcdParams<float> whole_step;
   for (std::size_t begin = 0; begin < queries.size(); begin += detail::kScreenLanes) {
     const int n = static_cast<int>(std::min<std::size_t>(detail::kScreenLanes, queries.size() - begin));
     bool lanes[detail::kScreenLanes];
-    detail::screen_single_in_lanes<CertifiedPolicy>(queries.data() + begin, n, lanes);
+    detail::screen_single_in_lanes<CertifiedPolicy>(queries.data() + begin, n, params, lanes);
     for (int lane = 0; lane < n; ++lane) {
-      const bool one = detail::certified_screen_single<CertifiedPolicy>(queries[begin + lane], whole_step);
+      const bool one = detail::certified_screen_single<CertifiedPolicy>(queries[begin + lane], params);
       differ += lanes[lane] != one;
       misses += one;
     }
@@ -682,15 +681,32 @@ TEST_CASE("single-precision screen: pairs screened in lanes get the one-pair scr
   CHECK(vf_misses < vf.size() * 9 / 10);
   CHECK(ee_misses > ee.size() / 10);
   CHECK(ee_misses < ee.size() * 9 / 10);
-  // The batch takes them in lanes only for contact over the whole step.
+  // Mode earliest's windows [0, time_limit): the window's boxes in lanes, the cubic's halvings
+  // one pair at a time. Each window must reject pairs the whole step passes (else the window's
+  // tests were not exercised).
+  for (const double limit : {std::ldexp(1.0, -16), std::ldexp(1.0, -8), 0.3, 0.5, 0.75}) {
+    CcdParams<double> window;
+    window.time_limit = limit;
+    std::size_t vf_window_misses = 0, ee_window_misses = 0;
+    CHECK(lane_differences(vf, vf_window_misses, window) == 0);
+    CHECK(lane_differences(ee, ee_window_misses, window) == 0);
+    std::printf("screen in lanes, window [0, %g): %zu and %zu misses\n", limit, vf_window_misses, ee_window_misses);
+    CHECK(vf_window_misses >= vf_misses);
+    CHECK(ee_window_misses >= ee_misses);
+    if (limit <= 0.5) {
+      CHECK(vf_window_misses > vf_misses);
+      CHECK(ee_window_misses > ee_misses);
+    }
+  }
+  // The batch takes them in lanes for contact (any window), not for a minimum separation.
   CcdParams<double> params;
 #if defined(LWSCCD_SCREEN_IN_LANES)
+  CHECK(detail::screen_in_lanes_applies(params));
+  params.time_limit = 0.5;
   CHECK(detail::screen_in_lanes_applies(params));
 #else
   CHECK_FALSE(detail::screen_in_lanes_applies(params));  // (a compiler without vector extensions)
 #endif
-  params.time_limit = 0.5;
-  CHECK_FALSE(detail::screen_in_lanes_applies(params));
   params.time_limit = 1;
   params.min_separation = 1e-3;
   CHECK_FALSE(detail::screen_in_lanes_applies(params));

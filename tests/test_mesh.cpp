@@ -4,8 +4,10 @@
 #include <map>
 #include <random>
 #include <set>
+#include <string>
 
 #include "lwsccd/core/error.hpp"
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/geometry/mesh.hpp"
 
 using namespace lwsccd;
@@ -52,18 +54,19 @@ TEST_CASE("edges follow the dataset order: unique (min, max) sorted by (max, min
   CHECK(quad.faces_share_vertex(0, 1));
 }
 
-TEST_CASE("derived edges and adjacency agree with a set-based reference on a random cloth", "[mesh]") {
-  auto faces = grid_faces(13, 9);
-  std::mt19937 rng(1);
-  std::shuffle(faces.begin(), faces.end(), rng);  // ids must not depend on face order
-  const index_t nv = 14 * 10;
-  const TriangleMesh mesh(nv, faces);
+namespace {
+
+// Checks every derived list of `mesh` against its definition from `faces` by ordered sets: edges
+// unique and sorted by (max, min), face_edges, and the face lists of vertices, edges and faces
+// (ascending, as the accessors promise). Returns the number of boundary edges.
+int check_against_definition(const TriangleMesh& mesh, const std::vector<Face>& faces, index_t nv) {
   std::set<std::pair<int, int>> by_max_min;  // (max, min)
   for (const Face& f : faces)
     for (int k = 0; k < 3; ++k) {
       const int a = f.v[k], b = f.v[(k + 1) % 3];
       by_max_min.insert({std::max(a, b), std::min(a, b)});
     }
+  REQUIRE(mesh.num_vertices() == nv);
   REQUIRE(mesh.num_edges() == static_cast<index_t>(by_max_min.size()));
   index_t e = 0;
   for (const auto& mm : by_max_min) {
@@ -85,13 +88,16 @@ TEST_CASE("derived edges and adjacency agree with a set-based reference on a ran
   int boundary = 0;
   for (index_t edge = 0; edge < mesh.num_edges(); ++edge) {
     const auto span = mesh.edge_faces(edge);
-    REQUIRE(std::set<index_t>(span.begin(), span.end()) == ref_edge_faces[edge]);
+    REQUIRE(std::vector<index_t>(span.begin(), span.end()) ==
+            std::vector<index_t>(ref_edge_faces[edge].begin(), ref_edge_faces[edge].end()));
     boundary += mesh.is_boundary_edge(edge);
   }
-  CHECK(boundary == 2 * (13 + 9));
   for (index_t v = 0; v < nv; ++v) {
     const auto span = mesh.vertex_faces(v);
-    REQUIRE(std::set<index_t>(span.begin(), span.end()) == ref_vertex_faces[v]);
+    const auto it = ref_vertex_faces.find(v);
+    const std::vector<index_t> ref = it == ref_vertex_faces.end() ? std::vector<index_t>{}
+                                                                  : std::vector<index_t>(it->second.begin(), it->second.end());
+    REQUIRE(std::vector<index_t>(span.begin(), span.end()) == ref);
   }
   for (index_t f = 0; f < mesh.num_faces(); ++f) {
     std::set<index_t> ref;
@@ -99,9 +105,57 @@ TEST_CASE("derived edges and adjacency agree with a set-based reference on a ran
       for (index_t g : ref_edge_faces[edge])
         if (g != f) ref.insert(g);
     const auto span = mesh.face_neighbors(f);
-    REQUIRE(std::set<index_t>(span.begin(), span.end()) == ref);
-    REQUIRE(std::is_sorted(span.begin(), span.end()));
+    REQUIRE(std::vector<index_t>(span.begin(), span.end()) == std::vector<index_t>(ref.begin(), ref.end()));
   }
+  return boundary;
+}
+
+}  // namespace
+
+TEST_CASE("derived edges and adjacency agree with a set-based reference on a random cloth", "[mesh]") {
+  auto faces = grid_faces(13, 9);
+  std::mt19937 rng(1);
+  std::shuffle(faces.begin(), faces.end(), rng);  // ids must not depend on face order
+  const index_t nv = 14 * 10;
+  const TriangleMesh mesh(nv, faces);
+  CHECK(check_against_definition(mesh, faces, nv) == 2 * (13 + 9));
+}
+
+TEST_CASE("a large mesh's edges and adjacency, built on several threads, agree with the reference", "[mesh][threads]") {
+  // A shuffled 150 x 100 cloth (many vertex and face ranges per thread), fins on some of its
+  // edges (three or four faces on one edge) and vertices in no face.
+  const int w = 150, h = 100;
+  auto faces = grid_faces(w, h);
+  index_t nv = (w + 1) * (h + 1);
+  std::mt19937 rng(7);
+  for (int i = 0; i < 500; ++i) {
+    const Face& f = faces[rng() % faces.size()];
+    const int k = static_cast<int>(rng() % 3);
+    faces.push_back({{f.v[k], f.v[(k + 1) % 3], nv++}});
+  }
+  nv += 37;  // isolated vertices
+  std::shuffle(faces.begin(), faces.end(), rng);
+  for (const unsigned threads : {1u, 2u, 5u}) {
+    const TriangleMesh mesh = cpu::ThreadLimit(threads).run([&] { return TriangleMesh(nv, faces); });
+    check_against_definition(mesh, faces, nv);
+    CHECK(mesh == TriangleMesh(nv, faces));
+  }
+  // Duplicates: the one on the first edge in id order is named, whatever the threads.
+  auto twice = faces;
+  twice.push_back(faces[10]);                                                    // face n
+  twice.push_back({{faces[3].v[2], faces[3].v[0], faces[3].v[1]}});             // face n + 1, a rotation
+  const std::size_t n = faces.size();
+  const TriangleMesh plain(nv, faces);
+  auto lowest_edge = [&](const Face& f) {
+    index_t e = plain.num_edges();
+    for (int k = 0; k < 3; ++k) e = std::min(e, plain.find_edge(f.v[k], f.v[(k + 1) % 3]));
+    return e;
+  };
+  const bool tenth_first = lowest_edge(faces[10]) < lowest_edge(faces[3]);
+  const std::string expected = tenth_first ? "face " + std::to_string(n) + ": duplicate of face 10"
+                                           : "face " + std::to_string(n + 1) + ": duplicate of face 3";
+  for (const unsigned threads : {1u, 2u, 5u})
+    CHECK_THROWS_WITH(cpu::ThreadLimit(threads).run([&] { return TriangleMesh(nv, twice, "m"); }), Catch::Contains(expected));
 }
 
 TEST_CASE("closed and non-manifold meshes", "[mesh]") {

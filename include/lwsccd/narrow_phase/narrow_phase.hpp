@@ -161,7 +161,7 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
             if (in_lanes && (i == begin || i - chunk == kScreenLanes)) {
               const int lanes = static_cast<int>(std::min<std::size_t>(kScreenLanes, end - i));
               for (int lane = 0; lane < lanes; ++lane) lane_queries[lane] = gather_single(i + lane);
-              screen_single_in_lanes<typename Method::policy_type>(lane_queries, lanes, screened_miss);
+              screen_single_in_lanes<typename Method::policy_type>(lane_queries, lanes, params, screened_miss);
               chunk = i;
             }
             const LaneQuery s = in_lanes ? lane_queries[i - chunk] : gather_single(i);

@@ -27,12 +27,11 @@ inline constexpr int kScreenLanes = 4;
 #endif
 
 /// True when screen_single_in_lanes may stand for certified_screen_single: contact (no minimum
-/// separation) over the whole step (the time-limited windows of mode earliest take the one-pair
-/// screen).
+/// separation), over the whole step or a window [0, time_limit) of mode earliest.
 template <class T>
 inline bool screen_in_lanes_applies(const CcdParams<T>& params) {
 #if defined(LWSCCD_SCREEN_IN_LANES)
-  return !(params.min_separation > T(0)) && !(params.time_limit < T(1));
+  return !(params.min_separation > T(0));
 #else
   (void)params;
   return false;
@@ -54,6 +53,9 @@ struct ScreenPoints<VertexFaceQuery<T>> {
   static constexpr int kFirst[2] = {0, 4}, kSecond[6] = {1, 2, 3, 5, 6, 7};  // {p0, p1}, {a0, b0, c0, a1, b1, c1}
   // p0 - a0, p1 - a1, b0 - a0, b1 - a1, c0 - a0, c1 - a1
   static constexpr int kDifference[6][2] = {{0, 1}, {4, 5}, {2, 1}, {6, 5}, {3, 1}, {7, 5}};
+  // window_boxes_apart's points: {i, i} is point i, {i, j} its position at w on the way to point j.
+  static constexpr int kWindowFirst[2][2] = {{0, 0}, {0, 4}};                                      // p0, p(w)
+  static constexpr int kWindowSecond[6][2] = {{1, 1}, {2, 2}, {3, 3}, {1, 5}, {2, 6}, {3, 7}};  // a0, b0, c0, a(w), b(w), c(w)
 };
 template <class T>
 struct ScreenPoints<EdgeEdgeQuery<T>> {
@@ -61,6 +63,9 @@ struct ScreenPoints<EdgeEdgeQuery<T>> {
   static constexpr int kFirst[4] = {0, 1, 4, 5}, kSecond[4] = {2, 3, 6, 7};  // {a0, b0, a1, b1}, {c0, d0, c1, d1}
   // c0 - a0, c1 - a1, b0 - a0, b1 - a1, d0 - c0, d1 - c1
   static constexpr int kDifference[6][2] = {{2, 0}, {6, 4}, {1, 0}, {5, 4}, {3, 2}, {7, 6}};
+  // window_boxes_apart's points: {i, i} is point i, {i, j} its position at w on the way to point j.
+  static constexpr int kWindowFirst[4][2] = {{0, 0}, {1, 1}, {0, 4}, {1, 5}};  // a0, b0, a(w), b(w)
+  static constexpr int kWindowSecond[4][2] = {{2, 2}, {3, 3}, {2, 6}, {3, 7}};  // c0, d0, c(w), d(w)
 };
 
 namespace lanes {
@@ -85,9 +90,11 @@ inline ScreenLane dot(const ScreenLane a[3], const ScreenLane b[3]) { return (a[
 /// certified_screen_single<Policy>(queries[i], params) for i < n <= kScreenLanes, into miss[i],
 /// where screen_in_lanes_applies(params). Each step below is the one-pair screen's (named), on
 /// every lane. (The host never contracts a * b + c: the library's target compiles with
-/// -ffp-contract=off, as the one-pair screen needs too.)
-template <class Policy, class Q>
-void screen_single_in_lanes(const Q* queries, int n, bool* miss) {
+/// -ffp-contract=off, as the one-pair screen needs too.) With params.time_limit < 1 (mode
+/// earliest's windows) the window's boxes are tested in lanes too, and the few pairs that neither
+/// test rejects take the one-pair screen, whose halvings of the cubic differ from lane to lane.
+template <class Policy, class Q, class T>
+void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params, bool* miss) {
   using Points = ScreenPoints<Q>;
   using L = ScreenLane;
   // The queries, rounded to float as relative_single reads them, a lane each (spare lanes repeat
@@ -122,6 +129,32 @@ void screen_single_in_lanes(const Q* queries, int n, bool* miss) {
     for (int i = 1; i < Points::kFirstCount; ++i) alo = lanes::min(alo, r[Points::kFirst[i]][k]), ahi = lanes::max(ahi, r[Points::kFirst[i]][k]);
     for (int i = 1; i < Points::kSecondCount; ++i) blo = lanes::min(blo, r[Points::kSecond[i]][k]), bhi = lanes::max(bhi, r[Points::kSecond[i]][k]);
     apart |= (ahi + pad < blo) | (bhi + pad < alo);
+  }
+  // screen_with's window boxes: the boxes over [0, w], w the smallest power of two that covers
+  // [0, time_limit), with the pad vscale(m, 20 perturbation) + tiny.
+  if (params.time_limit <= T(0.5)) {
+    float w = 0.5f;
+    for (int level = 1; level < 30 && T(w / 2) >= params.time_limit; ++level) w /= 2;
+    const float tiny = 4.0f * std::numeric_limits<float>::denorm_min();
+    const float window_pad_scale = 20.0f * perturbation;
+    auto window_point = [&](const int (&index)[2], int k) {
+      const L& start = r[index[0]][k];
+      return index[0] == index[1] ? start : start + w * (r[index[1]][k] - start);  // position_at
+    };
+    for (int k = 0; k < 3; ++k) {
+      const L pad = m[k] * window_pad_scale + tiny;
+      L alo = window_point(Points::kWindowFirst[0], k), ahi = alo;
+      L blo = window_point(Points::kWindowSecond[0], k), bhi = blo;
+      for (int i = 1; i < Points::kFirstCount; ++i) {
+        const L x_i = window_point(Points::kWindowFirst[i], k);
+        alo = lanes::min(alo, x_i), ahi = lanes::max(ahi, x_i);
+      }
+      for (int i = 1; i < Points::kSecondCount; ++i) {
+        const L x_i = window_point(Points::kWindowSecond[i], k);
+        blo = lanes::min(blo, x_i), bhi = lanes::max(bhi, x_i);
+      }
+      apart |= (ahi + pad < blo) | (bhi + pad < alo);
+    }
   }
   // screening_bernstein: coplanarity_of, bernstein_controls and the bound.
   L c[6][3];  // p0, p1, a0, a1, b0, b1
@@ -163,13 +196,16 @@ void screen_single_in_lanes(const Q* queries, int n, bool* miss) {
   const ScreenLane low = -screen;
   const ScreenLaneMask negative = (b0 < low) & (b1 < low) & (b2 < low) & (b3 < low);
   const ScreenLaneMask rejected = apart | (finite & (positive | negative));
-  for (int lane = 0; lane < n; ++lane) miss[lane] = rejected[lane] != 0;
+  // A window's pair that neither the boxes nor the whole step's signs reject: the one-pair screen
+  // (the cubic halved down to the window).
+  const bool window = params.time_limit < T(1);
+  for (int lane = 0; lane < n; ++lane)
+    miss[lane] = rejected[lane] != 0 || (window && finite[lane] != 0 && certified_screen_single<Policy>(queries[lane], params));
 }
 #else
-template <class Policy, class Q>
-void screen_single_in_lanes(const Q* queries, int n, bool* miss) {
-  CcdParams<float> whole_step;
-  for (int lane = 0; lane < n; ++lane) miss[lane] = certified_screen_single<Policy>(queries[lane], whole_step);
+template <class Policy, class Q, class T>
+void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params, bool* miss) {
+  for (int lane = 0; lane < n; ++lane) miss[lane] = certified_screen_single<Policy>(queries[lane], params);
 }
 #endif
 
