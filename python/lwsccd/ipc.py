@@ -82,31 +82,30 @@ def _arrays(mesh: Any) -> Tuple[np.ndarray, np.ndarray, int]:
                     f"num_vertices) or a tuple (V, E, F), got {type(mesh).__name__}")
 
 
-def _check_topology(f: np.ndarray, e: np.ndarray, num_vertices: int) -> np.ndarray:
-    """The faces as int64, after checking that the mesh is a triangle mesh lwsccd checks whole."""
+def _check_faces(f: np.ndarray, e: np.ndarray, num_vertices: int) -> Tuple[np.ndarray, np.ndarray]:
+    """The faces and edges as int64, after checking their types, shapes and the faces' indices."""
     if f.dtype.kind not in "iu" or (e.size and e.dtype.kind not in "iu"):
         raise TypeError(f"lwsccd.ipc: faces and edges must be integers, got {f.dtype} and {e.dtype}")
     if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
         raise ValueError(f"lwsccd.ipc: faces must have shape (num_faces > 0, 3), got {f.shape}")
     if f.min() < 0 or f.max() >= num_vertices:
         raise ValueError(f"lwsccd.ipc: a face index is outside [0, {num_vertices})")
-    f = np.ascontiguousarray(f, dtype=np.int64)
-    # Edges in no face and vertices in no face would be checked by ipctk, not by lwsccd.
-    if e.size:
-        if e.ndim != 2 or e.shape[1] != 2:
-            raise ValueError(f"lwsccd.ipc: edges must have shape (num_edges, 2), got {e.shape}")
-        face_edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-        key = lambda a: a[:, 0] * np.int64(num_vertices) + a[:, 1]  # noqa: E731
-        loose = int(np.count_nonzero(~np.isin(key(np.sort(e.astype(np.int64), axis=1)), key(face_edges))))
-        if loose:
-            raise ValueError(f"lwsccd.ipc: {loose} edges belong to no face (codimensional): lwsccd checks triangle "
-                             "meshes only")
-    used = np.zeros(num_vertices, dtype=bool)
-    used[f.ravel()] = True
-    if not used.all():
-        raise ValueError(f"lwsccd.ipc: {int((~used).sum())} vertices belong to no face (codimensional points): "
+    if e.size and (e.ndim != 2 or e.shape[1] != 2):
+        raise ValueError(f"lwsccd.ipc: edges must have shape (num_edges, 2), got {e.shape}")
+    edges = np.ascontiguousarray(e, dtype=np.int64).reshape(-1, 2) if e.size else np.zeros((0, 2), dtype=np.int64)
+    return np.ascontiguousarray(f, dtype=np.int64), edges
+
+
+def _check_triangle_mesh(p: Pipeline, edges: np.ndarray) -> None:
+    """Refuses codimensional elements, which ipctk would check and lwsccd does not: edges in no face
+    and vertices in no face (counted by the pipeline's own mesh, on all cores)."""
+    loose_edges, loose_vertices = p._core.count_loose(edges)
+    if loose_edges:
+        raise ValueError(f"lwsccd.ipc: {loose_edges} edges belong to no face (codimensional): lwsccd checks triangle "
+                         "meshes only")
+    if loose_vertices:
+        raise ValueError(f"lwsccd.ipc: {loose_vertices} vertices belong to no face (codimensional points): "
                          "lwsccd checks triangle meshes only")
-    return f
 
 
 def _setting(explicit: Optional[float], ccd: Any, name: str, default: float) -> float:
@@ -126,9 +125,10 @@ def _pipeline(mesh: Any, mode: str, min_distance: float, tolerance: float, max_i
            int(max_iterations), device)
     p = _CACHE.get(key)
     if p is None:
-        p = Pipeline(_check_topology(faces, edges, num_vertices), num_vertices=num_vertices, mode=mode,
-                     min_separation=float(min_distance), tolerance=float(tolerance), max_iterations=int(max_iterations),
-                     device=device)
+        f, e = _check_faces(faces, edges, num_vertices)
+        p = Pipeline(f, num_vertices=num_vertices, mode=mode, min_separation=float(min_distance),
+                     tolerance=float(tolerance), max_iterations=int(max_iterations), device=device)
+        _check_triangle_mesh(p, e)
         _CACHE[key] = p
         while len(_CACHE) > _CACHE_SIZE:
             _CACHE.popitem(last=False)

@@ -4,9 +4,11 @@
 // the GPU backend is in gpu_backend.cu, compiled in when LWSCCD_PYTHON_WITH_GPU is defined.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/pair.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <atomic>
 #include <cstdint>
 #include <cstring>
 #include <memory>
@@ -15,6 +17,7 @@
 #include <vector>
 
 #include "gpu_backend.hpp"
+#include "lwsccd/core/parallel.hpp"
 #include "lwsccd/io/dataset.hpp"
 #include "lwsccd/io/mesh_io.hpp"
 #include "lwsccd/io/render.hpp"
@@ -314,6 +317,33 @@ class Pipeline {
 
   void restart_from_root() { pipeline_->restart_from_root(); }
   const lwsccd::TriangleMesh& mesh() const { return *mesh_; }
+
+  // (edges given that are no edge of a face, vertices in no face): what lwsccd.ipc refuses
+  // (codimensional elements, which ipc-toolkit checks and lwsccd does not). Each edge is looked up
+  // in the mesh's own, on all cores.
+  std::pair<std::size_t, std::size_t> count_loose(const nb::ndarray<const std::int64_t, nb::shape<-1, 2>, nb::c_contig, nb::device::cpu>& edges) const {
+    const std::int64_t* e = edges.data();
+    const std::int64_t nv = mesh_->num_vertices();
+    std::atomic<std::size_t> loose_edges{0}, loose_vertices{0};
+    nb::gil_scoped_release unlocked;
+    lwsccd::detail::parallel_ranges(edges.shape(0), lwsccd::detail::grain_for(edges.shape(0)), [&](std::size_t begin, std::size_t end) {
+      std::size_t loose = 0;
+      for (std::size_t i = begin; i < end; ++i) {
+        const std::int64_t a = e[2 * i], b = e[2 * i + 1];
+        const bool in_range = a >= 0 && b >= 0 && a < nv && b < nv;
+        loose += !in_range || mesh_->find_edge(static_cast<lwsccd::index_t>(a), static_cast<lwsccd::index_t>(b)) < 0;
+      }
+      loose_edges += loose;
+    });
+    lwsccd::detail::parallel_ranges(static_cast<std::size_t>(nv), lwsccd::detail::grain_for(static_cast<std::size_t>(nv)),
+                                    [&](std::size_t begin, std::size_t end) {
+                                      std::size_t loose = 0;
+                                      for (std::size_t v = begin; v < end; ++v)
+                                        loose += mesh_->vertex_faces(static_cast<lwsccd::index_t>(v)).size() == 0;
+                                      loose_vertices += loose;
+                                    });
+    return {loose_edges.load(), loose_vertices.load()};
+  }
   std::string backend() const { return pipeline_->backend(); }
 
  private:
@@ -377,6 +407,7 @@ NB_MODULE(_lwsccd, m) {
       .def("step_from_device", &Pipeline::step_from_device, "x0"_a, "x1"_a, "float32"_a)
       .def("step_on_device", &Pipeline::step_on_device, "x0"_a, "x1"_a, "float32"_a)
       .def("restart_from_root", &Pipeline::restart_from_root)
+      .def("count_loose", &Pipeline::count_loose, "edges"_a)
       .def("render", &Pipeline::render, "path"_a, "x0"_a, "x1"_a, "vf"_a, "ee"_a, "earliest_toi"_a, "width"_a, "height"_a)
       .def_prop_ro("backend", &Pipeline::backend)
       .def_prop_ro("num_vertices", [](const Pipeline& p) { return p.mesh().num_vertices(); })
