@@ -34,9 +34,7 @@ Differences from ipctk, all on the safe side:
 
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict
-from typing import Any, Optional, Tuple
+from typing import Any, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -50,7 +48,17 @@ DEFAULT_TOLERANCE = 1e-6
 DEFAULT_CONSERVATIVE_RESCALING = 0.8
 DEFAULT_MAX_ITERATIONS = 16384
 
-_CACHE: "OrderedDict[tuple, Pipeline]" = OrderedDict()
+
+class _Kept(NamedTuple):
+    """A pipeline kept for a topology and settings, with copies of the arrays it was made from."""
+
+    faces: np.ndarray
+    edges: np.ndarray
+    settings: tuple
+    pipeline: Pipeline
+
+
+_CACHE: List[_Kept] = []  # the most recently used last
 _CACHE_SIZE = 4
 
 
@@ -116,24 +124,27 @@ def _setting(explicit: Optional[float], ccd: Any, name: str, default: float) -> 
     return default
 
 
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and a.dtype == b.dtype and bool(np.array_equal(a, b))
+
+
 def _pipeline(mesh: Any, mode: str, min_distance: float, tolerance: float, max_iterations: int, device: str) -> Pipeline:
     faces, edges, num_vertices = _arrays(mesh)
-    # A line search asks many times of one topology: it is checked once, when its pipeline is made.
-    digest = hashlib.sha1(np.ascontiguousarray(faces).tobytes())
-    digest.update(np.ascontiguousarray(edges).tobytes())
-    key = (digest.hexdigest(), faces.shape, str(faces.dtype), num_vertices, mode, float(min_distance), float(tolerance),
-           int(max_iterations), device)
-    p = _CACHE.get(key)
-    if p is None:
-        f, e = _check_faces(faces, edges, num_vertices)
-        p = Pipeline(f, num_vertices=num_vertices, mode=mode, min_separation=float(min_distance),
-                     tolerance=float(tolerance), max_iterations=int(max_iterations), device=device)
-        _check_triangle_mesh(p, e)
-        _CACHE[key] = p
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    else:
-        _CACHE.move_to_end(key)
+    settings = (num_vertices, mode, float(min_distance), float(tolerance), int(max_iterations), device)
+    # A line search asks many times of one topology: its pipeline is found again by comparing the
+    # arrays with the copies kept (memory compares: ~0.5 ms for 92 K triangles, where a SHA-1 of
+    # them took 6 ms a call), and the topology is checked once, when the pipeline is made.
+    for i in range(len(_CACHE) - 1, -1, -1):
+        kept = _CACHE[i]
+        if kept.settings == settings and _same(faces, kept.faces) and _same(edges, kept.edges):
+            _CACHE.append(_CACHE.pop(i))
+            return kept.pipeline
+    f, e = _check_faces(faces, edges, num_vertices)
+    p = Pipeline(f, num_vertices=num_vertices, mode=mode, min_separation=float(min_distance),
+                 tolerance=float(tolerance), max_iterations=int(max_iterations), device=device)
+    _check_triangle_mesh(p, e)
+    _CACHE.append(_Kept(np.array(faces, copy=True), np.array(edges, copy=True), settings, p))
+    del _CACHE[:-_CACHE_SIZE]
     return p
 
 

@@ -82,6 +82,36 @@ def test_stepsize_is_the_rescaled_certified_contact_and_one_when_free():
     assert lwsccd.ipc.compute_collision_free_stepsize(mesh, v0, v1, conservative_rescaling=1.0) == pytest.approx(0.5, abs=1e-6)
 
 
+def test_pipelines_are_kept_per_topology_and_settings():
+    """A line search's repeated calls reuse one pipeline; another topology, other settings or an
+    array changed in place get their own; at most four are kept; clear_cache drops them."""
+    from lwsccd import ipc
+
+    ipc.clear_cache()
+    v0, v1, edges, faces = two_triangles(2.0)
+    first = ipc._pipeline((v0, edges, faces), "earliest", 0.0, TOL, 16384, "cpu")
+    assert ipc._pipeline((v0, edges.copy(), faces.copy()), "earliest", 0.0, TOL, 16384, "cpu") is first
+    assert ipc._pipeline((v0, edges, faces), "set", 0.0, TOL, 16384, "cpu") is not first
+    assert ipc._pipeline((v0, edges, faces.astype(np.int32)), "earliest", 0.0, TOL, 16384, "cpu") is not first
+    changed = faces.copy()
+    changed[1] = [3, 5, 4]  # the same vertices, another orientation: another topology's faces
+    other = ipc._pipeline((v0, edges, changed), "earliest", 0.0, TOL, 16384, "cpu")
+    assert other is not first
+    faces_in_place = faces.copy()
+    kept = ipc._pipeline((v0, edges, faces_in_place), "earliest", 0.0, TOL, 16384, "cpu")
+    assert kept is first  # the most recently used are kept
+    faces_in_place[1] = [3, 5, 4]  # changed in place after the pipeline was made: compared by value
+    assert ipc._pipeline((v0, edges, faces_in_place), "earliest", 0.0, TOL, 16384, "cpu") is other
+    assert len(ipc._CACHE) == 4
+    ipc._pipeline((v0, edges, faces), "contacts", 0.0, TOL, 16384, "cpu")
+    assert len(ipc._CACHE) == 4
+    ipc.clear_cache()
+    assert not ipc._CACHE
+    # The answers do not depend on which pipeline served them.
+    assert ipc.compute_collision_free_stepsize((v0, edges, faces), v0, v1) == \
+        ipc.compute_collision_free_stepsize((v0, edges, changed), v0, v1)
+
+
 def test_bad_input_is_refused_with_a_clear_error():
     v0, v1, edges, faces = two_triangles(2.0)
     f = lwsccd.ipc.compute_collision_free_stepsize
