@@ -2,6 +2,8 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <limits>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -169,6 +171,44 @@ TEST_CASE("representatives: the orphans found in parallel ranges equal one seria
     CHECK(rep.orphans().vf == expected.vf);
     CHECK(rep.orphans().ee == expected.ee);
   }
+}
+
+TEST_CASE("representatives: the CPU's packed emission keeps the view's pairs, in its order", "[representative]") {
+  // Every triangle pair among a cloth-ball mesh's first faces and random others, with boxes that
+  // overlap often (random small boxes in a small space), some empty or NaN: the pairs
+  // emit_packed_triangle_pair keeps are emit_triangle_pair's, in the same order.
+  const MultiBodyStep ball = make_cloth_ball_scene(4000);
+  const TriangleMesh& mesh = *ball.step.mesh;
+  const RepresentativeTriangles rep(mesh);
+  const auto features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> at(0.0f, 1.0f), size(0.0f, 0.9f);
+  std::vector<Aabbf> boxes(features);
+  for (std::size_t i = 0; i < features; ++i) {
+    const Vec3f lo{at(rng), at(rng), at(rng)};
+    boxes[i] = {lo, {lo.x + size(rng), lo.y + size(rng), lo.z + size(rng)}};
+    if (i % 97 == 0) boxes[i].lo.y = std::numeric_limits<float>::quiet_NaN();
+    if (i % 89 == 0) boxes[i] = Aabbf::empty();
+  }
+  const EmissionView view = rep.view(boxes.data());
+  detail::PackedEmission packed;
+  detail::pack_emission(view, mesh.num_faces(), packed);
+  std::vector<std::pair<index_t, index_t>> expected, got;
+  std::size_t pairs = 0;
+  for (index_t a = 0; a < 300; ++a)
+    for (int j = 0; j < 60; ++j) {
+      const index_t b = static_cast<index_t>(rng() % static_cast<unsigned>(mesh.num_faces()));
+      if (b == a) continue;
+      ++pairs;
+      auto to = [](std::vector<std::pair<index_t, index_t>>& out, int kind) {
+        return [&out, kind](index_t x, index_t y) { out.emplace_back(kind * (1 << 30) + x, y); };
+      };
+      emit_triangle_pair(view, a, b, to(expected, 0), to(expected, 1));
+      detail::emit_packed_triangle_pair(packed, a, b, to(got, 0), to(got, 1));
+    }
+  INFO(pairs << " triangle pairs, " << expected.size() << " feature pairs");
+  CHECK(expected.size() > pairs / 2);
+  CHECK(got == expected);
 }
 
 TEST_CASE("representatives: emission equals the brute-force feature oracle, each pair once", "[representative]") {

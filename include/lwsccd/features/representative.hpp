@@ -20,6 +20,7 @@
 // one of them: the lowest-numbered face among those with the fewest features represented).
 #pragma once
 
+#include <cstdint>
 #include <utility>
 #include <vector>
 
@@ -192,6 +193,31 @@ class RepresentativeTriangles {
   OrphanSets orphans_;
 };
 
+namespace detail {
+
+/// A feature's box and id, packed with the others its face represents.
+struct PackedFeature {
+  Aabbf box;
+  index_t id;  ///< feature id (a vertex's own, an edge's num_vertices + e)
+};
+/// A face's part of the CPU emission: its box, and where the features it represents lie in
+/// PackedEmission::features (its vertices in faces[f].v order, then its edges in face_edges order),
+/// with EmissionView::represents' bits.
+struct PackedEmissionFace {
+  Aabbf box;
+  std::uint32_t first;
+  std::uint32_t represents;
+};
+/// What the CPU emission reads per candidate, packed by face: a candidate's boxes lie in a few
+/// cache lines instead of one each (pack_emission fills it from a step's feature boxes).
+struct PackedEmission {
+  std::vector<PackedEmissionFace> faces;
+  std::vector<PackedFeature> features;
+  index_t face_feature_base = 0;  ///< face f's feature id is face_feature_base + f
+};
+
+}  // namespace detail
+
 /// Feature pairs left in the lists the threads emitting them filled: the candidates' parts (each
 /// a vf and an ee list), then the kept orphans' parts, in that order; their concatenation, per
 /// kind, is the list emit_feature_pairs gives. Why: copying a step's pairs into one list costs
@@ -200,6 +226,8 @@ struct FeaturePairParts {
   using Pairs = std::vector<std::pair<index_t, index_t>>;
   std::vector<FeaturePairs> candidates;
   std::vector<Pairs> orphans_vf, orphans_ee;
+  /// The emission's own scratch, kept between steps (its memory reused).
+  detail::PackedEmission packed;
 
   /// The vertex-face (edge-edge) lists, in order.
   std::vector<const Pairs*> vf_lists() const { return lists_of(&FeaturePairs::vf, orphans_vf); }

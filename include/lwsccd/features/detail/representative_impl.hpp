@@ -239,6 +239,70 @@ inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const
 
 namespace detail {
 
+inline unsigned count_bits(unsigned bits) {
+  unsigned n = 0;
+  for (; bits; bits &= bits - 1) ++n;
+  return n;
+}
+
+// Fills `out` from the view's boxes: each face's box and the boxes and ids of the features it
+// represents, face after face (the offsets a serial pass, the boxes on all cores).
+inline void pack_emission(const EmissionView& view, index_t num_faces, PackedEmission& out) {
+  const auto nf = static_cast<std::size_t>(num_faces);
+  out.faces.resize(nf);
+  out.face_feature_base = view.face_feature(0);
+  std::uint32_t at = 0;
+  for (std::size_t f = 0; f < nf; ++f) {
+    out.faces[f].first = at;
+    out.faces[f].represents = view.represents[f];
+    at += count_bits(view.represents[f] & 0x3fu);
+  }
+  out.features.resize(at);
+  parallel_ranges(nf, grain_for(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      PackedEmissionFace& face = out.faces[f];
+      face.box = view.boxes[view.face_feature(static_cast<index_t>(f))];
+      PackedFeature* next = out.features.data() + face.first;
+      const unsigned r = face.represents;
+      for (int k = 0; k < 3; ++k)
+        if ((r >> k) & 1u) {
+          const index_t v = view.faces[f].v[k];
+          *next++ = {view.boxes[v], v};
+        }
+      for (int k = 0; k < 3; ++k)
+        if ((r >> (3 + k)) & 1u) {
+          const index_t id = view.edge_feature(view.face_edges[f].e[k]);
+          *next++ = {view.boxes[id], id};
+        }
+    }
+  });
+}
+
+// emit_triangle_pair over the packed boxes: the same pairs in the same order (vertices of a, of
+// b, then edge pairs in (a's, b's) order), each kept when emission_mask keeps it.
+template <class OnVf, class OnEe>
+void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t b, OnVf&& on_vf, OnEe&& on_ee) {
+  const PackedEmissionFace& fa = packed.faces[static_cast<std::size_t>(a)];
+  const PackedEmissionFace& fb = packed.faces[static_cast<std::size_t>(b)];
+  const unsigned ra = fa.represents, rb = fb.represents;
+  if ((ra | rb) == 0) return;
+  const PackedFeature* of_a = packed.features.data() + fa.first;
+  const PackedFeature* of_b = packed.features.data() + fb.first;
+  const unsigned vertices_a = count_bits(ra & 7u), vertices_b = count_bits(rb & 7u);
+  for (unsigned i = 0; i < vertices_a; ++i)
+    if (of_a[i].box.overlaps(fb.box)) on_vf(of_a[i].id, packed.face_feature_base + b);
+  for (unsigned i = 0; i < vertices_b; ++i)
+    if (of_b[i].box.overlaps(fa.box)) on_vf(of_b[i].id, packed.face_feature_base + a);
+  const unsigned edges_a = count_bits(ra >> 3), edges_b = count_bits(rb >> 3);
+  for (unsigned x = 0; x < edges_a; ++x) {
+    const PackedFeature& edge_x = of_a[vertices_a + x];
+    for (unsigned y = 0; y < edges_b; ++y) {
+      const PackedFeature& edge_y = of_b[vertices_b + y];
+      if (edge_x.box.overlaps(edge_y.box)) edge_x.id < edge_y.id ? on_ee(edge_x.id, edge_y.id) : on_ee(edge_y.id, edge_x.id);
+    }
+  }
+}
+
 // The feature pairs of n candidates, candidates_in(begin, end, fn) calling fn on the candidates
 // [begin, end) in order, left in `parts` (FeaturePairParts: each list emptied first, its memory
 // kept): the candidates' parts, then the orphans' kept pairs when `with_orphans`.
@@ -251,11 +315,13 @@ void emit_feature_pair_parts(const RepresentativeTriangles& rep, std::size_t n, 
     throw InputError("emit_feature_pairs", "boxes",
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
   const EmissionView view = rep.view(boxes.data());
+  pack_emission(view, mesh.num_faces(), parts.packed);
+  const PackedEmission& packed = parts.packed;
   ordered_parts(n, parts.candidates, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
     candidates_in(begin, end, [&](const TrianglePair& p) {
       if (p.adjacent) return;
-      emit_triangle_pair(
-          view, p.a, p.b, [&](index_t v, index_t f) { push_back_large(part.vf, {v, f}); },
+      emit_packed_triangle_pair(
+          packed, p.a, p.b, [&](index_t v, index_t f) { push_back_large(part.vf, {v, f}); },
           [&](index_t x, index_t y) { push_back_large(part.ee, {x, y}); });
     });
   });
