@@ -119,6 +119,25 @@ def test_bad_input_is_refused_with_a_clear_error():
         f((v0, np.vstack([edges, [[0, 4]]]), faces), v0, v1)  # a codimensional edge
     with pytest.raises(ValueError, match="belong to no face"):
         f((np.vstack([v0, [[5, 5, 5]]]), edges, faces), np.vstack([v0, [[5, 5, 5]]]), np.vstack([v1, [[5, 5, 5]]]))
+    # Edges the extension looks up: indices outside the mesh, either sign, count as in no face.
+    for outside in ([0, 6], [-1, 2], [2**40, 1]):
+        with pytest.raises(ValueError, match="1 edges belong to no face"):
+            f((v0, np.vstack([edges, [outside]]), faces), v0, v1)
+    with pytest.raises(ValueError, match="edges must have shape"):
+        f((v0, np.hstack([edges, edges[:, :1]]), faces), v0, v1)
+    with pytest.raises(TypeError, match="must be integers"):
+        f((v0, edges.astype(np.float64), faces), v0, v1)
+    with pytest.raises(TypeError, match="must be integers"):
+        f((v0, edges, faces.astype(np.float32)), v0, v1)
+    with pytest.raises(ValueError, match="face index is outside"):
+        f((v0, edges, np.vstack([faces, [[0, 1, 6]]])), v0, v1)
+    with pytest.raises(ValueError, match="faces must have shape"):
+        f((v0, edges, faces[:, :2]), v0, v1)
+    # A refused mesh leaves no pipeline behind: the cache holds only the meshes that passed.
+    lwsccd.ipc.clear_cache()
+    with pytest.raises(ValueError, match="belong to no face"):
+        f((v0, np.vstack([edges, [[0, 4]]]), faces), v0, v1)
+    assert not lwsccd.ipc._CACHE
     with pytest.raises(ValueError, match="codimensional"):
         m = DuckMesh(6, edges, faces)
         m.num_codim_vertices = 2
