@@ -67,6 +67,13 @@ struct CertifiedPolicy {
   /// Multiplier of the single-precision screen's input bound, which covers rounding the relative
   /// coordinates to float (1 = as derived; only the mutation tests change it).
   static constexpr double kSingleInputBound = 1.0;
+  /// The screen tests the differences of the features' points at the same time before the cubic
+  /// (detail::differences_apart): features that move together are apart there, however their
+  /// swept boxes overlap, and those whose motion is coplanar or collinear are decided at once
+  /// instead of by a search that cannot end (the inclusion fallback's work, before).
+  static constexpr bool kCornerDifferences = true;
+  /// Multiplier of that test's margins (1 = as derived; only the mutation tests change it).
+  static constexpr double kDifferenceBound = 1.0;
   /// Multiplier of the separating directions' bound (1 = as derived; only the mutation tests
   /// change it).
   static constexpr double kSeparationBound = 1.0;

@@ -77,6 +77,68 @@ LWSCCD_HD LWSCCD_HOST_INLINE bool swept_boxes_apart(const EdgeEdgeQuery<W>& q, c
   return boxes_apart(first, 4, second, 4, pad);
 }
 
+/// True when the features' relative motion keeps them apart for the whole step, by the
+/// differences of their points at the same time (bound B14, docs/NARROW_PHASE.md): a contact at
+/// time t is a point of one feature equal to a point of the other, and their difference is a
+/// convex combination of the differences x_i(t) - y_j(t) of the features' vertices, each of them
+/// (1 - t) (x_i0 - y_j0) + t (x_i1 - y_j1), so 0 lies in the convex hull of the `n` differences
+/// `d` at t = 0 and t = 1. A direction along which every difference is beyond its error rules
+/// contact out: the coordinate axes first (a comparison each), then the differences' sum. Unlike
+/// the features' own boxes or hulls this ignores the motion they share: features moving together,
+/// e.g. collinear edges of a cloth carried as a whole, or a vertex riding beside a face, are
+/// apart here though their swept boxes overlap, and their cubic may stay within its bound
+/// (coplanar or collinear motion) however long it is searched.
+/// Each coordinate of the exact differences, of every query within `perturbation` m_k of `q`, is
+/// within (2 p + 2 u) m_k of the computed one (both points move by p m_k; the subtraction rounds
+/// by u |d| <= 2 u m_k); a dot product with c adds gamma_3 |c|.|d| <= 2 gamma_3 (1 + u) |c|.m.
+/// The margins (2 p + 4 u) m_k and (2 p + 10 u) |c|.m, computed in W, cover those with their
+/// own rounding, and the smallest normal added covers underflow. A value that is not finite
+/// decides nothing. Policy::kDifferenceBound scales the margins (1 = as derived; only the mutation
+/// tests change it).
+template <class W>
+struct DifferenceMargins {
+  W axis, direction, smallest;  ///< margins: axis m_k + smallest, direction |c|.m + smallest
+};
+template <class Policy, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE DifferenceMargins<W> difference_margins(W perturbation) {
+  const W u = unit_roundoff<W>(), scale = W(Policy::kDifferenceBound);
+  return {fmul(fadd(W(2) * perturbation, W(4) * u), scale), fmul(fadd(W(2) * perturbation, W(10) * u), scale),
+          scale > W(0) ? std::numeric_limits<W>::min() : W(0)};
+}
+template <class Policy, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool differences_apart(const Vec3<W>* d, int n, const Vec3<W>& m, W perturbation) {
+  const DifferenceMargins<W> f = difference_margins<Policy>(perturbation);
+  for (int k = 0; k < 3; ++k) {
+    const W margin = fadd(fmul(f.axis, m[k]), f.smallest);
+    bool above = finite_value(margin), below = above;
+    for (int i = 0; i < n; ++i) {
+      above = above && d[i][k] > margin;
+      below = below && d[i][k] < -margin;
+    }
+    if (above || below) return true;
+  }
+  Vec3<W> c = d[0];
+  for (int i = 1; i < n; ++i) c = vadd(c, d[i]);
+  const W margin = fadd(fmul(f.direction, vabs_dot(c, m)), f.smallest);
+  bool apart = finite_value(margin);
+  for (int i = 0; i < n; ++i) {
+    const W along = vdot(c, d[i]);
+    apart = apart && finite_value(along) && along > margin;
+  }
+  return apart;
+}
+template <class Policy, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool differences_apart(const VertexFaceQuery<W>& q, const Vec3<W>& m, W perturbation) {
+  const Vec3<W> d[6] = {vsub(q.p0, q.a0), vsub(q.p0, q.b0), vsub(q.p0, q.c0), vsub(q.p1, q.a1), vsub(q.p1, q.b1), vsub(q.p1, q.c1)};
+  return differences_apart<Policy>(d, 6, m, perturbation);
+}
+template <class Policy, class W>
+LWSCCD_HD LWSCCD_HOST_INLINE bool differences_apart(const EdgeEdgeQuery<W>& q, const Vec3<W>& m, W perturbation) {
+  const Vec3<W> d[8] = {vsub(q.a0, q.c0), vsub(q.a0, q.d0), vsub(q.b0, q.c0), vsub(q.b0, q.d0),
+                        vsub(q.a1, q.c1), vsub(q.a1, q.d1), vsub(q.b1, q.c1), vsub(q.b1, q.d1)};
+  return differences_apart<Policy>(d, 8, m, perturbation);
+}
+
 /// True when, over the window [0, w] (w a power of two <= 1/2), the features' boxes are apart by
 /// more than `pad` per axis: each point's path up to w lies between its position at 0 and at w.
 /// The positions at w are computed (x0 + w (x1 - x0): w's product is exact, the two roundings
@@ -120,6 +182,9 @@ template <class Policy, class W, class Q, class T>
 LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m, bool* mixed = nullptr) {
   // Swept boxes apart: no arithmetic but the pad, so it goes first.
   if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
+  // The features' relative motion: cheaper than the cubic, and it decides most pairs of a real
+  // step, whose features move much as their neighbours do.
+  if (Policy::kCornerDifferences && differences_apart<Policy>(q, m, perturbation)) return true;
   // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
   // [0, w] that covers it, which are far smaller than the whole step's when w is short. (w is a
   // power of two, so its comparisons with the time limit are exact in T.)

@@ -53,6 +53,9 @@ struct ScreenPoints<VertexFaceQuery<T>> {
   static constexpr int kFirst[2] = {0, 4}, kSecond[6] = {1, 2, 3, 5, 6, 7};  // {p0, p1}, {a0, b0, c0, a1, b1, c1}
   // p0 - a0, p1 - a1, b0 - a0, b1 - a1, c0 - a0, c1 - a1
   static constexpr int kDifference[6][2] = {{0, 1}, {4, 5}, {2, 1}, {6, 5}, {3, 1}, {7, 5}};
+  // differences_apart's differences: p0 - a0, p0 - b0, p0 - c0, p1 - a1, p1 - b1, p1 - c1
+  static constexpr int kCornerCount = 6;
+  static constexpr int kCorner[6][2] = {{0, 1}, {0, 2}, {0, 3}, {4, 5}, {4, 6}, {4, 7}};
   // window_boxes_apart's points: {i, i} is point i, {i, j} its position at w on the way to point j.
   static constexpr int kWindowFirst[2][2] = {{0, 0}, {0, 4}};                                      // p0, p(w)
   static constexpr int kWindowSecond[6][2] = {{1, 1}, {2, 2}, {3, 3}, {1, 5}, {2, 6}, {3, 7}};  // a0, b0, c0, a(w), b(w), c(w)
@@ -63,6 +66,9 @@ struct ScreenPoints<EdgeEdgeQuery<T>> {
   static constexpr int kFirst[4] = {0, 1, 4, 5}, kSecond[4] = {2, 3, 6, 7};  // {a0, b0, a1, b1}, {c0, d0, c1, d1}
   // c0 - a0, c1 - a1, b0 - a0, b1 - a1, d0 - c0, d1 - c1
   static constexpr int kDifference[6][2] = {{2, 0}, {6, 4}, {1, 0}, {5, 4}, {3, 2}, {7, 6}};
+  // differences_apart's differences: a0 - c0, a0 - d0, b0 - c0, b0 - d0, then the same at t = 1
+  static constexpr int kCornerCount = 8;
+  static constexpr int kCorner[8][2] = {{0, 2}, {0, 3}, {1, 2}, {1, 3}, {4, 6}, {4, 7}, {5, 6}, {5, 7}};
   // window_boxes_apart's points: {i, i} is point i, {i, j} its position at w on the way to point j.
   static constexpr int kWindowFirst[4][2] = {{0, 0}, {1, 1}, {0, 4}, {1, 5}};  // a0, b0, a(w), b(w)
   static constexpr int kWindowSecond[4][2] = {{2, 2}, {3, 3}, {2, 6}, {3, 7}};  // c0, d0, c(w), d(w)
@@ -129,6 +135,42 @@ void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params,
     for (int i = 1; i < Points::kFirstCount; ++i) alo = lanes::min(alo, r[Points::kFirst[i]][k]), ahi = lanes::max(ahi, r[Points::kFirst[i]][k]);
     for (int i = 1; i < Points::kSecondCount; ++i) blo = lanes::min(blo, r[Points::kSecond[i]][k]), bhi = lanes::max(bhi, r[Points::kSecond[i]][k]);
     apart |= (ahi + pad < blo) | (bhi + pad < alo);
+  }
+  // differences_apart: along each axis, then along the differences' sum, with its margins.
+  if (Policy::kCornerDifferences) {
+    const DifferenceMargins<float> f = difference_margins<Policy>(perturbation);
+    const L zero = {};
+    L d[Points::kCornerCount][3];
+    for (int i = 0; i < Points::kCornerCount; ++i)
+      for (int k = 0; k < 3; ++k) d[i][k] = r[Points::kCorner[i][0]][k] - r[Points::kCorner[i][1]][k];
+    for (int k = 0; k < 3; ++k) {
+      const L margin = m[k] * f.axis + f.smallest;
+      ScreenLaneMask above = margin - margin == zero, below = above;
+      for (int i = 0; i < Points::kCornerCount; ++i) {
+        above &= d[i][k] > margin;
+        below &= d[i][k] < -margin;
+      }
+      apart |= above | below;
+    }
+    L c[3] = {d[0][0], d[0][1], d[0][2]};
+    for (int i = 1; i < Points::kCornerCount; ++i)
+      for (int k = 0; k < 3; ++k) c[k] = c[k] + d[i][k];
+    const L abs_c[3] = {lanes::abs(c[0]), lanes::abs(c[1]), lanes::abs(c[2])};
+    const L margin = lanes::dot(abs_c, m) * f.direction + f.smallest;
+    ScreenLaneMask along_apart = margin - margin == zero;
+    for (int i = 0; i < Points::kCornerCount; ++i) {
+      const L along = lanes::dot(c, d[i]);
+      along_apart &= (along - along == zero) & (along > margin);
+    }
+    apart |= along_apart;
+  }
+  // Every lane apart already (neighbouring pairs of a real step mostly are): the cubic can only
+  // agree.
+  bool all_apart = true;
+  for (int lane = 0; lane < n; ++lane) all_apart = all_apart && apart[lane] != 0;
+  if (all_apart) {
+    for (int lane = 0; lane < n; ++lane) miss[lane] = true;
+    return;
   }
   // screen_with's window boxes: the boxes over [0, w], w the smallest power of two that covers
   // [0, time_limit), with the pad vscale(m, 20 perturbation) + tiny.
