@@ -672,14 +672,21 @@ TEST_CASE("single-precision screen: pairs screened in lanes get the one-pair scr
     vf.push_back(far);
     ee.push_back(apart);
     // The near contact's first feature moved along an axis by 2^-k of the pair's extent (k of 0 ..
-    // 29): apart by the differences, at their margin, or not.
+    // 29), or by 1/4 .. 40 float roundings of its coordinates (B14's margins are about 18 of them):
+    // apart by the differences, at their margins, or not.
     VertexFaceQuery<float> shifted_vf = vf[vf.size() - 2];
     EdgeEdgeQuery<float> shifted_ee = ee[ee.size() - 2];
     const int axis = static_cast<int>(rng() % 3), k = static_cast<int>(rng() % 30);
+    const bool at_margin = rng() % 2 == 0;
+    const float roundings = static_cast<float>(1 + rng() % 160) / 4;
     auto shift = [&](auto& q, std::initializer_list<Vec3<float>*> first) {
-      float extent = 0;
-      for (int p = 0; p < 8; ++p) extent = std::max(extent, std::fabs(q.points()[p][axis] - q.points()[0][axis]));
-      const float by = std::ldexp(extent, -k) * (rng() % 2 ? 1.0f : -1.0f);
+      float extent = 0, magnitude = 0;
+      for (int p = 0; p < 8; ++p) {
+        extent = std::max(extent, std::fabs(q.points()[p][axis] - q.points()[0][axis]));
+        magnitude = std::max(magnitude, std::fabs(q.points()[p][axis]));
+      }
+      const float size = at_margin ? std::ldexp(magnitude, -24) * roundings : std::ldexp(extent, -k);
+      const float by = size * (rng() % 2 ? 1.0f : -1.0f);
       for (Vec3<float>* p : first) (*p)[axis] += by;
     };
     shift(shifted_vf, {&shifted_vf.p0, &shifted_vf.p1});

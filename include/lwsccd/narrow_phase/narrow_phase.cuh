@@ -107,15 +107,18 @@ struct NarrowPhasePolicy {
   /// this many blocks per SM (or fewer, where the input's room is smaller).
   static constexpr int kGridBlocksPerSm = 16;
   /// A first run counts its screen's survivors before it runs (no rerun for want of room) and
-  /// gives the hits room for one in this many of them (on cloth-ball 1 in 20 is a contact). A run
-  /// with more hits grows the room and runs again. False: a first run starts from the initial
-  /// capacity and grows where it overflowed (a run again).
+  /// gives the hits room for one in this many of them. Since the screen tests the features'
+  /// relative motion (B14) a survivor is often a contact (cloth-ball 1 in 5, the built-in scene's
+  /// vertex-face list 1 in 2), and a survivor gives at most one hit. A run with more hits grows
+  /// the room and runs again. False: a first run starts from the initial capacity and grows where
+  /// it overflowed (a run again).
   static constexpr bool kCountFirstRun = true;
-  static constexpr int kFirstRunHitsPerSurvivors = 8;
+  static constexpr int kFirstRunHitsPerSurvivors = 1;
   /// FP32 first: a first run gives the refinement in double's lists (the pairs single precision
   /// leaves, and the contacts it sends to the whole search) room for one in this many survivors
-  /// (cloth-ball: ~5%, the built-in scene ~3%); more is learned from a run's count (a run again).
-  static constexpr int kFirstRunRefinePerSurvivors = 8;
+  /// (what they take: cloth-ball ~21%, the built-in scene's vertex-face list ~47%; a survivor
+  /// takes at most one slot); more is learned from a run's count (a run again).
+  static constexpr int kFirstRunRefinePerSurvivors = 1;
 };
 
 /// Sorts device hits by (first, second), the order of the CPU backend's results (CUB radix sort

@@ -136,6 +136,43 @@ void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params,
     for (int i = 1; i < Points::kSecondCount; ++i) blo = lanes::min(blo, r[Points::kSecond[i]][k]), bhi = lanes::max(bhi, r[Points::kSecond[i]][k]);
     apart |= (ahi + pad < blo) | (bhi + pad < alo);
   }
+  // Every lane apart already (neighbouring pairs of a real step mostly are): the tests left can
+  // only agree. (Mode earliest's window boxes go first: over a short window they reject nearly
+  // every pair, so the differences would cost for nothing there; the verdicts do not depend on
+  // the order.)
+  auto all_apart = [&] {
+    for (int lane = 0; lane < n; ++lane)
+      if (apart[lane] == 0) return false;
+    for (int lane = 0; lane < n; ++lane) miss[lane] = true;
+    return true;
+  };
+  // screen_with's window boxes: the boxes over [0, w], w the smallest power of two that covers
+  // [0, time_limit), with the pad vscale(m, 20 perturbation) + tiny.
+  if (params.time_limit <= T(0.5)) {
+    float w = 0.5f;
+    for (int level = 1; level < 30 && T(w / 2) >= params.time_limit; ++level) w /= 2;
+    const float tiny = 4.0f * std::numeric_limits<float>::denorm_min();
+    const float window_pad_scale = 20.0f * perturbation;
+    auto window_point = [&](const int (&index)[2], int k) {
+      const L& start = r[index[0]][k];
+      return index[0] == index[1] ? start : start + w * (r[index[1]][k] - start);  // position_at
+    };
+    for (int k = 0; k < 3; ++k) {
+      const L pad = m[k] * window_pad_scale + tiny;
+      L alo = window_point(Points::kWindowFirst[0], k), ahi = alo;
+      L blo = window_point(Points::kWindowSecond[0], k), bhi = blo;
+      for (int i = 1; i < Points::kFirstCount; ++i) {
+        const L x_i = window_point(Points::kWindowFirst[i], k);
+        alo = lanes::min(alo, x_i), ahi = lanes::max(ahi, x_i);
+      }
+      for (int i = 1; i < Points::kSecondCount; ++i) {
+        const L x_i = window_point(Points::kWindowSecond[i], k);
+        blo = lanes::min(blo, x_i), bhi = lanes::max(bhi, x_i);
+      }
+      apart |= (ahi + pad < blo) | (bhi + pad < alo);
+    }
+  }
+  if (all_apart()) return;
   // differences_apart: along each axis, then along the differences' sum, with its margins.
   if (Policy::kCornerDifferences) {
     const DifferenceMargins<float> f = difference_margins<Policy>(perturbation);
@@ -164,40 +201,7 @@ void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params,
     }
     apart |= along_apart;
   }
-  // Every lane apart already (neighbouring pairs of a real step mostly are): the cubic can only
-  // agree.
-  bool all_apart = true;
-  for (int lane = 0; lane < n; ++lane) all_apart = all_apart && apart[lane] != 0;
-  if (all_apart) {
-    for (int lane = 0; lane < n; ++lane) miss[lane] = true;
-    return;
-  }
-  // screen_with's window boxes: the boxes over [0, w], w the smallest power of two that covers
-  // [0, time_limit), with the pad vscale(m, 20 perturbation) + tiny.
-  if (params.time_limit <= T(0.5)) {
-    float w = 0.5f;
-    for (int level = 1; level < 30 && T(w / 2) >= params.time_limit; ++level) w /= 2;
-    const float tiny = 4.0f * std::numeric_limits<float>::denorm_min();
-    const float window_pad_scale = 20.0f * perturbation;
-    auto window_point = [&](const int (&index)[2], int k) {
-      const L& start = r[index[0]][k];
-      return index[0] == index[1] ? start : start + w * (r[index[1]][k] - start);  // position_at
-    };
-    for (int k = 0; k < 3; ++k) {
-      const L pad = m[k] * window_pad_scale + tiny;
-      L alo = window_point(Points::kWindowFirst[0], k), ahi = alo;
-      L blo = window_point(Points::kWindowSecond[0], k), bhi = blo;
-      for (int i = 1; i < Points::kFirstCount; ++i) {
-        const L x_i = window_point(Points::kWindowFirst[i], k);
-        alo = lanes::min(alo, x_i), ahi = lanes::max(ahi, x_i);
-      }
-      for (int i = 1; i < Points::kSecondCount; ++i) {
-        const L x_i = window_point(Points::kWindowSecond[i], k);
-        blo = lanes::min(blo, x_i), bhi = lanes::max(bhi, x_i);
-      }
-      apart |= (ahi + pad < blo) | (bhi + pad < alo);
-    }
-  }
+  if (all_apart()) return;
   // screening_bernstein: coplanarity_of, bernstein_controls and the bound.
   L c[6][3];  // p0, p1, a0, a1, b0, b1
   for (int d = 0; d < 6; ++d)
