@@ -182,9 +182,6 @@ template <class Policy, class W, class Q, class T>
 LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m, bool* mixed = nullptr) {
   // Swept boxes apart: no arithmetic but the pad, so it goes first.
   if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
-  // The features' relative motion: cheaper than the cubic, and it decides most pairs of a real
-  // step, whose features move much as their neighbours do.
-  if (Policy::kCornerDifferences && differences_apart<Policy>(q, m, perturbation)) return true;
   // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
   // [0, w] that covers it, which are far smaller than the whole step's when w is short. (w is a
   // power of two, so its comparisons with the time limit are exact in T.)
@@ -195,6 +192,10 @@ LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbatio
     const Vec3<W> pad = vscale(m, W(20) * perturbation);
     if (window_boxes_apart(q, w, Vec3<W>{fadd(pad.x, tiny), fadd(pad.y, tiny), fadd(pad.z, tiny)})) return true;
   }
+  // The features' relative motion: cheaper than the cubic, and it decides most pairs of a real
+  // step, whose features move much as their neighbours do. (After a window's boxes, which over a
+  // short window reject nearly every pair alone; the verdict does not depend on the order.)
+  if (Policy::kCornerDifferences && differences_apart<Policy>(q, m, perturbation)) return true;
   W b[4];
   const W k = W(Policy::kCoefficientBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
   const W screen = fadd(fmul(k, screening_bernstein(q, b, m, perturbation)), slack);
