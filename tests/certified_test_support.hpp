@@ -71,6 +71,26 @@ inline std::vector<Case> hard_cases(std::mt19937& rng, int per_kind) {
   return out;
 }
 
+// Coplanar motion in the plane z = 0 moving to z = fall: a vertex c slides along the edge a-b (the
+// diagonal y = x) and onto it, approaching `slide / approach` times slower than it slides, the
+// other end d above the line; c is on the edge exactly at toi. Only the inside test can exclude
+// time there (the cubic is 0), and over an interval its bound covers the sliding motion, so a
+// band of intervals before the contact stays unknown on every level of the search.
+inline std::vector<Case> coplanar_sliding_cases(std::mt19937& rng, int n) {
+  using V = Vec3<long double>;
+  std::vector<Case> out;
+  for (int i = 0; i < n; ++i) {
+    const long double h0 = eighth(rng, 1, 64), h1 = eighth(rng, 1, 64), toi = h0 / (h0 + h1);
+    const long double approach = std::ldexp(1.0L, -std::uniform_int_distribution<int>(10, 16)(rng));
+    const long double slide = eighth(rng, 1, 16) * std::ldexp(1.0L, -std::uniform_int_distribution<int>(4, 8)(rng));
+    const long double along = eighth(rng, 1, 32), fall = eighth(rng, 1, 64);
+    const V a{0, 0, 0}, b{8, 8, 0}, up{0, 0, fall}, cd{-2, 6, 0};
+    const V c0{along, along + h0 * approach, 0}, c1{along + slide, along + slide - h1 * approach, fall};
+    out.push_back({"ee coplanar sliding onto an edge", false, {a, b, c0, c0 + cd, a + up, b + up, c1, c1 + cd}, toi});
+  }
+  return out;
+}
+
 // A vertex sliding into a triangle in a tilted plane (rotations by 3-4-5 and 5-12-13 triangles),
 // moved by `offset`: the exact configuration touches, its rounding leaves the cubic as noise.
 inline VertexFaceQuery<double> tilted_coplanar_contact(std::mt19937& rng, const Vec3<long double>& offset = {0, 0, 0}) {

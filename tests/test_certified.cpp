@@ -133,6 +133,49 @@ TEST_CASE("certified path: contacts on a boundary settled within the tolerance, 
   CHECK(toi_outside == 0);
 }
 
+// The certified path without inside tests in pieces (CertifiedPolicy::kPieceLevels).
+struct NoPiecesPolicy : CertifiedPolicy {
+  static constexpr int kPieceLevels = 0;
+};
+
+TEST_CASE("certified path: coplanar contacts decided by inside tests in pieces, within the tolerance below the exact TOI",
+          "[narrow][certified]") {
+  // A vertex sliding onto an edge in coplanar motion (cloth-funnel's contacts of nearly shared
+  // vertices): without pieces the search spends kMaxSplits on the bands of unknown intervals
+  // before the contact and leaves most such pairs to the fallback; with them it settles more, each
+  // a hit whose lower bound is at most the tolerance before the exact contact (exact in double).
+  std::mt19937 rng(23);
+  const std::vector<Case> cases = coplanar_sliding_cases(rng, 120);
+  std::size_t queries = 0, hits_with = 0, hits_without = 0, undecided_with = 0, misses = 0, after_toi = 0, too_early = 0,
+              fallback_misses = 0;
+  for (const Case& base : cases)
+    for (int permutation = 0; permutation < 6; ++permutation) {
+      const Case c = transformed(base, permutation, int(rng() % 8), int(rng() % 21) - 10, false);
+      const CcdParams<double> params;
+      const auto q = as_query<double, EdgeEdgeQuery<double>>(c);
+      const CertifiedAnswer<double> with = detail::certified_classify<CertifiedPolicy>(q, params);
+      const CertifiedAnswer<double> without = detail::certified_classify<NoPiecesPolicy>(q, params);
+      ++queries;
+      misses += with.certainty == Certainty::miss || without.certainty == Certainty::miss;
+      hits_without += without.certainty == Certainty::hit;
+      undecided_with += with.certainty == Certainty::undecided;
+      if (with.certainty == Certainty::hit) {
+        ++hits_with;
+        after_toi += with.lo > c.toi;
+        too_early += c.toi - with.lo > params.tolerance;
+      }
+      const CcdResult<double> whole = CertifiedCcd::edge_edge(q, params);
+      fallback_misses += !whole.hit || whole.toi > c.toi;
+    }
+  std::printf("  coplanar sliding contacts: %zu queries, hits %zu with pieces, %zu without; %zu left to the fallback\n", queries,
+              hits_with, hits_without, undecided_with);
+  CHECK(misses == 0);
+  CHECK(after_toi == 0);
+  CHECK(too_early == 0);
+  CHECK(fallback_misses == 0);
+  CHECK(hits_with >= hits_without + queries / 5);  // pieces settle what the bands left undecided
+}
+
 TEST_CASE("certified path: easy cases are decided without the fallback", "[narrow][certified]") {
   // A vertex through a triangle's middle with plenty of motion, and one passing well beside it.
   const VertexFaceQuery<double> through{{1, 1, -1}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}, {1, 1, 3}, {0, 0, 0}, {4, 0, 0}, {0, 4, 0}};

@@ -127,14 +127,30 @@ TEST_CASE("certified path: a refinement stopped at a level, then run whole, give
 
 // The GPU warp's way of running the inside tests (WarpInsideSubtree), on the CPU: a test not at
 // hand is evaluated with its subtree (the interval and 4 levels below it, 31 intervals, deeper than
-// the search goes skipped) and the search reads the verdicts from there. `wrong_place` reads a
-// neighbour's verdict instead (a mutation that the comparison must catch).
+// the search goes skipped) and the search reads the verdicts from there; an interval's pieces
+// (CertifiedPolicy::kPieceLevels) are evaluated all at once, as the warp's lanes do, without
+// touching the subtree held. `wrong_place` reads a neighbour's verdict instead, `any_piece`
+// excludes an interval when one of its pieces is outside (mutations the comparison must catch).
 struct SubtreeInside {
   int max_level = 0, wrong_place = 0;
+  bool any_piece = false;
   int root_level = -1;
   std::uint32_t root_index = 0;
   detail::InsideVerdict verdicts[31] = {};
-  int asked = 0, evaluated = 0;
+  int asked = 0, evaluated = 0, pieced = 0;
+  static constexpr bool kEvaluatesPieces = true;
+  template <class Compute>
+  detail::InsideVerdict pieces(int level, std::uint32_t index, int depth, const Compute& compute) {
+    ++pieced;
+    detail::PieceVotes votes;
+    bool some_outside = false;
+    for (std::uint32_t k = 0; k < (1u << depth); ++k) {
+      const detail::InsideVerdict v = compute(level + depth, (index << depth) | k);
+      votes.add(v);
+      some_outside = some_outside || v == detail::InsideVerdict::outside;
+    }
+    return any_piece && some_outside ? detail::InsideVerdict::outside : votes.verdict();
+  }
   template <class Compute>
   detail::InsideVerdict operator()(int level, std::uint32_t index, const Compute& compute) {
     ++asked;
@@ -157,8 +173,9 @@ struct SubtreeInside {
 
 TEST_CASE("certified path: inside tests evaluated ahead by subtrees give the one-by-one answer", "[narrow][certified]") {
   std::mt19937 rng(17);
-  const std::vector<Case> cases = hard_cases(rng, 6);
-  int asked = 0, evaluated = 0, differ_when_wrong = 0, queries = 0;
+  std::vector<Case> cases = hard_cases(rng, 6);
+  for (const Case& c : coplanar_sliding_cases(rng, 12)) cases.push_back(c);
+  int asked = 0, evaluated = 0, pieced = 0, differ_when_wrong = 0, differ_any_piece = 0, queries = 0;
   auto check = [&](const auto& q) {
     using T = std::decay_t<decltype(q.points()[0].x)>;
     for (CcdMode mode : {CcdMode::contacts, CcdMode::set}) {
@@ -166,17 +183,22 @@ TEST_CASE("certified path: inside tests evaluated ahead by subtrees give the one
       params.mode = mode;
       const CertifiedAnswer<T> whole = CertifiedCcd::refine<false>(q, params);
       SubtreeInside inside;
-      inside.max_level = detail::certified_max_level(params.tolerance);
+      inside.max_level = detail::certified_inside_levels<CertifiedPolicy, double>(params.tolerance);
       const CertifiedAnswer<T> ahead = CertifiedCcd::refine_with<false>(q, params, inside);
       CHECK(ahead.certainty == whole.certainty);
       CHECK(ahead.lo == whole.lo);
       CHECK(ahead.hi == whole.hi);
-      asked += inside.asked, evaluated += inside.evaluated, ++queries;
+      asked += inside.asked, evaluated += inside.evaluated, pieced += inside.pieced, ++queries;
       SubtreeInside wrong;
       wrong.max_level = inside.max_level;
       wrong.wrong_place = 1;
       const CertifiedAnswer<T> misread = CertifiedCcd::refine_with<false>(q, params, wrong);
       differ_when_wrong += misread.certainty != whole.certainty || misread.lo != whole.lo || misread.hi != whole.hi;
+      SubtreeInside loose;
+      loose.max_level = inside.max_level;
+      loose.any_piece = true;
+      const CertifiedAnswer<T> pieces_misread = CertifiedCcd::refine_with<false>(q, params, loose);
+      differ_any_piece += pieces_misread.certainty != whole.certainty || pieces_misread.lo != whole.lo || pieces_misread.hi != whole.hi;
     }
   };
   for (const Case& c : cases)
@@ -185,10 +207,13 @@ TEST_CASE("certified path: inside tests evaluated ahead by subtrees give the one
       if (t.vertex_face) check(as_query<double, VertexFaceQuery<double>>(t)), check(as_query<float, VertexFaceQuery<float>>(t));
       else check(as_query<double, EdgeEdgeQuery<double>>(t)), check(as_query<float, EdgeEdgeQuery<float>>(t));
     }
-  INFO(queries << " searches: " << asked << " inside tests asked, " << evaluated << " subtrees evaluated");
+  INFO(queries << " searches: " << asked << " inside tests asked, " << evaluated << " subtrees evaluated, " << pieced
+                << " intervals in pieces");
   CHECK(queries > 100);
   CHECK(evaluated * 2 < asked);     // most tests were read from a subtree evaluated ahead
+  CHECK(pieced > 0);                // intervals were tested in pieces
   CHECK(differ_when_wrong > 0);     // the comparison sees a misread verdict
+  CHECK(differ_any_piece > 0);      // and pieces combined wrongly
 }
 
 TEST_CASE("certified screen with a time limit: rejects only pairs whose cubic keeps its sign before it", "[narrow][certified]") {

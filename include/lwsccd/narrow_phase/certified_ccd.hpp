@@ -113,6 +113,16 @@ struct CertifiedPolicy {
   /// at that bound when the inclusion test accepts a small box within the tolerance after it
   /// (detail::tolerance_contact): the contacts on a feature's boundary that no sign decides.
   static constexpr bool kToleranceContacts = true;
+  /// An interval whose inside test is unknown, a leaf or a piece of coplanar motion at level
+  /// kCoplanarPiecesFrom or deeper, is tested again in 2^kPieceLevels pieces (fewer where the time
+  /// grid has no room) and excluded when every piece is: a piece's bound covers an eighth of the
+  /// motion, so features that approach slowly (a vertex sliding onto an edge in coplanar motion,
+  /// where only the inside test excludes time) are excluded up to about a leaf before they touch,
+  /// instead of a band of intervals on every level that ran out of kMaxSplits (0: no pieces).
+  static constexpr int kPieceLevels = 3;
+  /// Below the certified filter's levels (CertifiedFilter: 3 and 7), whose verdicts must stay the
+  /// search's own there.
+  static constexpr int kCoplanarPiecesFrom = 8;
 };
 
 /// What the certified fast path decided about one query.

@@ -468,6 +468,21 @@ struct WarpInsideSubtree {
     const int place = (1 << d) - 1 + static_cast<int>(index - (root_index << d));
     return static_cast<InsideVerdict>(((low_bits >> place) & 1u) | (((high_bits >> place) & 1u) << 1));
   }
+
+  // An interval's 2^depth pieces `depth` levels down, a lane each, combined as
+  // lwsccd::detail::PieceVotes combines them (certified_refine's verdict_in_pieces): the subtree
+  // held stays held, so the search goes on reading its ballots.
+  static constexpr bool kEvaluatesPieces = true;
+  template <class Compute>
+  __device__ lwsccd::detail::InsideVerdict pieces(int level, std::uint32_t index, int depth, const Compute& compute) const {
+    using lwsccd::detail::InsideVerdict;
+    InsideVerdict v = InsideVerdict::outside;
+    if (lane < (1 << depth)) v = compute(level + depth, (index << depth) | static_cast<std::uint32_t>(lane));
+    const unsigned not_outside = __ballot_sync(0xffffffffu, v != InsideVerdict::outside);
+    const unsigned not_excluded = __ballot_sync(0xffffffffu, v != InsideVerdict::outside && v != InsideVerdict::outside_as_given);
+    if (not_outside == 0u) return InsideVerdict::outside;
+    return not_excluded == 0u ? InsideVerdict::outside_as_given : InsideVerdict::unknown;
+  }
 };
 
 // The search in double of pair p by the whole warp (every lane runs it on the same values, the
@@ -477,7 +492,7 @@ __device__ void warp_refine(const Q& q, const CcdParams<T>& params, std::pair<in
                             unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided) {
   WarpInsideSubtree inside;
   inside.lane = lane;
-  inside.max_level = lwsccd::detail::certified_max_level(params.tolerance);
+  inside.max_level = lwsccd::detail::certified_inside_levels<typename Method::policy_type, double>(params.tolerance);
   const CertifiedAnswer<T> a = Method::template refine_with<false>(q, params, inside);
   if (lane == 0) settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
   __syncwarp();

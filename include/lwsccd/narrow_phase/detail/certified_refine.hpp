@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 #include "lwsccd/core/detail/fp.hpp"
 #include "lwsccd/core/detail/rounding.hpp"
@@ -114,6 +115,66 @@ LWSCCD_HD CertifiedAnswer<T> certified_undecided(const Q& q_in, const CcdParams<
   const T to = fadd(lower, width) < T(1) ? fadd(lower, width) : T(1);
   if (!tolerance_contact(q_in.template cast<T>(), params, lower, to)) return undecided;
   return {Certainty::hit, lower, to, true};
+}
+
+/// The deepest levels the time grid has room for: dyadic indices in 32 bits whose times are exact
+/// in T and in W (certified_max_level's cap for the narrower of the two).
+template <class T, class W>
+LWSCCD_HD constexpr int certified_grid_levels() {
+  constexpr int t = std::numeric_limits<T>::digits - 2, w = std::numeric_limits<W>::digits - 2;
+  constexpr int narrower = t < w ? t : w;
+  return narrower < 30 ? narrower : 30;
+}
+
+/// The deepest level at which the search asks for an inside test: its leaves' pieces
+/// (Policy::kPieceLevels below certified_max_level), within the time grid.
+template <class Policy, class W, class T>
+LWSCCD_HD int certified_inside_levels(T tolerance) {
+  const int deepest = certified_max_level(tolerance) + Policy::kPieceLevels, grid = certified_grid_levels<T, W>();
+  return deepest < grid ? deepest : grid;
+}
+
+/// Whether an `inside_at` evaluator runs an interval's pieces itself (`pieces(level, index,
+/// depth, compute)`, all at once, as a warp's lanes do): a member `kEvaluatesPieces`.
+template <class InsideAt, class = void>
+struct evaluates_pieces : std::false_type {};
+template <class InsideAt>
+struct evaluates_pieces<InsideAt, std::void_t<decltype(InsideAt::kEvaluatesPieces)>>
+    : std::bool_constant<InsideAt::kEvaluatesPieces> {};
+
+/// The verdicts of 2^depth pieces, combined: outside when every piece is outside, outside as
+/// given when every piece is one of the two, else unknown.
+struct PieceVotes {
+  bool all_outside = true, all_excluded = true;
+  LWSCCD_HD void add(InsideVerdict v) {
+    all_outside = all_outside && v == InsideVerdict::outside;
+    all_excluded = all_excluded && (v == InsideVerdict::outside || v == InsideVerdict::outside_as_given);
+  }
+  LWSCCD_HD InsideVerdict verdict() const {
+    return all_outside ? InsideVerdict::outside : (all_excluded ? InsideVerdict::outside_as_given : InsideVerdict::unknown);
+  }
+};
+
+/// The verdict of an interval whose own inside test was unknown, from its pieces
+/// Policy::kPieceLevels levels down (PieceVotes). Sound as any inside test is: a piece's verdict
+/// holds over the piece, and the pieces cover the interval. Asked of `inside_at` like the
+/// search's other tests (or of its `pieces` where it has one), so every evaluator gives the same
+/// verdicts.
+template <class Policy, class T, class W, class InsideAt, class Compute>
+LWSCCD_HD InsideVerdict verdict_in_pieces(int level, std::uint32_t index, InsideAt& inside_at, const Compute& compute) {
+  static_assert(Policy::kPieceLevels >= 0 && Policy::kPieceLevels <= 5,
+                "lwsccd: CertifiedPolicy::kPieceLevels must be in [0, 5] (a warp's lanes evaluate the pieces at once)");
+  int depth = certified_grid_levels<T, W>() - level;
+  depth = depth < Policy::kPieceLevels ? depth : Policy::kPieceLevels;
+  if (depth <= 0) return InsideVerdict::unknown;
+  if constexpr (evaluates_pieces<std::decay_t<InsideAt>>::value) {
+    return inside_at.pieces(level, index, depth, compute);
+  } else {
+    PieceVotes votes;
+    for (std::uint32_t k = 0; k < (1u << depth) && votes.all_excluded; ++k)
+      votes.add(inside_at(level + depth, (index << depth) | k, compute));
+    return votes.verdict();
+  }
 }
 
 /// The refinement's inside tests as they are asked for, one at a time (certified_refine's
@@ -273,11 +334,14 @@ LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W p
     if (try_hit || coarse || coplanar) {
       // The test over interval `index` of `level` (this one, or another that inside_at evaluates
       // ahead): the same operations on the same values, so the same verdict.
-      inside = inside_at(e.level, e.index, [&](int level, std::uint32_t index) {
+      const auto compute = [&](int level, std::uint32_t index) {
         const W half_width = exact_pow2_neg<W>(level + 1);
         const T from = static_cast<T>(index) * exact_pow2_neg<T>(level);
         return inside_over<Policy>(q, fadd(W(from), half_width), half_width, m, perturbation, inside_slack, given);
-      });
+      };
+      inside = inside_at(e.level, e.index, compute);
+      if (inside == InsideVerdict::unknown && (leaf || (coplanar && e.level >= Policy::kCoplanarPiecesFrom)))
+        inside = verdict_in_pieces<Policy, T, W>(e.level, e.index, inside_at, compute);
       if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
         if (inside == InsideVerdict::outside_as_given) note_lower(lo);
         if (leaf && ++leaves > Policy::kMaxLeaves) return settle(has_lower ? lower : lo);
