@@ -64,10 +64,11 @@ struct NarrowPhasePolicy {
   /// coplanar ones that end undecided), not where thousands of them do (the built-in scene's
   /// degenerate motion). 0: always a thread each.
   static constexpr int kHandedWarpsPerSm = 32;
-  /// Handed searches run a warp each only on GPUs whose FP32 throughput is at most this many times
-  /// their FP64 one (cudaDevAttrSingleToDoublePrecisionPerfRatio: 2 on an H100 or H200, 32-64 on
-  /// the RTX and L40 classes): every lane of a warp's search repeats its FP64 instructions, which a
-  /// GPU with little FP64 pays for; there they run a thread each.
+  /// Searches in double run a warp each (the handed ones, and a deferred list of at most
+  /// kRefineWarpBelow pairs) only on GPUs whose FP32 throughput is at most this many times their
+  /// FP64 one (cudaDevAttrSingleToDoublePrecisionPerfRatio: 2 on an H100 or H200, 32-64 on the RTX
+  /// and L40 classes): every lane of a warp's search repeats its FP64 instructions, which a GPU
+  /// with little FP64 pays for; there they run a thread each.
   static constexpr int kHandedWarpsMaxFp64Ratio = 2;
   /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
@@ -228,7 +229,7 @@ class NarrowPhase {
   std::size_t handed_searches_in_warps() const { return lists_[0].handed_in_warps + lists_[1].handed_in_warps; }
   /// Plans the following runs as for a GPU whose FP32 runs `ratio` times faster than its FP64 (0:
   /// this device's own, cudaDevAttrSingleToDoublePrecisionPerfRatio): past
-  /// kHandedWarpsMaxFp64Ratio the handed searches run a thread each. The answers do not change
+  /// kHandedWarpsMaxFp64Ratio the searches in double run a thread each. The answers do not change
   /// (PipelineParams::fp64_ratio: measuring on one GPU the path another takes).
   void plan_for_fp64_ratio(int ratio) {
     if (ratio < 0) throw InputError("gpu::NarrowPhase::plan_for_fp64_ratio", "ratio", "must be >= 0 (0: the device's own)");

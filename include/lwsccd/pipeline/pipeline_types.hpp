@@ -42,8 +42,9 @@ struct PipelineParams {
   /// host side is one thread and ignores it.
   unsigned threads = 0;
   /// GPU backend: plan the narrow phase as for a GPU whose FP32 runs this many times faster than
-  /// its FP64 (0: the device's own ratio). Above 2 the searches in double that the thread kernel
-  /// hands on run a thread each rather than a warp each (NarrowPhasePolicy::kHandedWarpsMaxFp64Ratio);
+  /// its FP64 (0: the device's own ratio). Above 2 the searches in double (those the thread kernel
+  /// hands on, and a short deferred list's) run a thread each rather than a warp each
+  /// (NarrowPhasePolicy::kHandedWarpsMaxFp64Ratio);
   /// the answers are the same for every value. For measuring on one GPU the path another takes
   /// (e.g. 64, an RTX- or L40-class GPU, counted on an H100: bench/fp_instructions.py).
   int fp64_ratio = 0;

@@ -23,38 +23,99 @@ __device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
   else return Method::quick_reject(q, params);
 }
 
-// Pass 1: the pairs that the method's cheap first step does not reject, appended to `kept`.
-// FP32 first (CertifiedCcd deciding in single precision): the screen reads only `single`, the
-// vertices rounded to float, and counts its misses, then the single-precision filter's separating
-// directions (counted apart: screened pairs the filter decides); the double screen runs later, on
-// what the single-precision filter leaves.
-template <class Method, bool kVertexFace, class T, class P>
+// The screen's tail for one pair the tests in space left, in single precision: the cubic's signs,
+// then the filter's separating directions (so that the pairs they decide are never kept: the
+// filter's threads would diverge on them; counted as screened and decided in float); what is
+// left is kept.
+template <class Method, bool kVertexFace, class T>
+__device__ void screen_single_tail(const MeshFeatures& mesh, const SingleVertex* single, std::pair<index_t, index_t> p,
+                                   const CcdParams<T>& params, std::pair<index_t, index_t>* kept, std::size_t room,
+                                   unsigned long long* counters) {
+  using Policy = typename Method::policy_type;
+  const auto q = gather_single_query<kVertexFace>(mesh, single, p);
+  if (lwsccd::detail::single_screen_by_cubic<Policy>(lwsccd::detail::relative_single(q), params)) {
+    append_index(counters + kSingleMisses);
+    return;
+  }
+  if (lwsccd::detail::CertifiedFilter<Policy>::separates_single(q, params)) {
+    append_index(counters + kSeparated);
+    return;
+  }
+  const unsigned long long at = append_index(counters + kSurvivors);
+  if (at < room) {  // (std::pair's assignment is host-only before C++20)
+    kept[at].first = p.first;
+    kept[at].second = p.second;
+  }
+}
+
+// Pass 1 of a certified method, FP32 first: every pair through the single-precision screen.
+// Its tests in space (swept boxes, the differences of the features' points) end most pairs of a
+// real step, but nearly every warp holds a pair they leave (cloth-ball: 8% of the pairs), and the
+// cubic and the separating directions would then run with a lane or two active. So a warp gathers
+// the pairs they leave in shared memory and screens them 32 at a time, full warps, as it goes and
+// once more at the end: the same verdicts and counts, in another order. kBlock: the launch's
+// threads per block.
+template <class Method, bool kVertexFace, int kBlock, class T>
+__device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex* single, const std::pair<index_t, index_t>* pairs,
+                                    std::size_t n, const CcdParams<T>& params, std::pair<index_t, index_t>* kept,
+                                    std::size_t room, unsigned long long* counters) {
+  using Policy = typename Method::policy_type;
+  static_assert(kBlock % 32 == 0, "lwsccd: the screen's blocks are whole warps");
+  __shared__ index_t gathered_first[kBlock / 32][64], gathered_second[kBlock / 32][64];
+  const int lane = static_cast<int>(threadIdx.x % 32), warp = static_cast<int>(threadIdx.x / 32);
+  index_t* firsts = gathered_first[warp];
+  index_t* seconds = gathered_second[warp];
+  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (kBlock / 32);
+  int count = 0;  // pairs gathered, below 32 between rounds
+  for (std::size_t base = (static_cast<std::size_t>(blockIdx.x) * (kBlock / 32) + warp) * 32; base < n; base += warps * 32) {
+    const std::size_t i = base + static_cast<std::size_t>(lane);
+    bool left = false;
+    index_t first = 0, second = 0;
+    if (i < n) {
+      const std::pair<index_t, index_t> p = pairs[i];
+      first = p.first, second = p.second;
+      const auto q = gather_single_query<kVertexFace>(mesh, single, p);
+      if (lwsccd::detail::single_screen_in_space<Policy>(lwsccd::detail::relative_single(q), params)) append_index(counters + kSingleMisses);
+      else left = true;
+    }
+    const unsigned mask = __ballot_sync(0xffffffffu, left);
+    if (left) {
+      const int at = count + __popc(mask & ((1u << lane) - 1u));
+      firsts[at] = first;
+      seconds[at] = second;
+    }
+    count += __popc(mask);
+    __syncwarp();
+    if (count >= 32) {
+      count -= 32;
+      const std::pair<index_t, index_t> g{firsts[count + lane], seconds[count + lane]};
+      __syncwarp();  // read before the next round writes there
+      screen_single_tail<Method, kVertexFace>(mesh, single, g, params, kept, room, counters);
+    }
+  }
+  if (lane < count) screen_single_tail<Method, kVertexFace>(mesh, single, {firsts[lane], seconds[lane]}, params, kept, room, counters);
+}
+
+// Pass 1 of two-pass methods: the cheap first step on every pair of a list whose length is read
+// on the device; survivors appended to `kept` (if it has room; always counted). A certified
+// method FP32 first: screen_single_first.
+template <class Method, bool kVertexFace, int kBlock, class T, class P>
 __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const SingleVertex* single, PairList in,
-                              CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
-                              std::size_t room, unsigned long long* counters) {
+                  CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
+                  std::size_t room, unsigned long long* counters) {
   if (control[kSkip]) return;
   const std::size_t n = in.count.get();
-  LWSCCD_GRID_STRIDE(i, n) {
-    const std::pair<index_t, index_t> p = in.pairs[i];
-    if constexpr (lwsccd::detail::single_first_of<Method>::value) {
-      const auto q = gather_single_query<kVertexFace>(mesh, single, p);
-      if (Method::screen_verdict(q, params) != lwsccd::detail::ScreenVerdict::passed) {
-        append_index(counters + kSingleMisses);
-        continue;
+  if constexpr (lwsccd::detail::single_first_of<Method>::value) {
+    screen_single_first<Method, kVertexFace, kBlock>(mesh, single, in.pairs, n, params, kept, room, counters);
+  } else {
+    LWSCCD_GRID_STRIDE(i, n) {
+      const std::pair<index_t, index_t> p = in.pairs[i];
+      if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) continue;
+      const unsigned long long at = append_index(counters + kSurvivors);
+      if (at < room) {  // (std::pair's assignment is host-only before C++20)
+        kept[at].first = p.first;
+        kept[at].second = p.second;
       }
-      // The filter's separating directions here, so that the pairs they decide are never kept
-      // (the filter's threads would diverge on them; counted as screened and decided in float).
-      if (lwsccd::detail::CertifiedFilter<typename Method::policy_type>::separates_single(q, params)) {
-        append_index(counters + kSeparated);
-        continue;
-      }
-    } else if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) {
-      continue;
-    }
-    const unsigned long long at = append_index(counters + kSurvivors);
-    if (at < room) {  // (std::pair's assignment is host-only before C++20)
-      kept[at].first = p.first;
-      kept[at].second = p.second;
     }
   }
 }

@@ -179,7 +179,20 @@ struct certified_compute<float> {
 /// screen in any precision rejects the pair by the cubic (the exact coefficients have both signs,
 /// and a computed one is within its rounding bound of the exact one).
 template <class Policy, class W, class Q, class T>
+LWSCCD_HD bool screen_in_space(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m);
+template <class Policy, class W, class Q, class T>
+LWSCCD_HD bool screen_by_cubic(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m, bool* mixed = nullptr);
+template <class Policy, class W, class Q, class T>
 LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m, bool* mixed = nullptr) {
+  if (mixed) *mixed = false;
+  return screen_in_space<Policy>(q, params, perturbation, m) || screen_by_cubic<Policy>(q, params, perturbation, m, mixed);
+}
+
+/// screen_with's first part: the features apart in space over the step (swept boxes; a window's
+/// boxes; the differences of their points at the same time), before any cubic. A batch may run
+/// the two parts apart (the GPU's screen gathers the pairs this part leaves into full warps).
+template <class Policy, class W, class Q, class T>
+LWSCCD_HD bool screen_in_space(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m) {
   // Swept boxes apart: no arithmetic but the pad, so it goes first.
   if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
   // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
@@ -195,7 +208,13 @@ LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbatio
   // The features' relative motion: cheaper than the cubic, and it decides most pairs of a real
   // step, whose features move much as their neighbours do. (After a window's boxes, which over a
   // short window reject nearly every pair alone; the verdict does not depend on the order.)
-  if (Policy::kCornerDifferences && differences_apart<Policy>(q, m, perturbation)) return true;
+  return Policy::kCornerDifferences && differences_apart<Policy>(q, m, perturbation);
+}
+
+/// screen_with's second part: the cubic's Bernstein signs on the step (or on the smallest dyadic
+/// window that covers [0, time_limit)).
+template <class Policy, class W, class Q, class T>
+LWSCCD_HD bool screen_by_cubic(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m, bool* mixed) {
   W b[4];
   const W k = W(Policy::kCoefficientBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
   const W screen = fadd(fmul(k, screening_bernstein(q, b, m, perturbation)), slack);

@@ -168,6 +168,17 @@ LWSCCD_HD bool certified_screen_single(const Q& q_in, const CcdParams<T>& params
   return screen_with<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m, mixed);
 }
 
+/// certified_screen_single in its two parts (screen_in_space, screen_by_cubic), on the relative
+/// float query: certified_screen_single is true exactly when one of them is.
+template <class Policy, class QF, class T>
+LWSCCD_HD bool single_screen_in_space(const SingleQuery<QF>& s, const CcdParams<T>& params) {
+  return !(params.min_separation > T(0)) && screen_in_space<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
+}
+template <class Policy, class QF, class T>
+LWSCCD_HD bool single_screen_by_cubic(const SingleQuery<QF>& s, const CcdParams<T>& params) {
+  return !(params.min_separation > T(0)) && screen_by_cubic<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
+}
+
 /// How the screen ended for a pair: a miss decided in single precision, one decided in double,
 /// or passed on to the refinement.
 enum class ScreenVerdict : std::uint8_t { single_miss, double_miss, passed };

@@ -26,7 +26,6 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
                                         std::size_t hit_room, unsigned* open, std::size_t direct_below) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
   if (control[kSkip]) return;
-  const CcdParams<T> base = limited_params(params, limit_bits);
   const std::size_t n = count.get();
   if (n <= direct_below) {
     LWSCCD_GRID_STRIDE(i, n) {
@@ -35,9 +34,15 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
     }
     return;
   }
+  // (After the lists' lengths: the limit's few FP64 operations in every thread of a launch sized
+  // for the list's room were most of cloth-funnel's FP64 per pair once it had no fallback.)
+  const CcdParams<T> base = limited_params(params, limit_bits);
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = item_pair(items[i]);
     const CcdParams<T> qp = item_params(items[i], base);
+    // Nothing after the step's end (a query the certified path settled stays listed from time 1):
+    // every box ends by then, so the search would drop them all.
+    if (!(qp.time_from < T(1))) continue;
     CcdResult<T> r;
     bool done = true;
     auto attempt = [&](const auto& q) {
@@ -111,8 +116,9 @@ __global__ void __launch_bounds__(32 * kWarps)
   __shared__ unsigned long long dropped[kWarps];
   __shared__ int state[kWarps];
   if (control[kSkip]) return;
-  const CcdParams<T> base = limited_params(params, limit_bits);
   const std::size_t n = static_cast<std::size_t>(counters[kOpen]);
+  if (static_cast<std::size_t>(blockIdx.x) * kWarps >= n) return;  // no search for this block (as above)
+  const CcdParams<T> base = limited_params(params, limit_bits);
   const int warp = static_cast<int>(threadIdx.x) / 32, lane = static_cast<int>(threadIdx.x) % 32;
   Search& search = reinterpret_cast<Search*>(storage)[warp];
   const BoxOrderKey after_all{~0ull, ~0ull};
@@ -121,6 +127,7 @@ __global__ void __launch_bounds__(32 * kWarps)
     const std::size_t i = which[w];
     const std::pair<index_t, index_t> p = item_pair(items[i]);
     const CcdParams<T> qp = item_params(items[i], base);
+    if (!(qp.time_from < T(1))) continue;  // nothing after the step's end (as the thread kernel)
     CcdResult<T> r;
     auto solve = [&](const auto& q) {
       if (Traits::filtered && !non_penetration_filter(q, qp)) return;

@@ -192,10 +192,10 @@ void NarrowPhase<Method, T, Policy>::count_survivors(const MeshFeatures& mesh, c
       const unsigned blocks = grid_for(inputs[k].count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
       if (blocks == 0) continue;
       if (k == 0)
-        detail::screen_kernel<Method, true, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+        detail::screen_kernel<Method, true, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
             mesh, x0, x1, single_.data(), inputs[k], params, control, nullptr, 0, l.counters.data());
       else
-        detail::screen_kernel<Method, false, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+        detail::screen_kernel<Method, false, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
             mesh, x0, x1, single_.data(), inputs[k], params, control, nullptr, 0, l.counters.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
@@ -222,7 +222,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
   if constexpr (kTwoPass) {
     const unsigned blocks = grid_for(in.count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
     if (blocks == 0) return;
-    detail::screen_kernel<Method, kVertexFace, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+    detail::screen_kernel<Method, kVertexFace, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
         mesh, x0, x1, single_.data(), in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
   }
@@ -295,7 +295,10 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     }
     // The deferred pairs: a warp each when they are few (the long searches' latency is the
     // list's), else a thread each; each kernel returns at once where the other one's case holds.
-    const auto warp_below = static_cast<std::size_t>(Policy::kRefineWarpBelow);
+    // A warp each only on a GPU with FP64 to spare (kHandedWarpsMaxFp64Ratio): every lane of a
+    // warp's search repeats its FP64 instructions.
+    const std::size_t warp_below =
+        fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio ? static_cast<std::size_t>(Policy::kRefineWarpBelow) : 0;
     // (With kHandOnDoubleSearches the thread kernel runs only where `handed` has a bit per entry.)
     constexpr bool kHand = Policy::kHandOnDoubleSearches;
     unsigned* handed = kHand && l.handed.size() > 0 ? l.handed.data() : nullptr;
