@@ -691,6 +691,24 @@ std::size_t lane_differences(const std::vector<Q>& queries, std::size_t& misses,
   }
   return differ;
 }
+
+// The screen in its two parts, as the GPU's screen kernel runs them (the tests in space on every
+// pair, the cubic's on the pairs they leave, gathered into full warps), against the one-pair
+// screen: how many verdicts differ; `in_space` and `by_cubic` count the misses of each part.
+template <class Q>
+std::size_t part_differences(const std::vector<Q>& queries, std::size_t& in_space, std::size_t& by_cubic,
+                             const CcdParams<double>& params = {}) {
+  std::size_t differ = 0;
+  for (const Q& q : queries) {
+    const auto s = detail::relative_single(q);
+    const bool space = detail::single_screen_in_space<CertifiedPolicy>(s, params);
+    const bool cubic = !space && detail::single_screen_by_cubic<CertifiedPolicy>(s, params);
+    differ += (space || cubic) != detail::certified_screen_single<CertifiedPolicy>(q, params);
+    in_space += space;
+    by_cubic += cubic;
+  }
+  return differ;
+}
 }  // namespace
 
 TEST_CASE("single-precision screen: pairs screened in lanes get the one-pair screen's verdicts", "[narrow][certified][single]") {
@@ -740,6 +758,18 @@ TEST_CASE("single-precision screen: pairs screened in lanes get the one-pair scr
   std::size_t vf_misses = 0, ee_misses = 0;
   CHECK(lane_differences(vf, vf_misses) == 0);
   CHECK(lane_differences(ee, ee_misses) == 0);
+  // The GPU's two parts, over the whole step and a short window; each part decides some pairs.
+  for (const double limit : {1.0, std::ldexp(1.0, -8)}) {
+    CcdParams<double> window;
+    window.time_limit = limit;
+    std::size_t in_space = 0, by_cubic = 0;
+    CHECK(part_differences(vf, in_space, by_cubic, window) == 0);
+    CHECK(part_differences(ee, in_space, by_cubic, window) == 0);
+    std::printf("screen in two parts, window [0, %g): %zu misses by the tests in space, %zu by the cubic\n", limit, in_space,
+                by_cubic);
+    CHECK(in_space > 0);
+    CHECK(by_cubic > 0);
+  }
   std::printf("screen in lanes (%d): %zu vertex-face and %zu edge-edge pairs, %zu and %zu misses, the rest passed\n",
               detail::kScreenLanes, vf.size(), ee.size(), vf_misses, ee_misses);
   CHECK(vf_misses > vf.size() / 10);
