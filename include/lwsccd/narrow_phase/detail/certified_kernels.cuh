@@ -23,6 +23,17 @@ __device__ bool first_step_rejects(const Q& q, const CcdParams<T>& params) {
   else return Method::quick_reject(q, params);
 }
 
+// A pair the first pass keeps, appended to `kept` where it has room (always counted, so that the
+// host sees the room it needs).
+__device__ inline void keep_survivor(std::pair<index_t, index_t> p, std::pair<index_t, index_t>* kept, std::size_t room,
+                                     unsigned long long* counters) {
+  const unsigned long long at = append_index(counters + kSurvivors);
+  if (at < room) {  // (std::pair's assignment is host-only before C++20)
+    kept[at].first = p.first;
+    kept[at].second = p.second;
+  }
+}
+
 // The screen's tail for one pair the tests in space left, in single precision: the cubic's signs,
 // then the filter's separating directions (so that the pairs they decide are never kept: the
 // filter's threads would diverge on them; counted as screened and decided in float); what is
@@ -41,11 +52,7 @@ __device__ void screen_single_tail(const MeshFeatures& mesh, const SingleVertex*
     append_index(counters + kSeparated);
     return;
   }
-  const unsigned long long at = append_index(counters + kSurvivors);
-  if (at < room) {  // (std::pair's assignment is host-only before C++20)
-    kept[at].first = p.first;
-    kept[at].second = p.second;
-  }
+  keep_survivor(p, kept, room, counters);
 }
 
 // Pass 1 of a certified method, FP32 first: every pair through the single-precision screen.
@@ -101,8 +108,8 @@ __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex
 // method FP32 first: screen_single_first.
 template <class Method, bool kVertexFace, int kBlock, class T, class P>
 __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const SingleVertex* single, PairList in,
-                  CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
-                  std::size_t room, unsigned long long* counters) {
+                              CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
+                              std::size_t room, unsigned long long* counters) {
   if (control[kSkip]) return;
   const std::size_t n = in.count.get();
   if constexpr (lwsccd::detail::single_first_of<Method>::value) {
@@ -110,12 +117,7 @@ __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
   } else {
     LWSCCD_GRID_STRIDE(i, n) {
       const std::pair<index_t, index_t> p = in.pairs[i];
-      if (first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) continue;
-      const unsigned long long at = append_index(counters + kSurvivors);
-      if (at < room) {  // (std::pair's assignment is host-only before C++20)
-        kept[at].first = p.first;
-        kept[at].second = p.second;
-      }
+      if (!first_step_rejects<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params)) keep_survivor(p, kept, room, counters);
     }
   }
 }

@@ -34,8 +34,8 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
     }
     return;
   }
-  // (After the lists' lengths: the limit's few FP64 operations in every thread of a launch sized
-  // for the list's room were most of cloth-funnel's FP64 per pair once it had no fallback.)
+  // (After the list's length: threads of a launch sized for the list's room that hold no query
+  // need not compute the limit.)
   const CcdParams<T> base = limited_params(params, limit_bits);
   LWSCCD_GRID_STRIDE(i, n) {
     const std::pair<index_t, index_t> p = item_pair(items[i]);
