@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 
 #include <cstring>
+#include <initializer_list>
 #include <random>
 
 #include "lwsccd/io/dataset.hpp"
@@ -216,6 +217,70 @@ TEST_CASE("GPU hit sort: by (first, second) over only the bits the feature ids t
         REQUIRE(got[i].toi == expected[i].toi);
       }
     }
+}
+
+TEST_CASE("GPU hit sort ahead: enqueued before the count reaches the host, used only where it covered it", "[gpu][narrow]") {
+  // A buffer whose slots past the count hold other hits (a run's room past its hits): the sort
+  // ahead of `span` slots must order the first n and put nothing of the rest before them; where
+  // the span is short of n it must say so and leave the buffer as it was.
+  std::mt19937 rng(11);
+  for (const std::size_t limit : {std::size_t(3), std::size_t(1) << 16, std::size_t(50021), std::size_t(1) << 31})
+    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), std::size_t(200), std::size_t(256),
+                                std::size_t(300), std::size_t(20000)})
+      for (const std::size_t span : {n, n + 7, n > 0 ? n - 1 : 0, std::size_t(256), 2 * n + 3}) {
+        INFO("limit " << limit << ", n " << n << ", span " << span);
+        const std::size_t size = std::max(span, n) + 5;
+        std::uniform_int_distribution<std::size_t> id(0, limit - 1);
+        std::vector<FeatureHit<double>> hits(size);
+        for (std::size_t i = 0; i < size; ++i)
+          hits[i] = {static_cast<index_t>(i % 4 ? id(rng) : 0), static_cast<index_t>(id(rng)), static_cast<double>(i)};
+        gpu::DeviceBuffer<FeatureHit<double>> d;
+        d.upload(hits);
+        gpu::DeviceBuffer<unsigned long long> count;
+        count.upload(std::vector<unsigned long long>{n});
+        gpu::HitSorter<double> sorter;
+        sorter.sort_ahead(d, count.data(), span, limit);
+        LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+        const bool covered = sorter.take_ahead(d, n);
+        REQUIRE(covered == (n < 2 || span >= n));
+        std::vector<FeatureHit<double>> expected(hits.begin(), hits.begin() + static_cast<std::ptrdiff_t>(n));
+        if (covered) std::stable_sort(expected.begin(), expected.end());
+        const std::vector<FeatureHit<double>> got = d.download_prefix(n);
+        for (std::size_t i = 0; i < n; ++i) {
+          REQUIRE(got[i].first == expected[i].first);
+          REQUIRE(got[i].second == expected[i].second);
+          REQUIRE(got[i].toi == expected[i].toi);
+        }
+        CHECK(!sorter.take_ahead(d, std::max<std::size_t>(n, 2)));  // (taken once only)
+      }
+}
+
+TEST_CASE("GPU narrow phase run after run: hits sorted ahead where the last count covers them, else after", "[gpu][narrow]") {
+  // The same object on the folded cloth's pairs, then a few of them (fewer hits: the sort ahead
+  // covers them), then all again (more hits than the span learned from the few: sorted after the
+  // count comes back), then once more (covered): each run's contacts are the CPU backend's.
+  const auto m = lwsccd_test::folded_cloth(40, 4);
+  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
+  const FeaturePairs all = feature_pairs(m.mesh, pairs);
+  FeaturePairs few;
+  for (std::size_t i = 0; i < all.vf.size(); i += 7) few.vf.push_back(all.vf[i]);
+  for (std::size_t i = 0; i < all.ee.size(); i += 7) few.ee.push_back(all.ee[i]);
+  gpu::DeviceMeshFeatures features(m.mesh);
+  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::set}) {
+    gpu::NarrowPhase<CertifiedCcd, double> narrow(1 << 16);
+    CcdParams<double> params;
+    params.mode = mode;
+    for (const FeaturePairs* fp : std::initializer_list<const FeaturePairs*>{&all, &all, &few, &all, &all}) {
+      gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
+      vf.upload(fp->vf);
+      ee.upload(fp->ee);
+      narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
+      const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, *fp, params);
+      REQUIRE(expected.vf.size() + expected.ee.size() > 2);
+      lwsccd_test::require_same_contacts(narrow.download(), expected);
+    }
+  }
 }
 
 TEST_CASE("GPU narrow phase equals the CPU backend on the real scenes' candidate pairs", "[gpu][narrow][data]") {

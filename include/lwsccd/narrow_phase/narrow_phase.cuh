@@ -5,7 +5,9 @@
 #include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
+#include <functional>
 #include <utility>
+#include <vector>
 
 #include "lwsccd/bvh/bvh.cuh"
 #include "lwsccd/core/cuda_handles.cuh"
@@ -132,11 +134,25 @@ class HitSorter {
   /// end up in `hits` by an exchange of buffers (the old one becomes this sorter's scratch), so
   /// `hits` keeps at least its size.
   void sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::size_t id_limit, cudaStream_t stream = nullptr);
+  /// Enqueues the sort of the first `span` slots of `hits` (at most its size) while their count
+  /// is still on the device only (`device_count`: slots from it on sort after the hits), so that
+  /// no host round trip sits between a run's last kernel and its sort. take_ahead() then says
+  /// whether that sort covered the count.
+  void sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
+                  std::size_t id_limit, cudaStream_t stream = nullptr);
+  /// Once the stream of the last sort_ahead() has been synchronized and the count `n` is known:
+  /// true when that sort covered it, the sorted hits then in `hits` (buffers exchanged as by
+  /// sort()); false when it did not (`hits` unchanged: sort() them). Forgets the sort ahead.
+  bool take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n);
+  /// The span to sort ahead in a run that follows one with `n` hits: a quarter more, so that a
+  /// count that grows a little from run to run stays covered.
+  static std::size_t span_after(std::size_t n) { return n + n / 4 + 32; }
   std::size_t device_bytes() const {
     return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes();
   }
 
  private:
+  std::size_t ahead_ = 0;  ///< slots the last sort_ahead() sorted (0: none pending)
   DeviceBuffer<FeatureHit<T>> sorted_;
   DeviceBuffer<unsigned long long> keys_, sorted_keys_;
   DeviceBuffer<unsigned char> scratch_;
@@ -295,6 +311,7 @@ class NarrowPhase {
     std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
     std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0, handed_in_warps = 0;
+    std::size_t sort_span = 0;                   ///< hits the next run sorts before its count reaches the host (0: none)
     CudaStream stream;
     CudaEvent done;
   };
@@ -315,12 +332,15 @@ class NarrowPhase {
   template <class P>
   void count_survivors(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& vf, const PairList& ee,
                        const CcdParams<T>& params, cudaStream_t stream);
+  // A list's launches in their order, recorded to be issued in turn with the other list's.
+  using Launches = std::vector<std::function<void()>>;
   template <class P, bool kVertexFace>
   void enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
-                          const CcdParams<T>& params, List& list);
+                          const CcdParams<T>& params, List& list, Launches& out);
   template <class P, bool kVertexFace>
   void enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
-                         const CcdParams<T>& params, const unsigned long long* limit, List& list);
+                         const CcdParams<T>& params, const unsigned long long* limit, List& list, Launches& out);
+  void issue_in_turn(Launches (&launches)[2], int first);
   unsigned grid_for(std::size_t room, int block, int per_sm) const;
 
   std::size_t initial_capacity_;

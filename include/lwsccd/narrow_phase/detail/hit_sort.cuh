@@ -15,11 +15,18 @@
 namespace lwsccd::gpu::detail {
 
 // The sort key of a hit: (first, second) as one word, first shifted by `id_bits` (every id is
-// below 2^id_bits, so the key's order is the pair's and it has 2 id_bits bits to sort).
+// below 2^id_bits, so the key's order is the pair's and it has 2 id_bits bits to sort). With
+// `device_n` (a sort enqueued before the host knows the count) only the first min(*device_n, n)
+// slots hold hits: the others get the largest key and sort after them.
 template <class T>
-__global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id_bits, unsigned long long* keys) {
+__global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id_bits, unsigned long long* keys,
+                                const unsigned long long* device_n = nullptr) {
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
+  if (device_n && i >= *device_n) {
+    keys[i] = 2 * id_bits >= 64 ? ~0ull : (1ull << (2 * id_bits)) - 1;
+    return;
+  }
   assert(static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) >> id_bits == 0 &&
          static_cast<unsigned long long>(static_cast<unsigned>(hits[i].second)) >> id_bits == 0 && "a feature id past the mesh's features");
   keys[i] = (static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) << id_bits) | static_cast<unsigned>(hits[i].second);
@@ -28,11 +35,14 @@ __global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id
 // A sort of at most kThreads hits in one block, a thread per hit: its place is the number of
 // keys below its own plus the equal ones before it (stable, as the radix sort). A step's few
 // hits (horse-gallop: a handful) took a radix sort's ~14 us single-tile pass plus the key
-// kernel; the block compares every pair of keys in shared memory instead.
+// kernel; the block compares every pair of keys in shared memory instead. With `device_n`: the
+// first min(*device_n, n) hits.
 template <class T, int kThreads>
 __global__ void __launch_bounds__(kThreads)
-    small_hit_sort_kernel(const FeatureHit<T>* hits, int n, int id_bits, FeatureHit<T>* sorted) {
+    small_hit_sort_kernel(const FeatureHit<T>* hits, int n, int id_bits, FeatureHit<T>* sorted,
+                          const unsigned long long* device_n = nullptr) {
   __shared__ unsigned long long keys[kThreads];
+  if (device_n && *device_n < static_cast<unsigned long long>(n)) n = static_cast<int>(*device_n);
   const int i = static_cast<int>(threadIdx.x);
   FeatureHit<T> hit;
   unsigned long long key = 0;

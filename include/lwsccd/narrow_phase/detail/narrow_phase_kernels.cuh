@@ -145,8 +145,12 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     LWSCCD_CUDA_CHECK_LAUNCH();
     LWSCCD_CUDA_CHECK(cudaEventRecord(start_, stream));
     for (auto& l : lists_) LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
-    enqueue_first_pass<P, true>(view, x0, x1, vf, limited, lists_[0]);
-    enqueue_first_pass<P, false>(view, x0, x1, ee, limited, lists_[1]);
+    // The longer list's launches lead (its chain is usually the step's longest).
+    const int first = ee.count.room > vf.count.room ? 1 : 0;
+    Launches launches[2];
+    enqueue_first_pass<P, true>(view, x0, x1, vf, limited, lists_[0], launches[0]);
+    enqueue_first_pass<P, false>(view, x0, x1, ee, limited, lists_[1], launches[1]);
+    issue_in_turn(launches, first);
     const unsigned long long* limit = nullptr;
     if (kCertified && params.mode == CcdMode::earliest) {
       // The fallback need not look past the best certified time of either list (as the CPU does).
@@ -158,15 +162,24 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
       for (auto& l : lists_) LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, start_, 0));
       limit = control + detail::kFallbackLimitBits;
     }
-    enqueue_full_test<P, true>(view, x0, x1, vf, limited, limit, lists_[0]);
-    enqueue_full_test<P, false>(view, x0, x1, ee, limited, limit, lists_[1]);
+    enqueue_full_test<P, true>(view, x0, x1, vf, limited, limit, lists_[0], launches[0]);
+    enqueue_full_test<P, false>(view, x0, x1, ee, limited, limit, lists_[1], launches[1]);
+    issue_in_turn(launches, first);
     join_lists(stream);
     if (!windows || !(limited.time_limit < params.time_limit)) break;
+  }
+  earliest_only_ = params.mode == CcdMode::earliest;
+  // The hits' sort, enqueued before their count reaches the host (the last run's count + a
+  // quarter): a round trip between the run and its sort idled the GPU for its ~14 launches a list.
+  if (!earliest_only_) {
+    for (auto& l : lists_) {
+      l.sorter.sort_ahead(l.hits, l.counters.data() + detail::kHits, l.sort_span, id_limit_, l.stream);
+    }
+    join_lists(stream);
   }
   for (auto& l : lists_)
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(l.host_counters.data(), l.counters.data(), detail::kNarrowCounters * sizeof(unsigned long long),
                                       cudaMemcpyDeviceToHost, stream));
-  earliest_only_ = params.mode == CcdMode::earliest;
 }
 
 // The first run's sizing: the screen alone over both lists (its survivors only counted: no room
@@ -215,18 +228,26 @@ void NarrowPhase<Method, T, Policy>::count_survivors(const MeshFeatures& mesh, c
 
 // Pass 1 on the list's stream: two-pass methods' cheap first step on every pair (survivors
 // appended); CertifiedCcd's refinement of the survivors (hits and undecided queries appended).
+// Its launches are recorded in `out` in their order, a kernel (with the memset before it) each,
+// for enqueue() to issue in turn with the other list's.
 template <class Method, class T, class Policy>
 template <class P, bool kVertexFace>
 void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
-                                                        const PairList& in, const CcdParams<T>& params, List& l) {
+                                                        const PairList& in, const CcdParams<T>& params, List& list,
+                                                        Launches& out) {
+  List* const lp = &list;
   if constexpr (kTwoPass) {
     const unsigned blocks = grid_for(in.count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
     if (blocks == 0) return;
-    detail::screen_kernel<Method, kVertexFace, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, single_.data(), in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    out.push_back([=] {
+      List& l = *lp;
+      detail::screen_kernel<Method, kVertexFace, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+          mesh, x0, x1, single_.data(), in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    });
   }
   if constexpr (kCertified) {
+    const List& l = list;
     const std::size_t room = std::min(l.work_room, in.count.room);
     // Mode set tries hits on the way down (from level 0), which the filter leaves to the whole
     // search: there the levels-to-kRefineDeferLevel kernel decides more at once.
@@ -236,62 +257,89 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     int kept_counter = detail::kSurvivors;
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       if constexpr (kSingleFirst) {
-        detail::single_filter_kernel<Method, kVertexFace, T>
-            <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
-                l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room);
-        LWSCCD_CUDA_CHECK_LAUNCH();
-        LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
         const bool single_deeper = single_second_round(params.mode);
-        detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
-            mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
-            l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
-            single_deeper ? l.single_expanded.data() : nullptr);
-        LWSCCD_CUDA_CHECK_LAUNCH();
+        out.push_back([=] {
+          List& l = *lp;
+          detail::single_filter_kernel<Method, kVertexFace, T>
+              <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                  mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
+                  l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room);
+          LWSCCD_CUDA_CHECK_LAUNCH();
+        });
+        out.push_back([=] {
+          List& l = *lp;
+          LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
+          detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+              mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
+              l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
+              single_deeper ? l.single_expanded.data() : nullptr);
+          LWSCCD_CUDA_CHECK_LAUNCH();
+        });
         if (single_deeper) {
-          detail::single_expand_kernel<Method, kVertexFace, T><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
-              mesh, single_.data(), l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
-              l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), l.refine_room);
-          LWSCCD_CUDA_CHECK_LAUNCH();
-          detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>
-              <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                  mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(),
-                  detail::kSingleDeepIntervals, l.single_deep.data(), l.single_deep_room, l.single_failed.data(),
-                  l.double_kept.data(), l.deferred.data(), nullptr);
-          LWSCCD_CUDA_CHECK_LAUNCH();
+          out.push_back([=] {
+            List& l = *lp;
+            detail::single_expand_kernel<Method, kVertexFace, T><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+                mesh, single_.data(), l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
+                l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), l.refine_room);
+            LWSCCD_CUDA_CHECK_LAUNCH();
+          });
+          out.push_back([=] {
+            List& l = *lp;
+            detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>
+                <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                    mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(),
+                    detail::kSingleDeepIntervals, l.single_deep.data(), l.single_deep_room, l.single_failed.data(),
+                    l.double_kept.data(), l.deferred.data(), nullptr);
+            LWSCCD_CUDA_CHECK_LAUNCH();
+          });
         }
         kept = l.double_kept.data();
         kept_counter = detail::kDoubleKept;
       }
-      detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-          mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
-          l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
-      LWSCCD_CUDA_CHECK_LAUNCH();
-      LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
       const bool deeper = second_round(params.mode);
-      detail::filter_inside_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
-          mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
-          l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
-      LWSCCD_CUDA_CHECK_LAUNCH();
+      out.push_back([=] {
+        List& l = *lp;
+        detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
+            l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
+      out.push_back([=] {
+        List& l = *lp;
+        LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
+        detail::filter_inside_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
+            mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
+            l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
       if (deeper) {
-        detail::filter_expand_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
-            mesh, x0, x1, kept, params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
-            l.deep_room, l.listed.data(), l.deferred.data());
-        LWSCCD_CUDA_CHECK_LAUNCH();
-        detail::filter_inside_kernel<Method, kVertexFace, T, P>
-            <<<grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kDeepIntervals,
-                l.deep.data(), l.deep_room, l.listed.data(), l.deferred.data(), nullptr);
-        LWSCCD_CUDA_CHECK_LAUNCH();
+        out.push_back([=] {
+          List& l = *lp;
+          detail::filter_expand_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, kept, params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
+              l.deep_room, l.listed.data(), l.deferred.data());
+          LWSCCD_CUDA_CHECK_LAUNCH();
+        });
+        out.push_back([=] {
+          List& l = *lp;
+          detail::filter_inside_kernel<Method, kVertexFace, T, P>
+              <<<grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                  mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kDeepIntervals,
+                  l.deep.data(), l.deep_room, l.listed.data(), l.deferred.data(), nullptr);
+          LWSCCD_CUDA_CHECK_LAUNCH();
+        });
       }
     } else {
-      detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
-          <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
-              l.hit_room, l.undecided.data(), l.deferred.data());
-      LWSCCD_CUDA_CHECK_LAUNCH();
+      out.push_back([=] {
+        List& l = *lp;
+        detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
+            <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
+                l.hit_room, l.undecided.data(), l.deferred.data());
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
     }
     // The deferred pairs: a warp each when they are few (the long searches' latency is the
     // list's), else a thread each; each kernel returns at once where the other one's case holds.
@@ -301,73 +349,112 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio ? static_cast<std::size_t>(Policy::kRefineWarpBelow) : 0;
     // (With kHandOnDoubleSearches the thread kernel runs only where `handed` has a bit per entry.)
     constexpr bool kHand = Policy::kHandOnDoubleSearches;
-    unsigned* handed = kHand && l.handed.size() > 0 ? l.handed.data() : nullptr;
-    if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
-    detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
-        l.hit_room, l.undecided.data(), warp_below, handed);
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    unsigned* handed = kHand && list.handed.size() > 0 ? list.handed.data() : nullptr;
+    out.push_back([=] {
+      List& l = *lp;
+      if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
+      detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+          mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+          l.hit_room, l.undecided.data(), warp_below, handed);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    });
     if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
       const std::size_t warp_limit = fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio
                                          ? static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kHandedWarpsPerSm)
                                          : 0;
       handed_warp_limit_ = warp_limit;
-      auto launch_handed = [&](auto kernel) {
-        kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
-            mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
-            l.undecided.data(), warp_below, warp_limit);
-        LWSCCD_CUDA_CHECK_LAUNCH();
+      auto launch_handed = [=, &out](auto kernel) {
+        out.push_back([=] {
+          List& l = *lp;
+          kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
+              l.undecided.data(), warp_below, warp_limit);
+          LWSCCD_CUDA_CHECK_LAUNCH();
+        });
       };
       launch_handed(detail::refine_handed_kernel<Method, kVertexFace, true, T, P>);
       launch_handed(detail::refine_handed_kernel<Method, kVertexFace, false, T, P>);
     }
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
-      detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
-          <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
-              l.hit_room, l.undecided.data(), warp_below);
-      LWSCCD_CUDA_CHECK_LAUNCH();
+      out.push_back([=] {
+        List& l = *lp;
+        detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
+            <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
+                l.hit_room, l.undecided.data(), warp_below);
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
     }
     // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
-    detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
-        mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.refine_room);
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    out.push_back([=] {
+      List& l = *lp;
+      detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
+          mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.refine_room);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    });
   }
 }
 
 // The full test on the list's stream, of CertifiedCcd's undecided queries, of the first pass's
 // survivors, or (one-pass methods) of the input: hits appended after the list's earlier ones.
+// Its launches are recorded in `out`, as the first pass's.
 template <class Method, class T, class Policy>
 template <class P, bool kVertexFace>
 void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                                        const PairList& in, const CcdParams<T>& params,
-                                                       const unsigned long long* limit, List& l) {
+                                                       const unsigned long long* limit, List& list, Launches& out) {
+  List* const lp = &list;
   auto launch = [&](const auto* items, DeviceCount count) {
     count.room = std::min(count.room, in.count.room);
     if (count.room == 0) return;
     if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
       // A thread per query for a few rounds, then a warp per query still open.
-      detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
-          <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room,
-              l.open.data(), static_cast<std::size_t>(Policy::kWarpSearchDirect));
-      LWSCCD_CUDA_CHECK_LAUNCH();
-      constexpr int kWarps = Policy::kSearchWarpsPerBlock;
-      detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps>
-          <<<grid_for(count.room, kWarps, Policy::kGridBlocksPerSm), 32 * kWarps, 0, l.stream>>>(
-              mesh, x0, x1, items, l.open.data(), params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+      out.push_back([=] {
+        List& l = *lp;
+        detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
+            <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room,
+                l.open.data(), static_cast<std::size_t>(Policy::kWarpSearchDirect));
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
+      out.push_back([=] {
+        List& l = *lp;
+        constexpr int kWarps = Policy::kSearchWarpsPerBlock;
+        detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps>
+            <<<grid_for(count.room, kWarps, Policy::kGridBlocksPerSm), 32 * kWarps, 0, l.stream>>>(
+                mesh, x0, x1, items, l.open.data(), params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
     } else {
-      detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P>
-          <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-              mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+      out.push_back([=] {
+        List& l = *lp;
+        detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P>
+            <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+                mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+        LWSCCD_CUDA_CHECK_LAUNCH();
+      });
     }
-    LWSCCD_CUDA_CHECK_LAUNCH();
   };
+  const List& l = list;
   const unsigned long long* counters = l.counters.data();
   if constexpr (kCertified) launch(l.undecided.data(), DeviceCount{counters + detail::kUndecided, DeviceCount::Part::whole, l.refine_room});
   else if constexpr (kTwoPass) launch(l.survivors.data(), DeviceCount{counters + detail::kSurvivors, DeviceCount::Part::whole, l.work_room});
   else launch(in.pairs, in.count);
+}
+
+// Issues two lists' recorded launches in turn, one of each (`first` leads): each list's stay in
+// their order on its stream, and neither stream waits for the host to launch the other list's
+// whole chain (cloth-funnel, H200: the edge-edge list's first kernel started ~125 us after the
+// vertex-face one's, the host launching all of those in between).
+template <class Method, class T, class Policy>
+void NarrowPhase<Method, T, Policy>::issue_in_turn(Launches (&launches)[2], int first) {
+  const std::size_t n = std::max(launches[0].size(), launches[1].size());
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k : {first, 1 - first})
+      if (i < launches[k].size()) launches[k][i]();
+  launches[0].clear();
+  launches[1].clear();
 }
 
 template <class Method, class T, class Policy>
@@ -439,9 +526,16 @@ bool NarrowPhase<Method, T, Policy>::collect() {
   }
   // The hits in (first, second) order, on the device: they were appended in any order. The two
   // lists sort at once, each on its stream; the run's stream waits for both.
+  // A sort enqueued with the run (sort_ahead, from the last run's count) is used where it covered
+  // the count; otherwise the hits are sorted now.
   if (!earliest_only_) {
-    for (auto& l : lists_) l.sorter.sort(l.hits, l.count, id_limit_, l.stream);
+    for (auto& l : lists_) {
+      if (!l.sorter.take_ahead(l.hits, l.count)) l.sorter.sort(l.hits, l.count, id_limit_, l.stream);
+      l.sort_span = HitSorter<T>::span_after(l.count);
+    }
     join_lists(stream_);
+  } else {
+    for (auto& l : lists_) l.sorter.take_ahead(l.hits, 0);
   }
   return true;
 }
@@ -471,6 +565,44 @@ void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::s
   LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(scratch_.data(), bytes, keys_.data(), sorted_keys_.data(), hits.data(),
                                                     sorted_.data(), static_cast<std::int64_t>(n), 0, 2 * id_bits, stream));
   std::swap(hits, sorted_);  // (only the handles: the sort wrote `sorted_`, which is now `hits`)
+}
+
+template <class T>
+void HitSorter<T>::sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
+                              std::size_t id_limit, cudaStream_t stream) {
+  ahead_ = 0;
+  span = std::min(span, hits.size());
+  if (span < 2) return;
+  sorted_.resize_discard(std::max(span, hits.size()));
+  const int id_bits = detail::id_bits_below(id_limit);
+  if (span <= static_cast<std::size_t>(detail::kSmallHitSort)) {
+    detail::small_hit_sort_kernel<T, detail::kSmallHitSort>
+        <<<1, detail::kSmallHitSort, 0, stream>>>(hits.data(), static_cast<int>(span), id_bits, sorted_.data(), device_count);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  } else {
+    keys_.resize_discard(span);
+    sorted_keys_.resize_discard(span);
+    detail::hit_keys_kernel<<<static_cast<unsigned>((span + 255) / 256), 256, 0, stream>>>(hits.data(), span, id_bits, keys_.data(),
+                                                                                          device_count);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+    std::size_t bytes = 0;
+    LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys_.data(), sorted_keys_.data(), hits.data(), sorted_.data(),
+                                                      static_cast<std::int64_t>(span), 0, 2 * id_bits, stream));
+    scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
+    LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(scratch_.data(), bytes, keys_.data(), sorted_keys_.data(), hits.data(),
+                                                      sorted_.data(), static_cast<std::int64_t>(span), 0, 2 * id_bits, stream));
+  }
+  ahead_ = span;
+}
+
+template <class T>
+bool HitSorter<T>::take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n) {
+  const std::size_t ahead = ahead_;
+  ahead_ = 0;
+  if (n < 2) return true;  // (nothing to order)
+  if (ahead < n) return false;
+  std::swap(hits, sorted_);  // (the slots past n sorted after the hits)
+  return true;
 }
 
 template <class Method, class T, class Policy>
