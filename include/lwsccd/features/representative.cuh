@@ -1,15 +1,16 @@
 // lwsccd — feature pairs produced once on the GPU: representative triangles and feature-box
 // culling (representative.hpp says what and why), with no sort.
 //
-// Three kernels and one small scan: the swept box of every feature; a count pass that runs the
-// shared emission test (emission_mask, orphan_kept) over every candidate triangle pair and every
-// orphan, stores each item's mask and sums each block's counts (vertex-face and edge-edge packed in
-// one 64-bit word, so one scan gives both offsets); an inclusive scan of the block totals; a write
-// pass that ranks the items within their block and decodes each mask at its offset, into buffers
-// sized by earlier runs (enqueue() leaves the totals on the device for the narrow phase; collect()
-// grows a buffer that was short and writes again). The pairs come in the order of the items
-// (candidates, then vertex-face orphans, then edge-edge orphans), the order cpu
-// emit_feature_pairs gives for the same candidate list.
+// Three kernels and one small scan: the swept boxes, packed face by face (a face's box, then the
+// boxes of the vertices and edges it represents, as the CPU's pack_emission lays them out); a
+// count pass that runs the shared emission test (the masks of emission_mask, orphan_kept) over
+// every candidate triangle pair and every orphan, stores each item's mask and sums each block's
+// counts (vertex-face and edge-edge packed in one 64-bit word, so one scan gives both offsets); an
+// inclusive scan of the block totals; a write pass that ranks the items within their block and
+// decodes each mask at its offset, into buffers sized by earlier runs (enqueue() leaves the totals
+// on the device for the narrow phase; collect() grows a buffer that was short and writes again).
+// The pairs come in the order of the items (candidates, then vertex-face orphans, then edge-edge
+// orphans), the order cpu emit_feature_pairs gives for the same candidate list.
 #pragma once
 
 #include <cub/block/block_reduce.cuh>
@@ -18,6 +19,7 @@
 
 #include <tuple>
 #include <utility>
+#include <vector>
 
 #include "lwsccd/core/cuda_check.cuh"
 #include "lwsccd/core/device_buffer.cuh"
@@ -38,30 +40,113 @@ LWSCCD_HD inline unsigned long long pack_counts(unsigned vf, unsigned ee) {
   return (static_cast<unsigned long long>(vf) << 32) | ee;
 }
 
+// The swept boxes packed face by face, each 32 bytes (two 16-byte loads, one sector): per face its
+// box with, in the fourth words, where its features' boxes start and its represents bits; per
+// represented vertex or edge, in the face's order (vertices by corner, then edges), its box. A
+// candidate pair then reads two face records and its faces' few feature boxes, which lie
+// together, instead of a box per feature id through the faces' vertex and edge ids (cloth-ball,
+// H200: the count pass was bound by its L1 requests, 24-byte boxes read a float at a time).
+struct PackedBoxes {
+  float4* faces = nullptr;     ///< two per face: (lo, first), (hi, represents)
+  float4* features = nullptr;  ///< two per represented vertex or edge: (lo, -), (hi, -)
+
+  __device__ static void put(float4* at, const Aabbf& box, unsigned a, unsigned b) {
+    at[0] = make_float4(box.lo.x, box.lo.y, box.lo.z, __uint_as_float(a));
+    at[1] = make_float4(box.hi.x, box.hi.y, box.hi.z, __uint_as_float(b));
+  }
+  __device__ static Aabbf get(const float4* at, unsigned& a, unsigned& b) {
+    const float4 lo = __ldg(at), hi = __ldg(at + 1);
+    a = __float_as_uint(lo.w);
+    b = __float_as_uint(hi.w);
+    return {{lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z}};
+  }
+  __device__ Aabbf feature(unsigned slot) const {
+    unsigned unused_a, unused_b;
+    return get(features + 2 * static_cast<std::size_t>(slot), unused_a, unused_b);
+  }
+  __device__ Aabbf face(index_t f) const {
+    unsigned unused_a, unused_b;
+    return get(faces + 2 * static_cast<std::size_t>(f), unused_a, unused_b);
+  }
+};
+
+// A thread per face: its box and its represented features' boxes, each feature_box of its id (the
+// same values as the CPU's boxes), at the face's slots.
 template <class P>
-__global__ void feature_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec3<P>* x1, index_t n, float margin,
-                                     Aabbf* boxes) {
-  const index_t id = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
-  if (id >= n) return;
-  boxes[id] = feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, id, margin);
+__global__ void packed_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec3<P>* x1, index_t num_faces, float margin,
+                                    const unsigned* face_first, PackedBoxes packed) {
+  const index_t f = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (f >= num_faces) return;
+  const unsigned r = m.represents[f];
+  unsigned slot = face_first[f];
+  PackedBoxes::put(packed.faces + 2 * static_cast<std::size_t>(f),
+                   feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, m.face_feature(f), margin), slot, r);
+  const Face t = m.faces[f];
+  const FaceEdgeIds e = m.face_edges[f];
+#pragma unroll
+  for (int k = 0; k < 3; ++k)
+    if ((r >> k) & 1u)
+      PackedBoxes::put(packed.features + 2 * static_cast<std::size_t>(slot++),
+                       feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, t.v[k], margin), 0u, 0u);
+#pragma unroll
+  for (int k = 0; k < 3; ++k)
+    if ((r >> (3 + k)) & 1u)
+      PackedBoxes::put(packed.features + 2 * static_cast<std::size_t>(slot++),
+                       feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, m.edge_feature(e.e[k]), margin), 0u, 0u);
+}
+
+// emission_mask of the candidate (a, b) over the packed boxes: the same bits (a feature's bit by
+// its corner or edge index, its box at the next of its face's slots).
+__device__ inline unsigned packed_emission_mask(const PackedBoxes& packed, index_t a, index_t b) {
+  unsigned slot_a, ra, slot_b, rb;
+  const Aabbf box_a = PackedBoxes::get(packed.faces + 2 * static_cast<std::size_t>(a), slot_a, ra);
+  const Aabbf box_b = PackedBoxes::get(packed.faces + 2 * static_cast<std::size_t>(b), slot_b, rb);
+  if (ra == 0 && rb == 0) return 0;
+  unsigned mask = 0;
+#pragma unroll
+  for (int k = 0; k < 3; ++k)
+    if ((ra >> k) & 1u && packed.feature(slot_a++).overlaps(box_b)) mask |= 1u << k;
+#pragma unroll
+  for (int k = 0; k < 3; ++k)
+    if ((rb >> k) & 1u && packed.feature(slot_b++).overlaps(box_a)) mask |= 1u << (3 + k);
+  if ((ra >> 3) == 0 || (rb >> 3) == 0) return mask;
+  Aabbf edges_b[3];  // (constant indices once unrolled: registers)
+#pragma unroll
+  for (int y = 0; y < 3; ++y)
+    if ((rb >> (3 + y)) & 1u) edges_b[y] = packed.feature(slot_b++);
+#pragma unroll
+  for (int x = 0; x < 3; ++x) {
+    if (!((ra >> (3 + x)) & 1u)) continue;
+    const Aabbf box_x = packed.feature(slot_a++);
+#pragma unroll
+    for (int y = 0; y < 3; ++y)
+      if ((rb >> (3 + y)) & 1u && box_x.overlaps(edges_b[y])) mask |= 1u << (6 + 3 * x + y);
+  }
+  return mask;
 }
 
 // Item i: candidate triangle pair i (i < n), then vertex-face orphan i - n, then edge-edge orphan.
 // Its emission mask: emission_mask for a candidate; bit 0 (vertex-face) or bit 6 (edge-edge) for a
-// kept orphan.
+// kept orphan (orphan_kept: the two features' packed boxes overlap; `feature_slot` gives a vertex's
+// or an edge's slot, every feature of an orphan having a representing face).
 template <class Pair>
-__device__ unsigned item_mask(const EmissionView& m, const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf,
-                              std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t i) {
+__device__ unsigned item_mask(const EmissionView& m, const PackedBoxes& packed, const unsigned* feature_slot,
+                              const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf, std::size_t num_orphan_vf,
+                              const Pair* orphan_ee, std::size_t i) {
   if (i < n) {
     const TrianglePair p = candidates[i];
-    return p.adjacent ? 0u : emission_mask(m, p.a, p.b);
+    return p.adjacent ? 0u : packed_emission_mask(packed, p.a, p.b);
   }
-  if (i < n + num_orphan_vf) {
-    const Pair q = orphan_vf[i - n];
-    return orphan_kept(m, q.first, q.second) ? 1u : 0u;
-  }
-  const Pair q = orphan_ee[i - n - num_orphan_vf];
-  return orphan_kept(m, q.first, q.second) ? 1u << 6 : 0u;
+  const index_t faces_from = m.num_vertices + m.num_edges;
+  auto box_of = [&](index_t id) {
+    if (id >= faces_from) return packed.face(id - faces_from);
+    const unsigned slot = feature_slot[id];
+    assert(slot != ~0u && "an orphan's feature without a representing face");
+    return packed.feature(slot);
+  };
+  auto kept = [&](const Pair& q) { return box_of(q.first).overlaps(box_of(q.second)); };
+  if (i < n + num_orphan_vf) return kept(orphan_vf[i - n]) ? 1u : 0u;
+  return kept(orphan_ee[i - n - num_orphan_vf]) ? 1u << 6 : 0u;
 }
 
 __device__ inline unsigned long long mask_counts(unsigned mask) {
@@ -72,16 +157,16 @@ __device__ inline unsigned long long mask_counts(unsigned mask) {
 // the block again, so only block totals need a device-wide scan).
 template <int kBlock, class Pair>
 __global__ void __launch_bounds__(kBlock)
-    emission_count_kernel(EmissionView m, const TrianglePair* candidates, DeviceCount candidate_count, const Pair* orphan_vf,
-                          std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t num_orphan_ee, unsigned short* masks,
-                          unsigned long long* block_totals) {
+    emission_count_kernel(EmissionView m, PackedBoxes packed, const unsigned* feature_slot, const TrianglePair* candidates,
+                          DeviceCount candidate_count, const Pair* orphan_vf, std::size_t num_orphan_vf, const Pair* orphan_ee,
+                          std::size_t num_orphan_ee, unsigned short* masks, unsigned long long* block_totals) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   __shared__ typename Reduce::TempStorage storage;
   const std::size_t i = static_cast<std::size_t>(blockIdx.x) * kBlock + threadIdx.x;
   const std::size_t n = candidate_count.get(), items = n + num_orphan_vf + num_orphan_ee;
   unsigned mask = 0;
   if (i < items) {
-    mask = item_mask(m, candidates, n, orphan_vf, num_orphan_vf, orphan_ee, i);
+    mask = item_mask(m, packed, feature_slot, candidates, n, orphan_vf, num_orphan_vf, orphan_ee, i);
     masks[i] = static_cast<unsigned short>(mask);
   }
   const unsigned long long total = Reduce(storage).Sum(mask_counts(mask));
@@ -148,7 +233,23 @@ class FeatureEmitter {
     represents_.upload(rep.represents(), stream);
     orphan_vf_.upload(rep.orphans().vf, stream);
     orphan_ee_.upload(rep.orphans().ee, stream);
-    boxes_.resize_discard(static_cast<std::size_t>(num_vertices_ + num_edges_ + num_faces_));
+    // Each face's first slot of the packed boxes (the represented vertices and edges before it),
+    // and each vertex's and edge's slot (~0u: a vertex of no face), in detail::packed_boxes_kernel's order.
+    std::vector<unsigned> first(static_cast<std::size_t>(num_faces_));
+    std::vector<unsigned> slot_of(static_cast<std::size_t>(num_vertices_ + num_edges_), ~0u);
+    unsigned slots = 0;
+    for (std::size_t f = 0; f < first.size(); ++f) {
+      first[f] = slots;
+      const unsigned r = rep.represents()[f];
+      for (int k = 0; k < 3; ++k)
+        if ((r >> k) & 1u) slot_of[static_cast<std::size_t>(rep.mesh().faces()[f].v[k])] = slots++;
+      for (int k = 0; k < 3; ++k)
+        if ((r >> (3 + k)) & 1u) slot_of[static_cast<std::size_t>(num_vertices_ + rep.face_edges()[f].e[k])] = slots++;
+    }
+    face_first_.upload(first, stream);
+    feature_slot_.upload(slot_of, stream);
+    packed_faces_.resize_discard(2 * static_cast<std::size_t>(std::max<index_t>(num_faces_, 1)));
+    packed_features_.resize_discard(2 * static_cast<std::size_t>(std::max(slots, 1u)));
   }
 
   /// The feature pairs of `n` candidate triangle pairs (device memory; adjacent ones are skipped)
@@ -199,11 +300,11 @@ class FeatureEmitter {
       throw Error("gpu::FeatureEmitter::enqueue: orphan range [" + std::to_string(orphans.first) + ", " +
                   std::to_string(orphans.first + orphans.count) + ") is past the " + std::to_string(num_orphans()) +
                   " orphans");
-    const index_t features = num_vertices_ + num_edges_ + num_faces_;
     const EmissionView m = view();
-    if (!boxes_current) {
-      detail::feature_boxes_kernel<<<static_cast<unsigned>((features + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
-                                     stream>>>(m, x0, x1, features, margin_, boxes_.data());
+    const detail::PackedBoxes packed{packed_faces_.data(), packed_features_.data()};
+    if (!boxes_current && num_faces_ > 0) {
+      detail::packed_boxes_kernel<<<static_cast<unsigned>((num_faces_ + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
+                                    stream>>>(m, x0, x1, num_faces_, margin_, face_first_.data(), packed);
       LWSCCD_CUDA_CHECK_LAUNCH();
     }
     candidates_ = candidates;
@@ -224,8 +325,8 @@ class FeatureEmitter {
       masks_.resize_discard(items);
       block_totals_.resize_discard(blocks_);
       detail::emission_count_kernel<Policy::kBlock><<<static_cast<unsigned>(blocks_), Policy::kBlock, 0, stream>>>(
-          m, candidates, count, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_, orphan_ee_.data() + orphan_ee_first_,
-          num_orphan_ee_, masks_.data(), block_totals_.data());
+          m, packed, feature_slot_.data(), candidates, count, orphan_vf_.data() + orphan_vf_first_, num_orphan_vf_,
+          orphan_ee_.data() + orphan_ee_first_, num_orphan_ee_, masks_.data(), block_totals_.data());
       LWSCCD_CUDA_CHECK_LAUNCH();
       std::size_t bytes = 0;
       LWSCCD_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, bytes, block_totals_.data(), block_totals_.data(),
@@ -281,8 +382,6 @@ class FeatureEmitter {
   /// The numbers of pairs of the last collected run.
   std::size_t num_vf() const { return num_vf_; }
   std::size_t num_ee() const { return num_ee_; }
-  /// The swept box of every feature id, from the last run.
-  const Aabbf* boxes() const { return boxes_.data(); }
 
   /// The last run's pairs on the host, in emission order.
   FeaturePairs download(cudaStream_t stream = nullptr) const {
@@ -297,7 +396,8 @@ class FeatureEmitter {
 
   std::size_t device_bytes() const {
     return faces_.capacity_bytes() + edges_.capacity_bytes() + face_edges_.capacity_bytes() + represents_.capacity_bytes() +
-           orphan_vf_.capacity_bytes() + orphan_ee_.capacity_bytes() + boxes_.capacity_bytes() + masks_.capacity_bytes() +
+           orphan_vf_.capacity_bytes() + orphan_ee_.capacity_bytes() + face_first_.capacity_bytes() + feature_slot_.capacity_bytes() +
+           packed_faces_.capacity_bytes() + packed_features_.capacity_bytes() + masks_.capacity_bytes() +
            block_totals_.capacity_bytes() + total_.capacity_bytes() +
            scratch_.capacity_bytes() + vf_.capacity_bytes() + ee_.capacity_bytes();
   }
@@ -315,7 +415,8 @@ class FeatureEmitter {
   }
 
   EmissionView view() const {
-    return {faces_.data(), face_edges_.data(), edges_.data(), represents_.data(), boxes_.data(), num_vertices_, num_edges_};
+    // (No per-id boxes on the device: the count pass reads the packed ones.)
+    return {faces_.data(), face_edges_.data(), edges_.data(), represents_.data(), nullptr, num_vertices_, num_edges_};
   }
 
   index_t num_vertices_, num_edges_, num_faces_;
@@ -324,7 +425,9 @@ class FeatureEmitter {
   DeviceBuffer<FaceEdgeIds> face_edges_;
   DeviceBuffer<unsigned char> represents_, scratch_;
   DeviceBuffer<Pair> orphan_vf_, orphan_ee_, vf_, ee_;
-  DeviceBuffer<Aabbf> boxes_;
+  DeviceBuffer<unsigned> face_first_;             ///< per face: its first slot in packed_features_
+  DeviceBuffer<unsigned> feature_slot_;           ///< per vertex and edge id: its slot (~0u: none)
+  DeviceBuffer<float4> packed_faces_, packed_features_;  ///< detail::PackedBoxes, from the last run's positions
   DeviceBuffer<unsigned short> masks_;          ///< per item: its emission mask
   DeviceBuffer<unsigned long long> block_totals_;  ///< per block: packed counts, then their inclusive scan
   DeviceBuffer<unsigned long long> total_{1};     ///< the last run's packed totals (read by the narrow phase)
