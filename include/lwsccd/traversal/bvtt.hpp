@@ -23,12 +23,13 @@ namespace detail {
 
 /// The BVTT descent rule shared by the tasks: split the larger volume (by surface area) of a
 /// pair that overlaps and is not two leaves; a leaf cannot be split.
+/// `box_a`, `box_b`: the two nodes' volumes, as the caller read them.
 LWSCCD_EXEC_CHECK_DISABLE
 template <class BV, class Out>
-LWSCCD_HD void descend_larger(const BvhView<BV>& ta, const BvhView<BV>& tb, const NodePair& p, Out& out) {
+LWSCCD_HD void descend_larger(const BvhView<BV>& ta, const BvhView<BV>& tb, const NodePair& p, const BV& box_a, const BV& box_b,
+                              Out& out) {
   const bool leaf_a = ta.is_leaf(p.a), leaf_b = tb.is_leaf(p.b);
-  const bool split_b =
-      leaf_a || (!leaf_b && bv_traits<BV>::surface_area(tb.bvs[p.b]) > bv_traits<BV>::surface_area(ta.bvs[p.a]));
+  const bool split_b = leaf_a || (!leaf_b && bv_traits<BV>::surface_area(box_b) > bv_traits<BV>::surface_area(box_a));
   if (split_b) {
     out.push_item(NodePair{p.a, tb.left[p.b]});
     out.push_item(NodePair{p.a, tb.right[p.b]});
@@ -101,7 +102,8 @@ struct SelfCollisionTask {
       out.push_item(NodePair{l, r});
       return;
     }
-    if (!bv_traits<BV>::overlap(bvh.bvs[p.a], bvh.bvs[p.b])) {
+    const BV box_a = load_bv(bvh.bvs + p.a), box_b = load_bv(bvh.bvs + p.b);
+    if (!bv_traits<BV>::overlap(box_a, box_b)) {
       out.push_front(p);
       return;
     }
@@ -110,7 +112,7 @@ struct SelfCollisionTask {
       emit_leaf_pair(bvh.primitive(p.a), bvh.primitive(p.b), out);
       return;
     }
-    detail::descend_larger(bvh, bvh, p, out);
+    detail::descend_larger(bvh, bvh, p, box_a, box_b, out);
   }
 
   LWSCCD_EXEC_CHECK_DISABLE
@@ -219,7 +221,8 @@ struct InterCollisionTask {
   LWSCCD_EXEC_CHECK_DISABLE
   template <class Out>
   LWSCCD_HD void process(const NodePair& p, Out& out) const {
-    if (!bv_traits<BV>::overlap(a_tree.bvs[p.a], b_tree.bvs[p.b])) {
+    const BV box_a = load_bv(a_tree.bvs + p.a), box_b = load_bv(b_tree.bvs + p.b);
+    if (!bv_traits<BV>::overlap(box_a, box_b)) {
       out.push_front(p);
       return;
     }
@@ -228,7 +231,7 @@ struct InterCollisionTask {
       out.push_result(TrianglePair{a_tree.primitive(p.a), b_tree.primitive(p.b), false});
       return;
     }
-    detail::descend_larger(a_tree, b_tree, p, out);
+    detail::descend_larger(a_tree, b_tree, p, box_a, box_b, out);
   }
 };
 
