@@ -64,6 +64,8 @@ def main():
     if not all_steps:
         raise SystemExit("kernel_timeline.py: no step found (no host-to-device copies of positions)")
     print("steps (us):", " ".join(f"{(s[-1]['end'] - s[0]['start']) / 1e3:.1f}" for s in all_steps))
+    if not -len(all_steps) <= a.step < len(all_steps):
+        raise SystemExit(f"kernel_timeline.py: --step {a.step}: the trace holds {len(all_steps)} steps")
     step = all_steps[a.step]
     last_kernel = max(i for i, r in enumerate(step) if r["kind"] == "K") if any(r["kind"] == "K" for r in step) else 0
     step = step[:last_kernel + 1]  # (what follows the last kernel is the host's: results read and checked)

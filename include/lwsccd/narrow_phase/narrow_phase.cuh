@@ -340,6 +340,8 @@ class NarrowPhase {
   template <class P, bool kVertexFace>
   void enqueue_full_test(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const PairList& in,
                          const CcdParams<T>& params, const unsigned long long* limit, List& list, Launches& out);
+  template <class Launch>
+  static void record(Launches& out, List* list, Launch launch);
   void issue_in_turn(Launches (&launches)[2], int first);
   unsigned grid_for(std::size_t room, int block, int per_sm) const;
 

@@ -239,11 +239,9 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
   if constexpr (kTwoPass) {
     const unsigned blocks = grid_for(in.count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
     if (blocks == 0) return;
-    out.push_back([=] {
-      List& l = *lp;
+    record(out, lp, [=](List& l) {
       detail::screen_kernel<Method, kVertexFace, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, single_.data(), in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
-      LWSCCD_CUDA_CHECK_LAUNCH();
     });
   }
   if constexpr (kCertified) {
@@ -259,39 +257,31 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       if constexpr (kSingleFirst) {
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
         const bool single_deeper = single_second_round(params.mode);
-        out.push_back([=] {
-          List& l = *lp;
+        record(out, lp, [=](List& l) {
           detail::single_filter_kernel<Method, kVertexFace, T>
               <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                   mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
                   l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room);
-          LWSCCD_CUDA_CHECK_LAUNCH();
         });
-        out.push_back([=] {
-          List& l = *lp;
+        record(out, lp, [=](List& l) {
           LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
           detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
               mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
               l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
               single_deeper ? l.single_expanded.data() : nullptr);
-          LWSCCD_CUDA_CHECK_LAUNCH();
         });
         if (single_deeper) {
-          out.push_back([=] {
-            List& l = *lp;
+          record(out, lp, [=](List& l) {
             detail::single_expand_kernel<Method, kVertexFace, T><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
                 mesh, single_.data(), l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
                 l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), l.refine_room);
-            LWSCCD_CUDA_CHECK_LAUNCH();
           });
-          out.push_back([=] {
-            List& l = *lp;
+          record(out, lp, [=](List& l) {
             detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>
                 <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                     mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(),
                     detail::kSingleDeepIntervals, l.single_deep.data(), l.single_deep_room, l.single_failed.data(),
                     l.double_kept.data(), l.deferred.data(), nullptr);
-            LWSCCD_CUDA_CHECK_LAUNCH();
           });
         }
         kept = l.double_kept.data();
@@ -299,46 +289,36 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       }
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
       const bool deeper = second_round(params.mode);
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
             mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
             l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
         detail::filter_inside_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
             mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
             l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
       if (deeper) {
-        out.push_back([=] {
-          List& l = *lp;
+        record(out, lp, [=](List& l) {
           detail::filter_expand_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
               mesh, x0, x1, kept, params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
               l.deep_room, l.listed.data(), l.deferred.data());
-          LWSCCD_CUDA_CHECK_LAUNCH();
         });
-        out.push_back([=] {
-          List& l = *lp;
+        record(out, lp, [=](List& l) {
           detail::filter_inside_kernel<Method, kVertexFace, T, P>
               <<<grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                   mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kDeepIntervals,
                   l.deep.data(), l.deep_room, l.listed.data(), l.deferred.data(), nullptr);
-          LWSCCD_CUDA_CHECK_LAUNCH();
         });
       }
     } else {
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
             <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                 mesh, x0, x1, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
                 l.hit_room, l.undecided.data(), l.deferred.data());
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
     }
     // The deferred pairs: a warp each when they are few (the long searches' latency is the
@@ -350,13 +330,11 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // (With kHandOnDoubleSearches the thread kernel runs only where `handed` has a bit per entry.)
     constexpr bool kHand = Policy::kHandOnDoubleSearches;
     unsigned* handed = kHand && list.handed.size() > 0 ? list.handed.data() : nullptr;
-    out.push_back([=] {
-      List& l = *lp;
+    record(out, lp, [=](List& l) {
       if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
       detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
           l.hit_room, l.undecided.data(), warp_below, handed);
-      LWSCCD_CUDA_CHECK_LAUNCH();
     });
     if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
       const std::size_t warp_limit = fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio
@@ -364,12 +342,10 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
                                          : 0;
       handed_warp_limit_ = warp_limit;
       auto launch_handed = [=, &out](auto kernel) {
-        out.push_back([=] {
-          List& l = *lp;
+        record(out, lp, [=](List& l) {
           kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
               mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
               l.undecided.data(), warp_below, warp_limit);
-          LWSCCD_CUDA_CHECK_LAUNCH();
         });
       };
       launch_handed(detail::refine_handed_kernel<Method, kVertexFace, true, T, P>);
@@ -377,21 +353,17 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     }
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
             <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
                 mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
                 l.hit_room, l.undecided.data(), warp_below);
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
     }
     // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
-    out.push_back([=] {
-      List& l = *lp;
+    record(out, lp, [=](List& l) {
       detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.refine_room);
-      LWSCCD_CUDA_CHECK_LAUNCH();
     });
   }
 }
@@ -410,29 +382,23 @@ void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh,
     if (count.room == 0) return;
     if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
       // A thread per query for a few rounds, then a warp per query still open.
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
             <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                 mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room,
                 l.open.data(), static_cast<std::size_t>(Policy::kWarpSearchDirect));
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         constexpr int kWarps = Policy::kSearchWarpsPerBlock;
         detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps>
             <<<grid_for(count.room, kWarps, Policy::kGridBlocksPerSm), 32 * kWarps, 0, l.stream>>>(
                 mesh, x0, x1, items, l.open.data(), params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
     } else {
-      out.push_back([=] {
-        List& l = *lp;
+      record(out, lp, [=](List& l) {
         detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P>
             <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
                 mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
-        LWSCCD_CUDA_CHECK_LAUNCH();
       });
     }
   };
@@ -441,6 +407,16 @@ void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh,
   if constexpr (kCertified) launch(l.undecided.data(), DeviceCount{counters + detail::kUndecided, DeviceCount::Part::whole, l.refine_room});
   else if constexpr (kTwoPass) launch(l.survivors.data(), DeviceCount{counters + detail::kSurvivors, DeviceCount::Part::whole, l.work_room});
   else launch(in.pairs, in.count);
+}
+
+// Records `launch` (a kernel of `list`, with the memset before it) in `out`: run later, then checked.
+template <class Method, class T, class Policy>
+template <class Launch>
+void NarrowPhase<Method, T, Policy>::record(Launches& out, List* list, Launch launch) {
+  out.push_back([list, launch] {
+    launch(*list);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  });
 }
 
 // Issues two lists' recorded launches in turn, one of each (`first` leads): each list's stay in
