@@ -114,26 +114,29 @@ LWSCCD_HD inline unsigned emission_mask(const EmissionView& m, index_t a, index_
 /// Bits 0-5 of an emission mask (vertex-face pairs) and bits 6-14 (edge-edge pairs).
 constexpr unsigned kEmissionVfBits = 0x3fu, kEmissionEeBits = 0x7fc0u;
 
+/// The feature pair of bit `bit` of an emission mask of (a, b) (emission_mask's bits): bit k < 3,
+/// (vertex k of a, face b); 3 + k, (vertex k of b, face a); 6 + 3 x + y, (edge x of a, edge y of
+/// b) as (smaller id, larger). Host and device.
+struct EmittedPair {
+  index_t first, second;
+};
+LWSCCD_HD inline EmittedPair emission_pair(const EmissionView& m, index_t a, index_t b, int bit) {
+  if (bit < 3) return {m.faces[a].v[bit], m.face_feature(b)};
+  if (bit < 6) return {m.faces[b].v[bit - 3], m.face_feature(a)};
+  const index_t ex = m.edge_feature(m.face_edges[a].e[(bit - 6) / 3]), ey = m.edge_feature(m.face_edges[b].e[(bit - 6) % 3]);
+  return ex < ey ? EmittedPair{ex, ey} : EmittedPair{ey, ex};
+}
+
 /// Calls on_vf(vertex id, face feature id) and on_ee(smaller edge feature id, larger) for each
-/// pair of `mask` (emission_mask of (a, b)): vertices of a, then of b, then edges in (a's, b's)
-/// order. Host and device.
+/// pair of `mask` (emission_mask of (a, b)), by its bits in order (emission_pair): vertices of a,
+/// then of b, then edges in (a's, b's) order. Host and device.
 template <class OnVf, class OnEe>
 LWSCCD_HD void decode_emission(const EmissionView& m, index_t a, index_t b, unsigned mask, OnVf&& on_vf, OnEe&& on_ee) {
-  if (mask & kEmissionVfBits) {
-    const Face ta = m.faces[a], tb = m.faces[b];
-    for (int k = 0; k < 3; ++k)
-      if ((mask >> k) & 1u) on_vf(ta.v[k], m.face_feature(b));
-    for (int k = 0; k < 3; ++k)
-      if ((mask >> (3 + k)) & 1u) on_vf(tb.v[k], m.face_feature(a));
-  }
-  if (mask & kEmissionEeBits) {
-    const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
-    for (int x = 0; x < 3; ++x)
-      for (int y = 0; y < 3; ++y)
-        if ((mask >> (6 + 3 * x + y)) & 1u) {
-          const index_t ex = m.edge_feature(ea.e[x]), ey = m.edge_feature(eb.e[y]);
-          ex < ey ? on_ee(ex, ey) : on_ee(ey, ex);
-        }
+  for (int bit = 0; bit < 15; ++bit) {
+    if (!((mask >> bit) & 1u)) continue;
+    const EmittedPair p = emission_pair(m, a, b, bit);
+    if (bit < 6) on_vf(p.first, p.second);
+    else on_ee(p.first, p.second);
   }
 }
 
