@@ -34,25 +34,23 @@ __device__ inline void keep_survivor(std::pair<index_t, index_t> p, std::pair<in
   }
 }
 
+// How the screen's tail ended for a pair.
+enum class TailVerdict : unsigned char { missed, separated, kept };
+
 // The screen's tail for one pair the tests in space left, in single precision: the cubic's signs,
 // then the filter's separating directions (so that the pairs they decide are never kept: the
 // filter's threads would diverge on them; counted as screened and decided in float); what is
-// left is kept.
+// left is kept (appended here). The caller counts the other two.
 template <class Method, bool kVertexFace, class T>
-__device__ void screen_single_tail(const MeshFeatures& mesh, const SingleVertex* single, std::pair<index_t, index_t> p,
-                                   const CcdParams<T>& params, std::pair<index_t, index_t>* kept, std::size_t room,
-                                   unsigned long long* counters) {
+__device__ TailVerdict screen_single_tail(const MeshFeatures& mesh, const SingleVertex* single, std::pair<index_t, index_t> p,
+                                          const CcdParams<T>& params, std::pair<index_t, index_t>* kept, std::size_t room,
+                                          unsigned long long* counters) {
   using Policy = typename Method::policy_type;
   const auto q = gather_single_query<kVertexFace>(mesh, single, p);
-  if (lwsccd::detail::single_screen_by_cubic<Policy>(lwsccd::detail::relative_single(q), params)) {
-    append_index(counters + kSingleMisses);
-    return;
-  }
-  if (lwsccd::detail::CertifiedFilter<Policy>::separates_single(q, params)) {
-    append_index(counters + kSeparated);
-    return;
-  }
+  if (lwsccd::detail::single_screen_by_cubic<Policy>(lwsccd::detail::relative_single(q), params)) return TailVerdict::missed;
+  if (lwsccd::detail::CertifiedFilter<Policy>::separates_single(q, params)) return TailVerdict::separated;
   keep_survivor(p, kept, room, counters);
+  return TailVerdict::kept;
 }
 
 // Pass 1 of a certified method, FP32 first: every pair through the single-precision screen.
@@ -60,8 +58,10 @@ __device__ void screen_single_tail(const MeshFeatures& mesh, const SingleVertex*
 // real step, but nearly every warp holds a pair they leave (cloth-ball: 8% of the pairs), and the
 // cubic and the separating directions would then run with a lane or two active. So a warp gathers
 // the pairs they leave in shared memory and screens them 32 at a time, full warps, as it goes and
-// once more at the end: the same verdicts and counts, in another order. kBlock: the launch's
-// threads per block.
+// once more at the end: the same verdicts and counts, in another order. A warp counts its misses
+// and separated pairs by ballots and adds them once at its end (an atomic per pair, even
+// warp-aggregated, took ~30 instructions a round and an eighth of the kernel's stalls on
+// cloth-ball). kBlock: the launch's threads per block.
 template <class Method, bool kVertexFace, int kBlock, class T>
 __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex* single, const std::pair<index_t, index_t>* pairs,
                                     std::size_t n, const CcdParams<T>& params, std::pair<index_t, index_t>* kept,
@@ -73,6 +73,11 @@ __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex
   index_t* firsts = gathered_first[warp];
   index_t* seconds = gathered_second[warp];
   const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (kBlock / 32);
+  unsigned long long misses = 0, separated = 0;  // the warp's (the same on every lane)
+  auto count_tail = [&](TailVerdict v) {
+    misses += static_cast<unsigned>(__popc(__ballot_sync(0xffffffffu, v == TailVerdict::missed)));
+    separated += static_cast<unsigned>(__popc(__ballot_sync(0xffffffffu, v == TailVerdict::separated)));
+  };
   int count = 0;  // pairs gathered, below 32 between rounds
   for (std::size_t base = (static_cast<std::size_t>(blockIdx.x) * (kBlock / 32) + warp) * 32; base < n; base += warps * 32) {
     const std::size_t i = base + static_cast<std::size_t>(lane);
@@ -82,10 +87,10 @@ __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex
       const std::pair<index_t, index_t> p = pairs[i];
       first = p.first, second = p.second;
       const auto q = gather_single_query<kVertexFace>(mesh, single, p);
-      if (lwsccd::detail::single_screen_in_space<Policy>(lwsccd::detail::relative_single(q), params)) append_index(counters + kSingleMisses);
-      else left = true;
+      left = !lwsccd::detail::single_screen_in_space<Policy>(lwsccd::detail::relative_single(q), params);
     }
     const unsigned mask = __ballot_sync(0xffffffffu, left);
+    misses += static_cast<unsigned>(__popc(__ballot_sync(0xffffffffu, i < n))) - static_cast<unsigned>(__popc(mask));
     if (left) {
       const int at = count + __popc(mask & ((1u << lane) - 1u));
       firsts[at] = first;
@@ -97,10 +102,16 @@ __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex
       count -= 32;
       const std::pair<index_t, index_t> g{firsts[count + lane], seconds[count + lane]};
       __syncwarp();  // read before the next round writes there
-      screen_single_tail<Method, kVertexFace>(mesh, single, g, params, kept, room, counters);
+      count_tail(screen_single_tail<Method, kVertexFace>(mesh, single, g, params, kept, room, counters));
     }
   }
-  if (lane < count) screen_single_tail<Method, kVertexFace>(mesh, single, {firsts[lane], seconds[lane]}, params, kept, room, counters);
+  TailVerdict last = TailVerdict::kept;  // (lanes past the gathered pairs: counted as neither)
+  if (lane < count) last = screen_single_tail<Method, kVertexFace>(mesh, single, {firsts[lane], seconds[lane]}, params, kept, room, counters);
+  count_tail(last);
+  if (lane == 0) {
+    if (misses) atomicAdd(counters + kSingleMisses, misses);
+    if (separated) atomicAdd(counters + kSeparated, separated);
+  }
 }
 
 // Pass 1 of two-pass methods: the cheap first step on every pair of a list whose length is read
