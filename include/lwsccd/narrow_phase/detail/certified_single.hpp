@@ -174,6 +174,16 @@ template <class Policy, class QF, class T>
 LWSCCD_HD bool single_screen_in_space(const SingleQuery<QF>& s, const CcdParams<T>& params) {
   return !(params.min_separation > T(0)) && screen_in_space<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
 }
+/// single_screen_in_space in its two parts (screen_in_motion, screen_boxes_apart): it is true
+/// exactly when one of them is.
+template <class Policy, class QF, class T>
+LWSCCD_HD bool single_screen_in_motion(const SingleQuery<QF>& s, const CcdParams<T>& params) {
+  return !(params.min_separation > T(0)) && screen_in_motion<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
+}
+template <class Policy, class QF, class T>
+LWSCCD_HD bool single_screen_boxes_apart(const SingleQuery<QF>& s, const CcdParams<T>& params) {
+  return !(params.min_separation > T(0)) && screen_boxes_apart(s.q, single_input_perturbation<Policy>(), s.m);
+}
 template <class Policy, class QF, class T>
 LWSCCD_HD bool single_screen_by_cubic(const SingleQuery<QF>& s, const CcdParams<T>& params) {
   return !(params.min_separation > T(0)) && screen_by_cubic<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
