@@ -61,8 +61,9 @@ struct CertifiedPolicy {
   /// goes to double (CertifiedFilter::expand_single).
   static constexpr bool kSingleSecondRound = true;
   /// The single-precision filter first tries directions that separate the pair's swept features
-  /// (their hulls over the step, detail::swept_hulls_apart): a quarter to two fifths of the pairs
-  /// the screen passes end there as misses, before the cubic's pieces and the inside tests.
+  /// (their hulls over the step, detail::swept_hulls_apart): 1-3% of the pairs the screen passes
+  /// on cloth-ball and armadillo-rollers end there as misses (a quarter to two fifths before the
+  /// screen tested the differences), before the cubic's pieces and the inside tests.
   static constexpr bool kSeparatingDirections = true;
   /// Multiplier of the single-precision screen's input bound, which covers rounding the relative
   /// coordinates to float (1 = as derived; only the mutation tests change it).

@@ -100,7 +100,7 @@ LWSCCD_HD LWSCCD_HOST_INLINE constexpr bool first_feature_point(int i) {
 /// and a direction d with max d.x over one hull's points below min d.y over the other's keeps the
 /// features apart at every t. The directions tried join the features' centroids (of both times,
 /// at t = 0, at t = 1): on the screen's survivors of cloth-ball and armadillo-rollers they
-/// separate a quarter to two fifths. Each dot product is within (gamma_3 + perturbation) S of the
+/// separated a quarter to two fifths before the screen tested the differences (B14), 1-3% since. Each dot product is within (gamma_3 + perturbation) S of the
 /// exact one for the exact relative query (S = |d| . m), the sums with E within u (|x| + E), so
 /// E = (perturbation + 6 u) S, plus the smallest normal float for underflow, covers both
 /// (Policy::kSeparationBound scales E: 1 = as derived; the mutation tests show that less is
