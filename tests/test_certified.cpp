@@ -692,23 +692,19 @@ std::size_t lane_differences(const std::vector<Q>& queries, std::size_t& misses,
   return differ;
 }
 
-// The screen in its parts, as the GPU's screen kernel runs them (the tests of the motion on every
-// pair; the swept boxes and the cubic on the pairs they leave, gathered into full warps), against
-// the one-pair screen: how many verdicts differ; `in_space` and `by_cubic` count the misses of
-// the tests in space (motion, then boxes) and of the cubic. The tests in space in their two parts
-// must agree with single_screen_in_space too.
+// The screen in its two parts, as the GPU's screen kernel runs them (the tests in space on every
+// pair, the cubic's on the pairs they leave, gathered into full warps), against the one-pair
+// screen: how many verdicts differ; `in_space` and `by_cubic` count the misses of each part.
 template <class Q>
 std::size_t part_differences(const std::vector<Q>& queries, std::size_t& in_space, std::size_t& by_cubic,
                              const CcdParams<double>& params = {}) {
   std::size_t differ = 0;
   for (const Q& q : queries) {
     const auto s = detail::relative_single(q);
-    const bool motion = detail::single_screen_in_motion<CertifiedPolicy>(s, params);
-    const bool boxes = !motion && detail::single_screen_boxes_apart<CertifiedPolicy>(s, params);
-    const bool cubic = !motion && !boxes && detail::single_screen_by_cubic<CertifiedPolicy>(s, params);
-    differ += (motion || boxes) != detail::single_screen_in_space<CertifiedPolicy>(s, params);
-    differ += (motion || boxes || cubic) != detail::certified_screen_single<CertifiedPolicy>(q, params);
-    in_space += motion || boxes;
+    const bool space = detail::single_screen_in_space<CertifiedPolicy>(s, params);
+    const bool cubic = !space && detail::single_screen_by_cubic<CertifiedPolicy>(s, params);
+    differ += (space || cubic) != detail::certified_screen_single<CertifiedPolicy>(q, params);
+    in_space += space;
     by_cubic += cubic;
   }
   return differ;

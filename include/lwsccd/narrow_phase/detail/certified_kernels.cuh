@@ -37,8 +37,8 @@ __device__ inline void keep_survivor(std::pair<index_t, index_t> p, std::pair<in
 // How the screen's tail ended for a pair.
 enum class TailVerdict : unsigned char { missed, separated, kept };
 
-// The screen's tail for one pair the tests of its motion left, in single precision: the swept
-// boxes and the cubic's signs, then the filter's separating directions (so that the pairs they decide are never kept: the
+// The screen's tail for one pair the tests in space left, in single precision: the cubic's signs,
+// then the filter's separating directions (so that the pairs they decide are never kept: the
 // filter's threads would diverge on them; counted as screened and decided in float); what is
 // left is kept (appended here). The caller counts the other two.
 template <class Method, bool kVertexFace, class T>
@@ -47,22 +47,18 @@ __device__ TailVerdict screen_single_tail(const MeshFeatures& mesh, const Single
                                           unsigned long long* counters) {
   using Policy = typename Method::policy_type;
   const auto q = gather_single_query<kVertexFace>(mesh, single, p);
-  const auto s = lwsccd::detail::relative_single(q);
-  if (lwsccd::detail::single_screen_boxes_apart<Policy>(s, params) || lwsccd::detail::single_screen_by_cubic<Policy>(s, params))
-    return TailVerdict::missed;
+  if (lwsccd::detail::single_screen_by_cubic<Policy>(lwsccd::detail::relative_single(q), params)) return TailVerdict::missed;
   if (lwsccd::detail::CertifiedFilter<Policy>::separates_single(q, params)) return TailVerdict::separated;
   keep_survivor(p, kept, room, counters);
   return TailVerdict::kept;
 }
 
 // Pass 1 of a certified method, FP32 first: every pair through the single-precision screen.
-// The tests of the features' motion (a window's boxes, the differences of their points) end most
-// pairs of a real step, but nearly every warp holds a pair they leave (cloth-ball: 17% of the
-// pairs), and the swept boxes, the cubic and the separating directions would then run with a few
-// lanes active. So a warp gathers the pairs they leave in shared memory and screens them 32 at a
-// time, full warps, as it goes and once more at the end: the same verdicts and counts, in another
-// order. (The swept boxes reject none of the emission's pairs, whose feature boxes overlap: on
-// every pair they cost ~90 instructions for nothing.) A warp counts its misses
+// Its tests in space (swept boxes, the differences of the features' points) end most pairs of a
+// real step, but nearly every warp holds a pair they leave (cloth-ball: 17% of the pairs), and the
+// cubic and the separating directions would then run with a lane or two active. So a warp gathers
+// the pairs they leave in shared memory and screens them 32 at a time, full warps, as it goes and
+// once more at the end: the same verdicts and counts, in another order. A warp counts its misses
 // and separated pairs by ballots and adds them once at its end (an atomic per pair, even
 // warp-aggregated, took ~30 instructions a round and an eighth of the kernel's stalls on
 // cloth-ball). kBlock: the launch's threads per block.
@@ -91,7 +87,7 @@ __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex
       const std::pair<index_t, index_t> p = pairs[i];
       first = p.first, second = p.second;
       const auto q = gather_single_query<kVertexFace>(mesh, single, p);
-      left = !lwsccd::detail::single_screen_in_motion<Policy>(lwsccd::detail::relative_single(q), params);
+      left = !lwsccd::detail::single_screen_in_space<Policy>(lwsccd::detail::relative_single(q), params);
     }
     const unsigned mask = __ballot_sync(0xffffffffu, left);
     misses += static_cast<unsigned>(__popc(__ballot_sync(0xffffffffu, i < n))) - static_cast<unsigned>(__popc(mask));

@@ -188,16 +188,16 @@ LWSCCD_HD bool screen_with(const Q& q, const CcdParams<T>& params, W perturbatio
   return screen_in_space<Policy>(q, params, perturbation, m) || screen_by_cubic<Policy>(q, params, perturbation, m, mixed);
 }
 
-/// screen_in_space's tests of the features' motion: a window's boxes (mode earliest), then the
-/// differences of their points at the same time. On the pairs a feature emission lists they
-/// decide nearly every pair screen_in_space rejects (CPU, commit e5ebae4: all of cloth-ball's and
-/// armadillo-rollers'), so a batch may run the swept boxes after them, on what they leave.
+/// screen_with's first part: the features apart in space over the step (swept boxes; a window's
+/// boxes; the differences of their points at the same time), before any cubic. A batch may run
+/// the two parts apart (the GPU's screen gathers the pairs this part leaves into full warps).
 template <class Policy, class W, class Q, class T>
-LWSCCD_HD bool screen_in_motion(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m) {
+LWSCCD_HD bool screen_in_space(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m) {
+  // Swept boxes apart: no arithmetic but the pad, so it goes first.
+  if (swept_boxes_apart(q, vscale(m, W(4) * perturbation))) return true;
   // Only [0, time_limit) asked for (mode earliest's windows): the boxes over the smallest dyadic
   // [0, w] that covers it, which are far smaller than the whole step's when w is short. (w is a
-  // power of two, so its comparisons with the time limit are exact in T.) They go first: over a
-  // short window they reject nearly every pair alone.
+  // power of two, so its comparisons with the time limit are exact in T.)
   if (params.time_limit <= T(0.5)) {
     W w = W(0.5);
     for (int level = 1; level < 30 && T(w / 2) >= params.time_limit; ++level) w /= 2;
@@ -205,26 +205,10 @@ LWSCCD_HD bool screen_in_motion(const Q& q, const CcdParams<T>& params, W pertur
     const Vec3<W> pad = vscale(m, W(20) * perturbation);
     if (window_boxes_apart(q, w, Vec3<W>{fadd(pad.x, tiny), fadd(pad.y, tiny), fadd(pad.z, tiny)})) return true;
   }
-  // The features' relative motion: it decides most pairs of a real step, whose features move much
-  // as their neighbours do.
+  // The features' relative motion: cheaper than the cubic, and it decides most pairs of a real
+  // step, whose features move much as their neighbours do. (After a window's boxes, which over a
+  // short window reject nearly every pair alone; the verdict does not depend on the order.)
   return Policy::kCornerDifferences && differences_apart<Policy>(q, m, perturbation);
-}
-
-/// The swept boxes of screen_in_space, apart by more than the pad that covers the perturbation.
-template <class W, class Q>
-LWSCCD_HD LWSCCD_HOST_INLINE bool screen_boxes_apart(const Q& q, W perturbation, const Vec3<W>& m) {
-  return swept_boxes_apart(q, vscale(m, W(4) * perturbation));
-}
-
-/// screen_with's first part: the features apart in space over the step (a window's boxes; the
-/// differences of their points at the same time; the swept boxes), before any cubic. A batch may
-/// run the two parts apart (the GPU's screen gathers the pairs the motion's tests leave into full
-/// warps, and tests their swept boxes and cubic there). The swept boxes go last: a feature
-/// emission lists only pairs whose feature boxes overlap, so on its pairs they reject none or
-/// almost none, and the tests before them reject most.
-template <class Policy, class W, class Q, class T>
-LWSCCD_HD bool screen_in_space(const Q& q, const CcdParams<T>& params, W perturbation, const Vec3<W>& m) {
-  return screen_in_motion<Policy>(q, params, perturbation, m) || screen_boxes_apart(q, perturbation, m);
 }
 
 /// screen_with's second part: the cubic's Bernstein signs on the step (or on the smallest dyadic

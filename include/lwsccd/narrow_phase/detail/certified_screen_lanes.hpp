@@ -126,7 +126,16 @@ void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params,
     for (int k = 0; k < 3; ++k) relative[k] = lanes::max(relative[k], lanes::abs(r[i][k]));
   for (int k = 0; k < 3; ++k) m[k] = relative[k] + input[k] * 3.0f;
   const float perturbation = single_input_perturbation<Policy>();
+  // swept_boxes_apart, with the pad vscale(m, 4 perturbation).
+  const float pad_scale = 4.0f * perturbation;
   ScreenLaneMask apart = {};
+  for (int k = 0; k < 3; ++k) {
+    const L pad = m[k] * pad_scale;
+    L alo = r[Points::kFirst[0]][k], ahi = alo, blo = r[Points::kSecond[0]][k], bhi = blo;
+    for (int i = 1; i < Points::kFirstCount; ++i) alo = lanes::min(alo, r[Points::kFirst[i]][k]), ahi = lanes::max(ahi, r[Points::kFirst[i]][k]);
+    for (int i = 1; i < Points::kSecondCount; ++i) blo = lanes::min(blo, r[Points::kSecond[i]][k]), bhi = lanes::max(bhi, r[Points::kSecond[i]][k]);
+    apart |= (ahi + pad < blo) | (bhi + pad < alo);
+  }
   // Every lane apart already (neighbouring pairs of a real step mostly are): the tests left can
   // only agree. (Mode earliest's window boxes go first: over a short window they reject nearly
   // every pair, so the differences would cost for nothing there; the verdicts do not depend on
@@ -191,17 +200,6 @@ void screen_single_in_lanes(const Q* queries, int n, const CcdParams<T>& params,
       along_apart &= (along - along == zero) & (along > margin);
     }
     apart |= along_apart;
-  }
-  if (all_apart()) return;
-  // swept_boxes_apart (screen_boxes_apart), with the pad vscale(m, 4 perturbation): after the
-  // motion's tests, as screen_in_space runs them (they reject none of an emission's pairs).
-  const float pad_scale = 4.0f * perturbation;
-  for (int k = 0; k < 3; ++k) {
-    const L pad = m[k] * pad_scale;
-    L alo = r[Points::kFirst[0]][k], ahi = alo, blo = r[Points::kSecond[0]][k], bhi = blo;
-    for (int i = 1; i < Points::kFirstCount; ++i) alo = lanes::min(alo, r[Points::kFirst[i]][k]), ahi = lanes::max(ahi, r[Points::kFirst[i]][k]);
-    for (int i = 1; i < Points::kSecondCount; ++i) blo = lanes::min(blo, r[Points::kSecond[i]][k]), bhi = lanes::max(bhi, r[Points::kSecond[i]][k]);
-    apart |= (ahi + pad < blo) | (bhi + pad < alo);
   }
   if (all_apart()) return;
   // screening_bernstein: coplanarity_of, bernstein_controls and the bound.

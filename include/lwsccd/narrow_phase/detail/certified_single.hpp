@@ -100,8 +100,9 @@ LWSCCD_HD LWSCCD_HOST_INLINE constexpr bool first_feature_point(int i) {
 /// and a direction d with max d.x over one hull's points below min d.y over the other's keeps the
 /// features apart at every t. The directions tried join the features' centroids (of both times,
 /// at t = 0, at t = 1): on the screen's survivors of cloth-ball and armadillo-rollers they
-/// separated a quarter to two fifths before the screen tested the differences (B14), 1-3% since. Each dot product is within (gamma_3 + perturbation) S of the
-/// exact one for the exact relative query (S = |d| . m), the sums with E within u (|x| + E), so
+/// separated a quarter to two fifths before the screen tested the differences (B14), 1-3%
+/// since. Each dot product is within (gamma_3 + perturbation) S of the exact one for the exact
+/// relative query (S = |d| . m), the sums with E within u (|x| + E), so
 /// E = (perturbation + 6 u) S, plus the smallest normal float for underflow, covers both
 /// (Policy::kSeparationBound scales E: 1 = as derived; the mutation tests show that less is
 /// unsound).
@@ -173,16 +174,6 @@ LWSCCD_HD bool certified_screen_single(const Q& q_in, const CcdParams<T>& params
 template <class Policy, class QF, class T>
 LWSCCD_HD bool single_screen_in_space(const SingleQuery<QF>& s, const CcdParams<T>& params) {
   return !(params.min_separation > T(0)) && screen_in_space<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
-}
-/// single_screen_in_space in its two parts (screen_in_motion, screen_boxes_apart): it is true
-/// exactly when one of them is.
-template <class Policy, class QF, class T>
-LWSCCD_HD bool single_screen_in_motion(const SingleQuery<QF>& s, const CcdParams<T>& params) {
-  return !(params.min_separation > T(0)) && screen_in_motion<Policy>(s.q, params, single_input_perturbation<Policy>(), s.m);
-}
-template <class Policy, class QF, class T>
-LWSCCD_HD bool single_screen_boxes_apart(const SingleQuery<QF>& s, const CcdParams<T>& params) {
-  return !(params.min_separation > T(0)) && screen_boxes_apart(s.q, single_input_perturbation<Policy>(), s.m);
 }
 template <class Policy, class QF, class T>
 LWSCCD_HD bool single_screen_by_cubic(const SingleQuery<QF>& s, const CcdParams<T>& params) {
