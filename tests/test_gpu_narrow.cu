@@ -1,6 +1,7 @@
 // The GPU narrow phase against the CPU backend, pair for pair (and TOI bit for bit).
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cstring>
 #include <initializer_list>
 #include <random>
@@ -221,38 +222,100 @@ TEST_CASE("GPU hit sort: by (first, second) over only the bits the feature ids t
 
 TEST_CASE("GPU hit sort ahead: enqueued before the count reaches the host, used only where it covered it", "[gpu][narrow]") {
   // A buffer whose slots past the count hold other hits (a run's room past its hits): the sort
-  // ahead of `span` slots must order the first n and put nothing of the rest before them; where
-  // the span is short of n it must say so and leave the buffer as it was.
+  // ahead of `span` slots must order the first n (stably) and put nothing of the rest before
+  // them; where the span is short of n it must say so and leave the buffer as it was. By radix
+  // (no overflow word) and by buckets (with one): a bucket past detail::kBucketRankMax hits must
+  // be counted there and the sort declined, and the sorter then sorts ahead by radix.
   std::mt19937 rng(11);
-  for (const std::size_t limit : {std::size_t(3), std::size_t(1) << 16, std::size_t(50021), std::size_t(1) << 31})
-    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), std::size_t(200), std::size_t(256),
-                                std::size_t(300), std::size_t(20000)})
-      for (const std::size_t span : {n, n + 7, n > 0 ? n - 1 : 0, std::size_t(256), 2 * n + 3}) {
-        INFO("limit " << limit << ", n " << n << ", span " << span);
-        const std::size_t size = std::max(span, n) + 5;
-        std::uniform_int_distribution<std::size_t> id(0, limit - 1);
-        std::vector<FeatureHit<double>> hits(size);
-        for (std::size_t i = 0; i < size; ++i)
-          hits[i] = {static_cast<index_t>(i % 4 ? id(rng) : 0), static_cast<index_t>(id(rng)), static_cast<double>(i)};
-        gpu::DeviceBuffer<FeatureHit<double>> d;
-        d.upload(hits);
-        gpu::DeviceBuffer<unsigned long long> count;
-        count.upload(std::vector<unsigned long long>{n});
-        gpu::HitSorter<double> sorter;
-        sorter.sort_ahead(d, count.data(), span, limit);
-        LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
-        const bool covered = sorter.take_ahead(d, n);
-        REQUIRE(covered == (n < 2 || span >= n));
-        std::vector<FeatureHit<double>> expected(hits.begin(), hits.begin() + static_cast<std::ptrdiff_t>(n));
-        if (covered) std::stable_sort(expected.begin(), expected.end());
-        const std::vector<FeatureHit<double>> got = d.download_prefix(n);
-        for (std::size_t i = 0; i < n; ++i) {
-          REQUIRE(got[i].first == expected[i].first);
-          REQUIRE(got[i].second == expected[i].second);
-          REQUIRE(got[i].toi == expected[i].toi);
+  for (const bool buckets : {false, true})
+    for (const std::size_t limit : {std::size_t(3), std::size_t(1) << 16, std::size_t(50021), std::size_t(1) << 31})
+      for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), std::size_t(200), std::size_t(256),
+                                  std::size_t(300), std::size_t(20000)})
+        for (const std::size_t span : {n, n + 7, n > 0 ? n - 1 : 0, std::size_t(256), 2 * n + 3}) {
+          INFO("buckets " << buckets << ", limit " << limit << ", n " << n << ", span " << span);
+          const std::size_t size = std::max(span, n) + 5;
+          std::uniform_int_distribution<std::size_t> id(0, limit - 1);
+          std::vector<FeatureHit<double>> hits(size);
+          for (std::size_t i = 0; i < size; ++i)
+            hits[i] = {static_cast<index_t>(i % 4 ? id(rng) : 0), static_cast<index_t>(id(rng)), static_cast<double>(i)};
+          gpu::DeviceBuffer<FeatureHit<double>> d;
+          d.upload(hits);
+          gpu::DeviceBuffer<unsigned long long> count, overflow;
+          count.upload(std::vector<unsigned long long>{n});
+          overflow.upload(std::vector<unsigned long long>{0});
+          gpu::HitSorter<double> sorter;
+          sorter.sort_ahead(d, count.data(), span, limit, nullptr, buckets ? overflow.data() : nullptr);
+          LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+          const unsigned long long overflowed = overflow.download()[0];
+          // Hits with first id 0 (a quarter of them) share a bucket: past its limit with n 20000.
+          const bool bucketed = buckets && std::min(span, size) > static_cast<std::size_t>(gpu::detail::kSmallHitSort);
+          const std::size_t in_first_bucket = static_cast<std::size_t>(
+              std::count_if(hits.begin(), hits.begin() + static_cast<std::ptrdiff_t>(std::min(n, span)),
+                            [&](const FeatureHit<double>& h) { return h.first == 0; }));
+          if (!bucketed) REQUIRE(overflowed == 0);
+          if (bucketed && in_first_bucket > gpu::detail::kBucketRankMax) REQUIRE(overflowed > 0);
+          const bool covered = sorter.take_ahead(d, n, overflowed);
+          REQUIRE(covered == (n < 2 || (span >= n && overflowed == 0)));
+          CHECK(sorter.ahead_by_radix() == (overflowed > 0));
+          std::vector<FeatureHit<double>> expected(hits.begin(), hits.begin() + static_cast<std::ptrdiff_t>(n));
+          if (covered) std::stable_sort(expected.begin(), expected.end());
+          const std::vector<FeatureHit<double>> got = d.download_prefix(n);
+          for (std::size_t i = 0; i < n; ++i) {
+            REQUIRE(got[i].first == expected[i].first);
+            REQUIRE(got[i].second == expected[i].second);
+            REQUIRE(got[i].toi == expected[i].toi);
+          }
+          CHECK(!sorter.take_ahead(d, std::max<std::size_t>(n, 2)));  // (taken once only)
+          if (overflowed == 0) continue;
+          // Declined once, by radix from then on: the same hits sorted ahead again are covered.
+          d.upload(hits);
+          sorter.sort_ahead(d, count.data(), span, limit, nullptr, overflow.data());
+          LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+          REQUIRE(sorter.take_ahead(d, n, 0) == (span >= n));
         }
-        CHECK(!sorter.take_ahead(d, std::max<std::size_t>(n, 2)));  // (taken once only)
-      }
+}
+
+TEST_CASE("GPU hit sort ahead by buckets: spread and crowded first ids, run after run", "[gpu][narrow]") {
+  // One sorter many times (its bucket counts must return to zero after each sort), with first ids
+  // spread (a bucket or two each), in runs (consecutive ids, as contacts of one region), and up
+  // to kBucketRankMax in one bucket: every sort covered and stable.
+  std::mt19937 rng(5);
+  gpu::HitSorter<double> sorter;
+  gpu::DeviceBuffer<unsigned long long> count, overflow;
+  overflow.upload(std::vector<unsigned long long>{0});
+  for (int round = 0; round < 12; ++round) {
+    const std::size_t limit = round % 3 == 0 ? std::size_t(300000) : round % 3 == 1 ? std::size_t(4099) : std::size_t(1) << 20;
+    const std::size_t n = round % 2 ? 70000 : 1000 + 37 * static_cast<std::size_t>(round);
+    INFO("round " << round << ", limit " << limit << ", n " << n);
+    std::uniform_int_distribution<std::size_t> id(0, limit - 1);
+    std::vector<FeatureHit<double>> hits(n);
+    const index_t crowded = static_cast<index_t>(id(rng));
+    for (std::size_t i = 0; i < n; ++i) {
+      index_t first = static_cast<index_t>(id(rng));
+      if (round % 4 == 1) first = static_cast<index_t>((i / 3) % limit);                  // runs of ids
+      if (i < gpu::detail::kBucketRankMax / 2) first = crowded;                          // one crowded id
+      hits[i] = {first, static_cast<index_t>(i % 7 ? id(rng) : 1), static_cast<double>(i)};
+    }
+    gpu::DeviceBuffer<FeatureHit<double>> d;
+    d.upload(hits);
+    count.upload(std::vector<unsigned long long>{n});
+    sorter.sort_ahead(d, count.data(), gpu::HitSorter<double>::span_after(n), limit, nullptr, overflow.data());
+    LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
+    const unsigned long long overflowed = overflow.download()[0];
+    if (limit >= n) REQUIRE(overflowed == 0);  // (a dense id range: buckets of one or two ids)
+    REQUIRE(sorter.take_ahead(d, n, overflowed) == (overflowed == 0));
+    if (overflowed) {
+      overflow.upload(std::vector<unsigned long long>{0});
+      continue;
+    }
+    std::stable_sort(hits.begin(), hits.end());
+    const std::vector<FeatureHit<double>> got = d.download_prefix(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      REQUIRE(got[i].first == hits[i].first);
+      REQUIRE(got[i].second == hits[i].second);
+      REQUIRE(got[i].toi == hits[i].toi);
+    }
+  }
 }
 
 TEST_CASE("GPU narrow phase run after run: hits sorted ahead where the last count covers them, else after", "[gpu][narrow]") {

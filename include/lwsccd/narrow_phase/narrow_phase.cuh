@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
 
 #include <algorithm>
 #include <functional>
@@ -125,7 +126,8 @@ struct NarrowPhasePolicy {
 };
 
 /// Sorts device hits by (first, second), the order of the CPU backend's results (CUB radix sort
-/// on a 64-bit key). Owns its scratch (reused; it only grows).
+/// on a 64-bit key; ahead of the count, by buckets of first ids where it can). Owns its scratch
+/// (reused; it only grows).
 template <class T>
 class HitSorter {
  public:
@@ -138,24 +140,43 @@ class HitSorter {
   /// is still on the device only (`device_count`: slots from it on sort after the hits), so that
   /// no host round trip sits between a run's last kernel and its sort. take_ahead() then says
   /// whether that sort covered the count.
+  /// With `overflow` (a device word, zero, that the caller reads back with its run's counts) the
+  /// hits are sorted by buckets of first ids (detail::bucket_rank_kernel: five launches, no
+  /// radix passes); a bucket of more than detail::kBucketRankMax hits adds to *overflow, and the
+  /// caller passes the word to take_ahead(), which then declines the sort (sort() them). From
+  /// then on this sorter sorts ahead by radix (a scene whose contacts crowd a few features keeps
+  /// crowding them). Without `overflow`: by radix.
   void sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
-                  std::size_t id_limit, cudaStream_t stream = nullptr);
+                  std::size_t id_limit, cudaStream_t stream = nullptr, unsigned long long* overflow = nullptr);
   /// Once the stream of the last sort_ahead() has been synchronized and the count `n` is known:
   /// true when that sort covered it, the sorted hits then in `hits` (buffers exchanged as by
-  /// sort()); false when it did not (`hits` unchanged: sort() them). Forgets the sort ahead.
-  bool take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n);
+  /// sort()); false when it did not (`hits` unchanged: sort() them). `overflow`: the value of the
+  /// word given to sort_ahead() (not zero: a bucket was too full, the sort is declined). Forgets
+  /// the sort ahead.
+  bool take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, unsigned long long overflow = 0);
   /// The span to sort ahead in a run that follows one with `n` hits: a quarter more, so that a
   /// count that grows a little from run to run stays covered.
   static std::size_t span_after(std::size_t n) { return n + n / 4 + 32; }
+  /// Whether sort_ahead() sorts by radix whatever it is given (after a bucket overflowed).
+  bool ahead_by_radix() const { return ahead_by_radix_; }
   std::size_t device_bytes() const {
-    return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes();
+    return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes() +
+           bucket_count_.capacity_bytes() + bucket_start_.capacity_bytes() + order_.capacity_bytes();
   }
 
  private:
+  void radix_sort(const FeatureHit<T>* hits, std::size_t n, int id_bits, cudaStream_t stream, const unsigned long long* device_count);
+  void bucket_sort(const FeatureHit<T>* hits, const unsigned long long* device_count, std::size_t span, std::size_t id_limit,
+                   int id_bits, cudaStream_t stream, unsigned long long* overflow);
   std::size_t ahead_ = 0;  ///< slots the last sort_ahead() sorted (0: none pending)
+  bool ahead_bucketed_ = false;  ///< the last sort_ahead() sorted by buckets
+  bool ahead_by_radix_ = false;  ///< a bucket overflowed once: sort ahead by radix from then on
   DeviceBuffer<FeatureHit<T>> sorted_;
   DeviceBuffer<unsigned long long> keys_, sorted_keys_;
   DeviceBuffer<unsigned char> scratch_;
+  DeviceBuffer<unsigned> bucket_count_;  ///< per bucket, zero between sorts
+  std::size_t bucket_count_zeroed_ = 0;  ///< words of bucket_count_ known to be zero
+  DeviceBuffer<unsigned> bucket_start_, order_;
 };
 
 /// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as

@@ -64,6 +64,63 @@ __global__ void __launch_bounds__(kThreads)
 }
 constexpr int kSmallHitSort = 256;  ///< hits sorted by small_hit_sort_kernel (more: the radix sort)
 
+// The sort ahead by buckets (HitSorter::sort_ahead): bucket b holds the hits whose first id lies
+// in [b 2^shift, (b + 1) 2^shift), so the buckets' order is the first ids' order; the hits are
+// counted per bucket, the counts scanned, each hit placed in its bucket's range, and then ranked
+// there by its key (the index in the unsorted list breaks ties, so the sort is stable). Five
+// short launches where a radix sort of the 2 id_bits-bit keys took eight (a histogram, a scan and
+// one pass per 8 bits), ~60-80 us at the end of a step's edge-edge list (H200 trace, cloth-ball).
+// A rank costs a read of every hit of its bucket; buckets of a real step can be crowded (a
+// feature of a coarse mesh touching many of a fine one: cloth-ball's edge-edge hits hold 189 in
+// one bucket of two edges, 118 for one edge), and a bucket of 1024 costs a thread ~1024 reads of
+// keys its warp mostly shares. A bucket with more than kBucketRankMax hits is counted in
+// *overflow and not ranked: the caller then sorts by radix.
+constexpr unsigned kBucketRankMax = 1024;
+
+template <class T>
+__global__ void bucket_count_kernel(const FeatureHit<T>* hits, std::size_t span, const unsigned long long* device_n, int shift,
+                                    unsigned* bucket_count, unsigned long long* overflow) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= span || i >= *device_n) return;
+  const unsigned b = static_cast<unsigned>(hits[i].first) >> shift;
+  if (atomicAdd(bucket_count + b, 1u) == kBucketRankMax) atomicAdd(overflow, 1ull);  // (once a bucket)
+}
+// Each hit to a slot of its bucket's range: its key and its index. The counts return to zero
+// (they are zero again for the next sort).
+template <class T>
+__global__ void bucket_place_kernel(const FeatureHit<T>* hits, std::size_t span, const unsigned long long* device_n, int shift,
+                                    int id_bits, unsigned* bucket_count, const unsigned* bucket_start, unsigned long long* keys,
+                                    unsigned* order) {
+  const std::size_t i = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= span || i >= *device_n) return;
+  const FeatureHit<T> h = hits[i];
+  const unsigned b = static_cast<unsigned>(h.first) >> shift;
+  const unsigned at = bucket_start[b] + atomicSub(bucket_count + b, 1u) - 1u;
+  assert(static_cast<unsigned long long>(static_cast<unsigned>(h.first)) >> id_bits == 0 &&
+         static_cast<unsigned long long>(static_cast<unsigned>(h.second)) >> id_bits == 0 && "a feature id past the mesh's features");
+  keys[at] = (static_cast<unsigned long long>(static_cast<unsigned>(h.first)) << id_bits) | static_cast<unsigned>(h.second);
+  order[at] = static_cast<unsigned>(i);
+}
+// A thread per placed hit: its rank among its bucket's hits is its place after the bucket's start.
+template <class T>
+__global__ void bucket_rank_kernel(const FeatureHit<T>* hits, std::size_t span, const unsigned long long* device_n, int shift,
+                                   int id_bits, const unsigned* bucket_start, const unsigned long long* keys, const unsigned* order,
+                                   FeatureHit<T>* sorted) {
+  const std::size_t p = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (p >= span || p >= *device_n) return;
+  const unsigned long long key = keys[p];
+  const unsigned index = order[p];
+  const unsigned b = static_cast<unsigned>(key >> id_bits) >> shift;
+  const unsigned from = bucket_start[b], to = bucket_start[b + 1];
+  if (to - from > kBucketRankMax) return;  // (counted: the caller sorts by radix)
+  unsigned rank = 0;
+  for (unsigned j = from; j < to; ++j) {
+    const unsigned long long other = keys[j];
+    rank += other < key || (other == key && order[j] < index);
+  }
+  sorted[from + rank] = hits[index];
+}
+
 // Bits of the largest feature id below `id_limit` (at least 1, at most 32).
 inline int id_bits_below(std::size_t id_limit) {
   int bits = 1;

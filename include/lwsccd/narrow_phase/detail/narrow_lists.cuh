@@ -87,6 +87,7 @@ enum NarrowCounter : int {
   kKeptSlots,       // FP32 first: slots of the double filter's list asked for (more than the room: the run is repeated with more)
   kKeptSlotsPeak,   // the most asked for by an earlier window of mode earliest
   kSeparated,       // FP32 first: pairs the screen passed and the filter's separating directions decided there
+  kHitSortOverflow, // the hits' sort ahead by buckets: buckets past detail::kBucketRankMax hits (then sorted by radix)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.

@@ -173,7 +173,8 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   // quarter): a round trip between the run and its sort idled the GPU for its ~14 launches a list.
   if (!earliest_only_) {
     for (auto& l : lists_) {
-      l.sorter.sort_ahead(l.hits, l.counters.data() + detail::kHits, l.sort_span, id_limit_, l.stream);
+      l.sorter.sort_ahead(l.hits, l.counters.data() + detail::kHits, l.sort_span, id_limit_, l.stream,
+                          l.counters.data() + detail::kHitSortOverflow);
     }
     join_lists(stream);
   }
@@ -506,7 +507,8 @@ bool NarrowPhase<Method, T, Policy>::collect() {
   // the count; otherwise the hits are sorted now.
   if (!earliest_only_) {
     for (auto& l : lists_) {
-      if (!l.sorter.take_ahead(l.hits, l.count)) l.sorter.sort(l.hits, l.count, id_limit_, l.stream);
+      if (!l.sorter.take_ahead(l.hits, l.count, l.host_counters.data()[detail::kHitSortOverflow]))
+        l.sorter.sort(l.hits, l.count, id_limit_, l.stream);
       l.sort_span = HitSorter<T>::span_after(l.count);
     }
     join_lists(stream_);
@@ -514,6 +516,21 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     for (auto& l : lists_) l.sorter.take_ahead(l.hits, 0);
   }
   return true;
+}
+
+template <class T>
+void HitSorter<T>::radix_sort(const FeatureHit<T>* hits, std::size_t n, int id_bits, cudaStream_t stream,
+                              const unsigned long long* device_count) {
+  keys_.resize_discard(n);
+  sorted_keys_.resize_discard(n);
+  detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(hits, n, id_bits, keys_.data(), device_count);
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  std::size_t bytes = 0;
+  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys_.data(), sorted_keys_.data(), hits, sorted_.data(),
+                                                    static_cast<std::int64_t>(n), 0, 2 * id_bits, stream));
+  scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
+  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(scratch_.data(), bytes, keys_.data(), sorted_keys_.data(), hits, sorted_.data(),
+                                                    static_cast<std::int64_t>(n), 0, 2 * id_bits, stream));
 }
 
 template <class T>
@@ -527,26 +544,53 @@ void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::s
     detail::small_hit_sort_kernel<T, detail::kSmallHitSort>
         <<<1, detail::kSmallHitSort, 0, stream>>>(hits.data(), static_cast<int>(n), id_bits, sorted_.data());
     LWSCCD_CUDA_CHECK_LAUNCH();
-    std::swap(hits, sorted_);
-    return;
+  } else {
+    radix_sort(hits.data(), n, id_bits, stream, nullptr);
   }
-  keys_.resize_discard(n);
-  sorted_keys_.resize_discard(n);
-  detail::hit_keys_kernel<<<static_cast<unsigned>((n + 255) / 256), 256, 0, stream>>>(hits.data(), n, id_bits, keys_.data());
-  LWSCCD_CUDA_CHECK_LAUNCH();
-  std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys_.data(), sorted_keys_.data(), hits.data(),
-                                                    sorted_.data(), static_cast<std::int64_t>(n), 0, 2 * id_bits, stream));
-  scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
-  LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(scratch_.data(), bytes, keys_.data(), sorted_keys_.data(), hits.data(),
-                                                    sorted_.data(), static_cast<std::int64_t>(n), 0, 2 * id_bits, stream));
   std::swap(hits, sorted_);  // (only the handles: the sort wrote `sorted_`, which is now `hits`)
 }
 
 template <class T>
+void HitSorter<T>::bucket_sort(const FeatureHit<T>* hits, const unsigned long long* device_count, std::size_t span,
+                               std::size_t id_limit, int id_bits, cudaStream_t stream, unsigned long long* overflow) {
+  // Buckets: a power of two, at least twice the span (a couple of hits a bucket where the first
+  // ids spread), at most one first id each; memory and scan in proportion to the span, not to
+  // the mesh.
+  int bucket_bits = 1;
+  while (bucket_bits < id_bits && (std::size_t(1) << bucket_bits) < 2 * span) ++bucket_bits;
+  const int shift = id_bits - bucket_bits;
+  const std::size_t buckets = ((std::max<std::size_t>(id_limit, 1) - 1) >> shift) + 1;
+  if (bucket_count_.size() < buckets + 1 || bucket_count_zeroed_ < buckets + 1) {
+    bucket_count_.resize_discard(std::max(buckets + 1, bucket_count_.size()));
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(bucket_count_.data(), 0, bucket_count_.size() * sizeof(unsigned), stream));
+    bucket_count_zeroed_ = bucket_count_.size();
+  }
+  bucket_start_.resize_discard(buckets + 1);
+  keys_.resize_discard(span);
+  order_.resize_discard(span);
+  const unsigned blocks = static_cast<unsigned>((span + 255) / 256);
+  detail::bucket_count_kernel<<<blocks, 256, 0, stream>>>(hits, span, device_count, shift, bucket_count_.data(), overflow);
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  // (bucket_count_[buckets] is zero: the scan's last word is the count.)
+  std::size_t bytes = 0;
+  LWSCCD_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, bytes, bucket_count_.data(), bucket_start_.data(),
+                                                  static_cast<std::int64_t>(buckets + 1), stream));
+  scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
+  LWSCCD_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scratch_.data(), bytes, bucket_count_.data(), bucket_start_.data(),
+                                                  static_cast<std::int64_t>(buckets + 1), stream));
+  detail::bucket_place_kernel<<<blocks, 256, 0, stream>>>(hits, span, device_count, shift, id_bits, bucket_count_.data(),
+                                                          bucket_start_.data(), keys_.data(), order_.data());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+  detail::bucket_rank_kernel<<<blocks, 256, 0, stream>>>(hits, span, device_count, shift, id_bits, bucket_start_.data(), keys_.data(),
+                                                         order_.data(), sorted_.data());
+  LWSCCD_CUDA_CHECK_LAUNCH();
+}
+
+template <class T>
 void HitSorter<T>::sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
-                              std::size_t id_limit, cudaStream_t stream) {
+                              std::size_t id_limit, cudaStream_t stream, unsigned long long* overflow) {
   ahead_ = 0;
+  ahead_bucketed_ = false;
   span = std::min(span, hits.size());
   if (span < 2) return;
   sorted_.resize_discard(std::max(span, hits.size()));
@@ -555,29 +599,25 @@ void HitSorter<T>::sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const uns
     detail::small_hit_sort_kernel<T, detail::kSmallHitSort>
         <<<1, detail::kSmallHitSort, 0, stream>>>(hits.data(), static_cast<int>(span), id_bits, sorted_.data(), device_count);
     LWSCCD_CUDA_CHECK_LAUNCH();
+  } else if (overflow && !ahead_by_radix_ && span < (std::size_t(1) << 31)) {
+    bucket_sort(hits.data(), device_count, span, id_limit, id_bits, stream, overflow);
+    ahead_bucketed_ = true;
   } else {
-    keys_.resize_discard(span);
-    sorted_keys_.resize_discard(span);
-    detail::hit_keys_kernel<<<static_cast<unsigned>((span + 255) / 256), 256, 0, stream>>>(hits.data(), span, id_bits, keys_.data(),
-                                                                                          device_count);
-    LWSCCD_CUDA_CHECK_LAUNCH();
-    std::size_t bytes = 0;
-    LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys_.data(), sorted_keys_.data(), hits.data(), sorted_.data(),
-                                                      static_cast<std::int64_t>(span), 0, 2 * id_bits, stream));
-    scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
-    LWSCCD_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(scratch_.data(), bytes, keys_.data(), sorted_keys_.data(), hits.data(),
-                                                      sorted_.data(), static_cast<std::int64_t>(span), 0, 2 * id_bits, stream));
+    radix_sort(hits.data(), span, id_bits, stream, device_count);
   }
   ahead_ = span;
 }
 
 template <class T>
-bool HitSorter<T>::take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n) {
+bool HitSorter<T>::take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, unsigned long long overflow) {
   const std::size_t ahead = ahead_;
+  const bool bucketed = ahead_bucketed_;
   ahead_ = 0;
+  ahead_bucketed_ = false;
+  if (bucketed && overflow != 0) ahead_by_radix_ = true;
   if (n < 2) return true;  // (nothing to order)
-  if (ahead < n) return false;
-  std::swap(hits, sorted_);  // (the slots past n sorted after the hits)
+  if (ahead < n || (bucketed && overflow != 0)) return false;
+  std::swap(hits, sorted_);  // (the slots past n sorted after the hits, or left as they were by buckets)
   return true;
 }
 
