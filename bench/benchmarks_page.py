@@ -558,6 +558,10 @@ def main():
     rel = os.path.relpath(results, os.path.dirname(os.path.abspath(page)))
     kinds = sorted(f[len("machine_"):-len(".json")] for f in os.listdir(results)
                    if f.startswith("machine_") and f.endswith(".json") and f != "machine_cpu.json")
+    # The latest measurement is drawn in full; older ones (other GPU kinds) are named with their
+    # files, so that the page shows one commit's figures.
+    kinds.sort(key=lambda k: (load(os.path.join(results, f"machine_{k}.json")) or {}).get("date", ""), reverse=True)
+    older, kinds = kinds[1:], kinds[:1]
     cpu_machine = load(os.path.join(results, "machine_cpu.json"))
     accuracy = load(os.path.join(results, "accuracy_cpu.json"))
     out = ["# Benchmarks", "",
@@ -590,6 +594,16 @@ def main():
         out += ["## BVH build and refit", "", f"Median ms ({gpu}):", ""] + bvh_section(
             load(os.path.join(results, f"bvh_{kind}.json"))) + [""]
         out += ["## Rays", ""] + rays_section(load(os.path.join(results, f"rays_{kind}.json")), kind, results, gpu) + [""]
+    if older:
+        out += ["## Earlier GPU measurements", "",
+                "Kept in [results/](results/) and not drawn here (each file names its benchmark):", ""]
+        for kind in older:
+            m = load(os.path.join(results, f"machine_{kind}.json")) or {}
+            files = sorted(f for f in os.listdir(results) if f.endswith(".json") and (
+                f == f"machine_{kind}.json" or any(f == f"{b}_{kind}.json" for b in ("pipeline", "traverse", "rays", "bvh", "fp"))))
+            out += [f"- {m.get('gpu', kind)}, commit `{m.get('commit', '?')}`, {m.get('date', '?')}: " +
+                    ", ".join(f"`{f}`" for f in files)]
+        out += [""]
     out += cpu_section(load(os.path.join(results, "pipeline_cpu.json")), cpu_machine)
     if cpu_machine:
         out += machine_lines(cpu_machine, "CPU backend measured on") + [""]

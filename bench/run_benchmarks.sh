@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Measures lwsccd on this machine and writes docs/BENCHMARKS.md from the results.
 #
-#   bash bench/run_benchmarks.sh [--only gpu|cpu] [--build DIR] [--data DIR] [--results DIR] [--no-page]
+#   bash bench/run_benchmarks.sh [--only gpu|cpu] [--no-fp | --fp-only] [--build DIR] [--data DIR] [--results DIR] [--no-page]
 #   bash bench/run_benchmarks.sh --plot [DIR]     # only the page and its charts, from results measured elsewhere
 #
 # It writes one file per benchmark and machine kind into the results folder (default docs/results),
@@ -14,6 +14,8 @@
 #   CPU: machine_cpu.json, accuracy_cpu.json (every narrow-phase method on the query sets and
 #       scenes), pipeline_cpu.json (the CPU backend, default policies per scene)
 # then bench/benchmarks_page.py draws the charts and writes the page (needs matplotlib).
+# --no-fp leaves out the FP64/FP32 counts (Nsight Compute profiles lwsccd-ccd eight times: minutes);
+# --fp-only measures only them (the GPU's other results and the CPU's are left as they are).
 # The benchmarks are built in DIR (default build-bench) when they are not there yet; a machine
 # without nvcc measures the CPU part only. The data comes from ../shared/data (or --data DIR).
 # The commit recorded is `git rev-parse --short HEAD` (with "+changes" when the tree differs),
@@ -25,6 +27,8 @@ build="build-bench"
 data=""
 results="docs/results"
 only=""
+fp=1
+fp_only=0
 page=1
 plot_only=0
 while [ $# -gt 0 ]; do
@@ -35,12 +39,19 @@ while [ $# -gt 0 ]; do
     --data) data="$2"; shift ;;
     --results) results="$2"; shift ;;
     --no-page) page=0 ;;
+    --no-fp) fp=0 ;;
+    --fp-only) fp_only=1 ;;
     -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
     *) echo "run_benchmarks.sh: unknown argument '$1' (see --help)" >&2; exit 1 ;;
   esac
   shift
 done
 case "$only" in ""|gpu|cpu) ;; *) echo "run_benchmarks.sh: --only takes gpu or cpu, not '$only'" >&2; exit 1 ;; esac
+if [ "$fp_only" = 1 ]; then
+  [ "$fp" = 1 ] || { echo "run_benchmarks.sh: --fp-only and --no-fp exclude each other" >&2; exit 1; }
+  [ "$only" != "cpu" ] || { echo "run_benchmarks.sh: --fp-only measures the GPU, not --only cpu" >&2; exit 1; }
+  only="gpu"
+fi
 
 write_page() {
   if python3 -c "import matplotlib" 2>/dev/null; then
@@ -132,21 +143,25 @@ EOF
 
 if [ -n "$gpu_name" ]; then
   echo "== GPU: $gpu_name (results *_$kind.json in $results)"
-  write_machine "$results/machine_$kind.json" 1
-  "$bin/lwsccd-bench-pipeline" --device gpu --sweep default,methods,scaling --reps 10 "${data_args[@]}" \
-      --json "$results/pipeline_$kind.json"
-  "$bin/lwsccd-bench-traverse" "${data_args[@]}" --json "$results/traverse_$kind.json"
-  "$bin/lwsccd-bench-rays" "${data_args[@]}" --json "$results/rays_$kind.json"
-  "$bin/lwsccd-bench-bvh" "${data_args[@]}" --json "$results/bvh_$kind.json"
-  # The step split over GPUs, where there are two or more and the build has NCCL.
-  gpus=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | wc -l)
-  if [ "$gpus" -ge 2 ] && [ -x "$bin/lwsccd-bench-multi-gpu" ]; then
-    "$bin/lwsccd-bench-multi-gpu" --sizes 1e6,1e7 --gpus "1,$gpus" --reps 11 --json "$results/multi_gpu_${kind}x$gpus.json"
+  if [ "$fp_only" = 0 ]; then
+    write_machine "$results/machine_$kind.json" 1
+    "$bin/lwsccd-bench-pipeline" --device gpu --sweep default,methods,scaling --reps 10 "${data_args[@]}" \
+        --json "$results/pipeline_$kind.json"
+    "$bin/lwsccd-bench-traverse" "${data_args[@]}" --json "$results/traverse_$kind.json"
+    "$bin/lwsccd-bench-rays" "${data_args[@]}" --json "$results/rays_$kind.json"
+    "$bin/lwsccd-bench-bvh" "${data_args[@]}" --json "$results/bvh_$kind.json"
+    # The step split over GPUs, where there are two or more and the build has NCCL.
+    gpus=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | wc -l)
+    if [ "$gpus" -ge 2 ] && [ -x "$bin/lwsccd-bench-multi-gpu" ]; then
+      "$bin/lwsccd-bench-multi-gpu" --sizes 1e6,1e7 --gpus "1,$gpus" --reps 11 --json "$results/multi_gpu_${kind}x$gpus.json"
+    fi
   fi
   # FP64 and FP32 instructions of a steady step, per feature pair (Nsight Compute, where it is).
   ncu="$(command -v ncu || ls /usr/local/cuda*/bin/ncu 2>/dev/null | head -n1 || true)"
   ccd="$build/examples/lwsccd-ccd"
-  if [ -n "$ncu" ] && [ -x "$ccd" ]; then
+  if [ "$fp" = 0 ]; then
+    echo "run_benchmarks.sh: --no-fp: FP64/FP32 instruction counts not measured" >&2
+  elif [ -n "$ncu" ] && [ -x "$ccd" ]; then
     scenes="${data:-$(sed -n 's/^LWSCCD_DATA_DIR:PATH=//p' "$build/CMakeCache.txt" 2>/dev/null || true)}/scenes"
     python3 bench/fp_instructions.py --ncu "$ncu" --program "$ccd" --json "$results/fp_$kind.json" -- \
         "$scenes/cloth-ball" -- "$scenes/armadillo-rollers" -- "$scenes/cloth-funnel" -- --triangles 100000
