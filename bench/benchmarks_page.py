@@ -429,9 +429,12 @@ def multi_gpu_section(rows):
     if not rows:
         return []
     m = rows[0]
+    # (Rows written without their commit and date: MULTI_GPU.md names them.)
+    when = (f"commit {m['commit']}, {m['date']}" if m.get("commit") and m.get("date")
+            else "its commit and date in MULTI_GPU.md")
     lines = [f"The same scene split over GPUs (`gpu::MultiGpuPipeline`, [MULTI_GPU.md](MULTI_GPU.md)), device-resident "
-             f"steps (positions on the first GPU, contacts left there): {m.get('machine', m.get('gpu', ''))}, commit "
-             f"{m.get('commit', '?')}, {m.get('date', '?')}, medians of {m.get('reps', '?')} steps:", ""]
+             f"steps (positions on the first GPU, contacts left there): {m.get('machine', m.get('gpu', ''))}, {when}, "
+             f"medians of {m.get('reps', '?')} steps:", ""]
     body = []
     one = {r["triangles"]: r["step_ms"] for r in rows if r["config"] == "one-gpu"}
     for r in rows:
