@@ -125,6 +125,12 @@ __device__ inline unsigned packed_emission_mask(const PackedBoxes& packed, index
   return mask;
 }
 
+// Orphan k of the items past the candidates: vertex-face orphan k, then the edge-edge ones.
+template <class Pair>
+__device__ inline Pair orphan_item(const Pair* orphan_vf, std::size_t num_orphan_vf, const Pair* orphan_ee, std::size_t k) {
+  return k < num_orphan_vf ? orphan_vf[k] : orphan_ee[k - num_orphan_vf];
+}
+
 // Item i: candidate triangle pair i (i < n), then vertex-face orphan i - n, then edge-edge orphan.
 // Its emission mask: emission_mask for a candidate; bit 0 (vertex-face) or bit 6 (edge-edge) for a
 // kept orphan (orphan_kept: the two features' packed boxes overlap; `feature_slot` gives a vertex's
@@ -144,9 +150,9 @@ __device__ unsigned item_mask(const EmissionView& m, const PackedBoxes& packed, 
     assert(slot != ~0u && "an orphan's feature without a representing face");
     return packed.feature(slot);
   };
-  auto kept = [&](const Pair& q) { return box_of(q.first).overlaps(box_of(q.second)); };
-  if (i < n + num_orphan_vf) return kept(orphan_vf[i - n]) ? 1u : 0u;
-  return kept(orphan_ee[i - n - num_orphan_vf]) ? 1u << 6 : 0u;
+  const Pair q = orphan_item(orphan_vf, num_orphan_vf, orphan_ee, i - n);
+  if (!box_of(q.first).overlaps(box_of(q.second))) return 0u;
+  return i < n + num_orphan_vf ? 1u : 1u << 6;
 }
 
 __device__ inline unsigned long long mask_counts(unsigned mask) {
@@ -228,7 +234,7 @@ __global__ void __launch_bounds__(kBlock)
       const TrianglePair p = candidates[i];
       a = p.a, b = p.b;
     } else {
-      const Pair q = i < n + num_orphan_vf ? orphan_vf[i - n] : orphan_ee[i - n - num_orphan_vf];
+      const Pair q = orphan_item(orphan_vf, num_orphan_vf, orphan_ee, i - n);
       a = q.first, b = q.second;
     }
   }

@@ -90,7 +90,8 @@ __device__ void screen_single_first(const MeshFeatures& mesh, const SingleVertex
       left = !lwsccd::detail::single_screen_in_space<Policy>(lwsccd::detail::relative_single(q), params);
     }
     const unsigned mask = __ballot_sync(0xffffffffu, left);
-    misses += static_cast<unsigned>(__popc(__ballot_sync(0xffffffffu, i < n))) - static_cast<unsigned>(__popc(mask));
+    const std::size_t in_range = n - base < 32 ? n - base : 32;  // (base < n: the warp's pairs this round)
+    misses += static_cast<unsigned>(in_range) - static_cast<unsigned>(__popc(mask));
     if (left) {
       const int at = count + __popc(mask & ((1u << lane) - 1u));
       firsts[at] = first;

@@ -104,8 +104,8 @@ __global__ void bucket_place_kernel(const FeatureHit<T>* hits, std::size_t span,
 // A thread per placed hit: its rank among its bucket's hits is its place after the bucket's start.
 template <class T>
 __global__ void bucket_rank_kernel(const FeatureHit<T>* hits, std::size_t span, const unsigned long long* device_n, int shift,
-                                   int id_bits, const unsigned* bucket_start, const unsigned long long* keys, const unsigned* order,
-                                   FeatureHit<T>* sorted) {
+                                   int id_bits, const unsigned* bucket_start, const unsigned long long* __restrict__ keys,
+                                   const unsigned* __restrict__ order, FeatureHit<T>* sorted) {
   const std::size_t p = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (p >= span || p >= *device_n) return;
   const unsigned long long key = keys[p];
@@ -113,10 +113,13 @@ __global__ void bucket_rank_kernel(const FeatureHit<T>* hits, std::size_t span, 
   const unsigned b = static_cast<unsigned>(key >> id_bits) >> shift;
   const unsigned from = bucket_start[b], to = bucket_start[b + 1];
   if (to - from > kBucketRankMax) return;  // (counted: the caller sorts by radix)
+  // Branch-free and unrolled, so that a crowded bucket's loads are in flight together (one after
+  // the other, each waited for, a bucket of 189 took its threads ~18 us: cloth-ball, H200 trace).
   unsigned rank = 0;
+#pragma unroll 8
   for (unsigned j = from; j < to; ++j) {
     const unsigned long long other = keys[j];
-    rank += other < key || (other == key && order[j] < index);
+    rank += static_cast<unsigned>(other < key) | (static_cast<unsigned>(other == key) & static_cast<unsigned>(order[j] < index));
   }
   sorted[from + rank] = hits[index];
 }
