@@ -61,10 +61,13 @@ struct CertifiedPolicy {
   /// goes to double (CertifiedFilter::expand_single).
   static constexpr bool kSingleSecondRound = true;
   /// The single-precision filter first tries directions that separate the pair's swept features
-  /// (their hulls over the step, detail::swept_hulls_apart): 1-3% of the pairs the screen passes
-  /// on cloth-ball and armadillo-rollers end there as misses (a quarter to two fifths before the
-  /// screen tested the differences), before the cubic's pieces and the inside tests.
-  static constexpr bool kSeparatingDirections = true;
+  /// (their hulls over the step, detail::swept_hulls_apart; on the GPU in the screen's tail). Off:
+  /// since the screen tests the differences (kCornerDifferences) they end only 1-3% of the pairs
+  /// it passes on cloth-ball and armadillo-rollers, which the filter's intervals decide in float
+  /// anyway, and trying them on every such pair cost more than it saved (NVIDIA H200: cloth-ball's
+  /// narrow phase 0.86 -> 0.83 ms; one CPU thread 524-528 -> 493-503 ms; docs/NARROW_PHASE.md,
+  /// B13). True for degenerate motion whose hulls are apart but whose intervals stay undecided.
+  static constexpr bool kSeparatingDirections = false;
   /// Multiplier of the single-precision screen's input bound, which covers rounding the relative
   /// coordinates to float (1 = as derived; only the mutation tests change it).
   static constexpr double kSingleInputBound = 1.0;

@@ -38,8 +38,9 @@ __device__ inline void keep_survivor(std::pair<index_t, index_t> p, std::pair<in
 enum class TailVerdict : unsigned char { missed, separated, kept };
 
 // The screen's tail for one pair the tests in space left, in single precision: the cubic's signs,
-// then the filter's separating directions (so that the pairs they decide are never kept: the
-// filter's threads would diverge on them; counted as screened and decided in float); what is
+// then the filter's separating directions where the policy asks for them (off by default; so
+// that the pairs they decide are never kept: the filter's threads would diverge on them; counted
+// as screened and decided in float); what is
 // left is kept (appended here). The caller counts the other two.
 template <class Method, bool kVertexFace, class T>
 __device__ TailVerdict screen_single_tail(const MeshFeatures& mesh, const SingleVertex* single, std::pair<index_t, index_t> p,
