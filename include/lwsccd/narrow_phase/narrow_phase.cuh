@@ -174,8 +174,7 @@ class HitSorter {
   DeviceBuffer<FeatureHit<T>> sorted_;
   DeviceBuffer<unsigned long long> keys_, sorted_keys_;
   DeviceBuffer<unsigned char> scratch_;
-  DeviceBuffer<unsigned> bucket_count_;  ///< per bucket, zero between sorts
-  std::size_t bucket_count_zeroed_ = 0;  ///< words of bucket_count_ known to be zero
+  DeviceBuffer<unsigned> bucket_count_;  ///< per bucket, zero between sorts (cleared when it grows)
   DeviceBuffer<unsigned> bucket_start_, order_;
 };
 

@@ -15,9 +15,17 @@
 namespace lwsccd::gpu::detail {
 
 // The sort key of a hit: (first, second) as one word, first shifted by `id_bits` (every id is
-// below 2^id_bits, so the key's order is the pair's and it has 2 id_bits bits to sort). With
-// `device_n` (a sort enqueued before the host knows the count) only the first min(*device_n, n)
-// slots hold hits: the others get the largest key and sort after them.
+// below 2^id_bits, so the key's order is the pair's and it has 2 id_bits bits to sort).
+template <class T>
+__device__ inline unsigned long long hit_key(const FeatureHit<T>& hit, int id_bits) {
+  assert(static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) >> id_bits == 0 &&
+         static_cast<unsigned long long>(static_cast<unsigned>(hit.second)) >> id_bits == 0 && "a feature id past the mesh's features");
+  return (static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) << id_bits) | static_cast<unsigned>(hit.second);
+}
+
+// The keys for the radix sort. With `device_n` (a sort enqueued before the host knows the count)
+// only the first min(*device_n, n) slots hold hits: the others get the largest key and sort after
+// them.
 template <class T>
 __global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id_bits, unsigned long long* keys,
                                 const unsigned long long* device_n = nullptr) {
@@ -27,9 +35,7 @@ __global__ void hit_keys_kernel(const FeatureHit<T>* hits, std::size_t n, int id
     keys[i] = 2 * id_bits >= 64 ? ~0ull : (1ull << (2 * id_bits)) - 1;
     return;
   }
-  assert(static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) >> id_bits == 0 &&
-         static_cast<unsigned long long>(static_cast<unsigned>(hits[i].second)) >> id_bits == 0 && "a feature id past the mesh's features");
-  keys[i] = (static_cast<unsigned long long>(static_cast<unsigned>(hits[i].first)) << id_bits) | static_cast<unsigned>(hits[i].second);
+  keys[i] = hit_key(hits[i], id_bits);
 }
 
 // A sort of at most kThreads hits in one block, a thread per hit: its place is the number of
@@ -48,9 +54,7 @@ __global__ void __launch_bounds__(kThreads)
   unsigned long long key = 0;
   if (i < n) {
     hit = hits[i];
-    assert(static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) >> id_bits == 0 &&
-           static_cast<unsigned long long>(static_cast<unsigned>(hit.second)) >> id_bits == 0 && "a feature id past the mesh's features");
-    key = (static_cast<unsigned long long>(static_cast<unsigned>(hit.first)) << id_bits) | static_cast<unsigned>(hit.second);
+    key = hit_key(hit, id_bits);
     keys[i] = key;
   }
   __syncthreads();
@@ -96,9 +100,7 @@ __global__ void bucket_place_kernel(const FeatureHit<T>* hits, std::size_t span,
   const FeatureHit<T> h = hits[i];
   const unsigned b = static_cast<unsigned>(h.first) >> shift;
   const unsigned at = bucket_start[b] + atomicSub(bucket_count + b, 1u) - 1u;
-  assert(static_cast<unsigned long long>(static_cast<unsigned>(h.first)) >> id_bits == 0 &&
-         static_cast<unsigned long long>(static_cast<unsigned>(h.second)) >> id_bits == 0 && "a feature id past the mesh's features");
-  keys[at] = (static_cast<unsigned long long>(static_cast<unsigned>(h.first)) << id_bits) | static_cast<unsigned>(h.second);
+  keys[at] = hit_key(h, id_bits);
   order[at] = static_cast<unsigned>(i);
 }
 // A thread per placed hit: its rank among its bucket's hits is its place after the bucket's start.

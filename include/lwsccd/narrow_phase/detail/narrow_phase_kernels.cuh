@@ -560,10 +560,9 @@ void HitSorter<T>::bucket_sort(const FeatureHit<T>* hits, const unsigned long lo
   while (bucket_bits < id_bits && (std::size_t(1) << bucket_bits) < 2 * span) ++bucket_bits;
   const int shift = id_bits - bucket_bits;
   const std::size_t buckets = ((std::max<std::size_t>(id_limit, 1) - 1) >> shift) + 1;
-  if (bucket_count_.size() < buckets + 1 || bucket_count_zeroed_ < buckets + 1) {
-    bucket_count_.resize_discard(std::max(buckets + 1, bucket_count_.size()));
+  if (bucket_count_.size() < buckets + 1) {
+    bucket_count_.resize_discard(buckets + 1);
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(bucket_count_.data(), 0, bucket_count_.size() * sizeof(unsigned), stream));
-    bucket_count_zeroed_ = bucket_count_.size();
   }
   bucket_start_.resize_discard(buckets + 1);
   keys_.resize_discard(span);
@@ -617,7 +616,7 @@ bool HitSorter<T>::take_ahead(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, 
   if (bucketed && overflow != 0) ahead_by_radix_ = true;
   if (n < 2) return true;  // (nothing to order)
   if (ahead < n || (bucketed && overflow != 0)) return false;
-  std::swap(hits, sorted_);  // (the slots past n sorted after the hits, or left as they were by buckets)
+  std::swap(hits, sorted_);  // (slots past n: by radix the others after the hits; by buckets stale)
   return true;
 }
 
