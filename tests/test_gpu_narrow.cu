@@ -188,6 +188,91 @@ TEST_CASE("GPU narrow phase: searches in double handed from a thread to a warp e
   }
 }
 
+// Runs CertifiedCcd twice on the same pairs, planned for `fp64_ratio`, each run's answers and
+// counts against the CPU's; returns {whole searches, those beside the double filter} of the
+// second run (the first has no last run to plan from: none beside it).
+template <class Policy, class T>
+std::pair<std::size_t, std::size_t> whole_beside_filter_runs(const lwsccd_test::MovingMesh& m, const FeaturePairs& fp, CcdMode mode,
+                                                             int fp64_ratio) {
+  gpu::DeviceMeshFeatures features(m.mesh);
+  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+  gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
+  vf.upload(fp.vf);
+  ee.upload(fp.ee);
+  gpu::NarrowPhase<CertifiedCcd, T, Policy> narrow(1 << 16);
+  narrow.plan_for_fp64_ratio(fp64_ratio);
+  CcdParams<T> params;
+  params.mode = mode;
+  const auto cpu_result = cpu::test_feature_pairs<CertifiedCcd, T>(m.mesh, m.x0, m.x1, fp, params);
+  for (int run = 0; run < 2; ++run) {
+    narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
+    const auto gpu_result = narrow.download();
+    lwsccd_test::require_same_contacts(gpu_result, cpu_result);
+    lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
+    lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
+    if (run == 0) CHECK(narrow.whole_searches_beside_filter() == 0);
+  }
+  return {narrow.whole_searches(), narrow.whole_searches_beside_filter()};
+}
+
+struct WholeAfterFilter : gpu::NarrowPhasePolicy {
+  static constexpr bool kWholeBesideFilter = false;
+};
+
+TEST_CASE("GPU narrow phase: contacts sent whole, searched beside the double filter, give the same answers", "[gpu][narrow]") {
+  // FP32 first sends a pair with an interval inside in float (a contact) straight to the whole
+  // search; filter_kernel searches those beside its own pairs, a thread each, where the list's
+  // whole searches do not all go to warps (planned from the list's last run). Planned for FP64
+  // at 1/64 they never do (a thread each always); at 1/1 only where a list holds more than
+  // kRefineWarpBelow.
+  const auto m = lwsccd_test::folded_cloth(40, 4);
+  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
+  const FeaturePairs fp = feature_pairs(m.mesh, pairs);
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set}) {
+    INFO("mode " << int(mode));
+    for (int ratio : {64, 1}) {
+      const auto [whole, beside] = whole_beside_filter_runs<gpu::NarrowPhasePolicy, double>(m, fp, mode, ratio);
+      std::printf("  planned for FP64 at 1/%d, mode %d: %zu whole searches, %zu of them beside the double filter\n", ratio,
+                  int(mode), whole, beside);
+      CHECK(beside <= whole);
+      if (mode == CcdMode::set) CHECK(beside == 0);  // (no filter)
+      if (ratio == 1) CHECK((beside == 0 || beside > static_cast<std::size_t>(gpu::NarrowPhasePolicy::kRefineWarpBelow)));
+      if (ratio == 64 && mode == CcdMode::contacts) CHECK(beside > 0);
+    }
+  }
+  // Float inputs; the searches in double run there too (not handed on); the knob off.
+  CHECK(whole_beside_filter_runs<gpu::NarrowPhasePolicy, float>(m, fp, CcdMode::contacts, 64).second > 0);
+  CHECK(whole_beside_filter_runs<NoneHanded, double>(m, fp, CcdMode::contacts, 64).second > 0);
+  CHECK(whole_beside_filter_runs<WholeAfterFilter, double>(m, fp, CcdMode::contacts, 64).second == 0);
+}
+
+TEST_CASE("GPU narrow phase: a short list planned for FP64 at 1/64 hands its searches in double on", "[gpu][narrow]") {
+  // Planned for a GPU with little FP64 every deferred list goes to a thread each and hands its
+  // searches in double on, however short: a list with room for fewer entries than
+  // kRefineWarpBelow still needs room for them (it once had none there).
+  using DoubleOnly = CertifiedCcdT<Filtered<InclusionCcd>, DoubleOnlyCertified>;
+  const auto m = lwsccd_test::folded_cloth(40, 4);
+  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
+  const FeaturePairs all = feature_pairs(m.mesh, pairs);
+  // The cloth's contacts, which every one reach a whole search: at most 300 of each kind.
+  const auto contacts = cpu::test_feature_pairs<DoubleOnly, double>(m.mesh, m.x0, m.x1, all, CcdParams<double>{});
+  FeaturePairs few;
+  for (const auto& h : contacts.vf)
+    if (few.vf.size() < 300) few.vf.push_back({h.first, h.second});
+  for (const auto& h : contacts.ee)
+    if (few.ee.size() < 300) few.ee.push_back({h.first, h.second});
+  REQUIRE(few.vf.size() + few.ee.size() > 0);
+  std::size_t handed = 0, in_warps = 1;
+  // (A capacity below kRefineWarpBelow: the lists' room is the input's, 300 pairs each.)
+  compare_backends<DoubleOnly, double>(m.mesh, m.x0, m.x1, few, 256, CcdMode::contacts, nullptr, &handed, 64, &in_warps);
+  std::printf("  %zu + %zu pairs planned for FP64 at 1/64: %zu searches in double handed on, %zu a warp each\n", few.vf.size(),
+              few.ee.size(), handed, in_warps);
+  CHECK(handed > 0);
+  CHECK(in_warps == 0);
+  compare_backends<CertifiedCcd, double>(m.mesh, m.x0, m.x1, few, 256, CcdMode::contacts, nullptr, nullptr, 64);
+  compare_backends<CertifiedCcd, float>(m.mesh, m.x0, m.x1, few, 256, CcdMode::earliest, nullptr, nullptr, 64);
+}
+
 TEST_CASE("GPU hit sort: by (first, second) over only the bits the feature ids take", "[gpu][narrow]") {
   // Limits at and around powers of two (the key packs first above second by the ids' bit width),
   // ids up to the largest below the limit, duplicates of first, n = 0, 1 (left as they are), and

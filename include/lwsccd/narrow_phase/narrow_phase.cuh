@@ -57,10 +57,15 @@ struct NarrowPhasePolicy {
   static constexpr int kRefineWarpBelow = 1024;
   /// CertifiedCcd, a deferred list longer than kRefineWarpBelow (a thread per pair): the searches in
   /// double of the pairs single precision leaves undecided are handed from their thread to a kernel
-  /// of their own (a bit per deferred pair marks them), a warp each (inside tests by subtrees) or a
+  /// of their own (listed for it), a warp each (inside tests by subtrees, the next search by a ticket) or a
   /// thread each by the two knobs below, so that one long search no longer holds up the thread
   /// kernel (the same answers). False: they run on their thread.
   static constexpr bool kHandOnDoubleSearches = true;
+  /// CertifiedCcd FP32 first: the contacts the single-precision filter sends whole are searched by
+  /// the double filter's kernel beside its few, long pairs, where the list's last run sent more
+  /// than kRefineWarpBelow (the SMs' warp slots the two kernels left idle one after the other are
+  /// shared; NVIDIA H200, cloth-ball narrow 0.83 -> 0.81 ms). The same answers; false: after it.
+  static constexpr bool kWholeBesideFilter = true;
   /// At most this many handed searches per SM run a warp each; more run a thread each (in a kernel
   /// of their own, still apart from the short ones): a warp's search costs ~30 lanes' work, which
   /// pays where a few long searches set the time (cloth-ball: 3.4 K edge-edge, 201 of them
@@ -263,6 +268,10 @@ class NarrowPhase {
   std::size_t handed_searches() const { return lists_[0].handed_searches + lists_[1].handed_searches; }
   /// Of those, the ones the last run searched a warp each (the rest: a thread each).
   std::size_t handed_searches_in_warps() const { return lists_[0].handed_in_warps + lists_[1].handed_in_warps; }
+  /// CertifiedCcd FP32 first: of the whole searches, those of the contacts the single-precision
+  /// filter sent whole that the double filter's kernel ran beside its own pairs, a thread each, in
+  /// the last run (none where a list's whole searches all went to warps).
+  std::size_t whole_searches_beside_filter() const { return lists_[0].whole_beside_filter + lists_[1].whole_beside_filter; }
   /// Plans the following runs as for a GPU whose FP32 runs `ratio` times faster than its FP64 (0:
   /// this device's own, cudaDevAttrSingleToDoublePrecisionPerfRatio): past
   /// kHandedWarpsMaxFp64Ratio the searches in double run a thread each. The answers do not change
@@ -313,7 +322,7 @@ class NarrowPhase {
     DeviceBuffer<Pair> survivors;                ///< pairs the first pass keeps
     DeviceBuffer<FeatureHit<T>> undecided;       ///< CertifiedCcd: left to the fallback, with the time excluded before
     DeviceBuffer<unsigned> deferred, open;       ///< indices: refinements deferred, searches left to a warp
-    DeviceBuffer<unsigned> handed;               ///< a bit per deferred entry: its search in double handed to a warp
+    DeviceBuffer<unsigned> handed;               ///< the deferred entries whose search in double a thread handed on
     DeviceBuffer<unsigned long long> intervals;  ///< CertifiedCcd's filter: intervals to test for inside (detail::filter_item)
     DeviceBuffer<unsigned long long> expanded;   ///< the filter's second round: intervals to split further (room: interval_room)
     DeviceBuffer<unsigned long long> deep;       ///< the second round's intervals to test for inside
@@ -330,7 +339,9 @@ class NarrowPhase {
     std::size_t interval_room = 0, deep_room = 0;  ///< room of the filter's intervals, of its second round's
     std::size_t single_interval_room = 0, single_deep_room = 0;  ///< room of the single-precision filter's intervals, of its second round's
     NarrowPhaseCounts counts;
-    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0, handed_in_warps = 0;
+    std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0, handed_in_warps = 0,
+                whole_beside_filter = 0;
+    std::size_t sent_whole = 0;  ///< the last run's: contacts the single-precision filter sent whole (plans the next)
     std::size_t sort_span = 0;                   ///< hits the next run sorts before its count reaches the host (0: none)
     CudaStream stream;
     CudaEvent done;
@@ -378,6 +389,9 @@ class NarrowPhase {
   int fp64_ratio_ = 2;  ///< the device's FP32 to FP64 throughput ratio
   int planned_fp64_ratio_ = 0;  ///< plan_for_fp64_ratio (0: the device's)
   std::size_t handed_warp_limit_ = 0;  ///< the last run's: at most this many handed searches went to warps
+  /// The last run's: the contacts sent whole were searched beside the double filter where more
+  /// than this many (none: the largest size_t).
+  std::size_t whole_beside_filter_above_ = static_cast<std::size_t>(-1);
   bool earliest_only_ = false;  ///< the last run was in mode earliest: download() gives no pairs
   bool rooms_learned_ = false;  ///< a run has sized the lists (count_survivors on the first)
 };

@@ -380,38 +380,92 @@ __global__ void single_expand_kernel(MeshFeatures mesh, const SingleVertex* sing
   }
 }
 
-// The double filter: a thread per pair of `kept` (its length in counters[kept_counter]).
+// The double filter on pair i of `kept`: FP32 first, the search in single precision (its misses,
+// and contacts with a double tail), as the CPU batch runs it on every pair the single passes leave;
+// then the double screen, and the intervals listed for filter_inside_kernel (or the pair deferred).
 template <class Method, bool kVertexFace, class T, class P>
+__device__ void filter_pair(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
+                            std::size_t i, const CcdParams<T>& params, unsigned long long* counters, unsigned long long* intervals,
+                            std::size_t interval_room, FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided,
+                            unsigned* deferred) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
+  if (settled_in_single<Method>(q, params, kept[i], counters, hits, hit_room, undecided)) return;
+  if (Method::screen_after_single(q, params)) return;
+  std::uint32_t found = 0;
+  lwsccd::detail::Noted<T> noted;
+  const int count = Filter::intervals(q, params, found, noted);
+  // A lower bound noted: with no interval left the search's answer is undecided from it (the
+  // fallback's, once settle_undecided_kernel has looked); with some, the whole search decides (rare).
+  bool whole = count < 0 || (count > 0 && noted.any);
+  if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
+  if (count > 0 && !whole) {
+    bool fits = true;
+    const unsigned long long base = append_run(counters + kIntervals, static_cast<unsigned>(count), interval_room, fits);
+    whole = !fits;
+    const bool expandable = Filter::expandable(count);
+    for (int k = 0; k < count; ++k, found &= found - 1u)
+      if (base + k < interval_room)
+        intervals[base + k] = whole ? kNoInterval : filter_item(i, expandable, static_cast<unsigned>(__ffs(found) - 1));
+  }
+  if (whole) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
+}
+
+// The whole search of deferred entry w (refine_deferred_kernel's, a thread each). The pairs sent
+// whole take the search in single precision and the double screen here; the double filter's pairs
+// took them in filter_pair (or refine_kernel). kHand: the search in double is handed on (w
+// appended to `handed`, counted in counters[kHandedToWarps]) instead of run here.
+template <class Method, bool kVertexFace, bool kHand, class T, class P>
+__device__ void refine_deferred_entry(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                      const std::pair<index_t, index_t>* kept, std::size_t room, const unsigned* deferred,
+                                      std::size_t w, const CcdParams<T>& params, unsigned long long* counters, FeatureHit<T>* hits,
+                                      std::size_t hit_room, FeatureHit<T>* undecided, unsigned* handed) {
+  const unsigned at = deferred[w];
+  const std::pair<index_t, index_t> p = kept[at];
+  const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
+  if (sent_whole(at, room, counters) &&
+      (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided) || Method::screen_after_single(q, params)))
+    return;
+  if constexpr (kHand) {
+    handed[append_index(counters + kHandedToWarps)] = static_cast<unsigned>(w);
+  } else {
+    settle_refined(Method::template refine<false>(q, params), p.first, p.second, counters, hits, hit_room, undecided);
+  }
+}
+
+// The deferred entries the single-precision filter sent whole that a thread each searches (the
+// first counters[kSingleWhole] of `deferred`, since the single-precision kernels list them before
+// any other; none where the whole list would fit refine_deferred_warp_kernel's warps, which take
+// every entry): FP32 first's contacts, which filter_kernel searches beside the double filter's
+// pairs (FilterWithWhole), and refine_deferred_kernel then skips.
+__device__ inline std::size_t whole_searched_early(const unsigned long long* counters, std::size_t warp_below) {
+  const auto whole = static_cast<std::size_t>(counters[kSingleWhole]);
+  return whole > warp_below ? whole : 0;
+}
+
+// The double filter: a thread per pair of `kept` (its length in counters[kept_counter]), and with
+// kWithWhole, past those, a thread per deferred entry the single-precision filter sent whole
+// (whole_searched_early, refine_deferred_entry). Why together: the double filter's pairs are few
+// and long (cloth-ball: ~6 of a warp's lanes busy, under 7% of the SMs' warps on an H200), and the
+// contacts sent whole need nothing it does, so their searches fill the SMs beside it instead of
+// waiting for it and its inside tests.
+template <class Method, bool kVertexFace, bool kWithWhole, bool kHand, class T, class P>
 __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* kept,
                               int kept_counter, std::size_t room, CcdParams<T> params, const unsigned long long* control,
                               unsigned long long* counters, unsigned long long* intervals, std::size_t interval_room,
-                              FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
-  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+                              FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred,
+                              std::size_t warp_below, unsigned* handed) {
   if (control[kSkip]) return;
   const std::size_t n = counters[kept_counter] < room ? static_cast<std::size_t>(counters[kept_counter]) : room;
-  LWSCCD_GRID_STRIDE(i, n) {
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, kept[i]);
-    // FP32 first: the search in single precision (its misses, and contacts with a double tail),
-    // as the CPU batch runs it on every pair the single passes leave; then the double screen.
-    if (settled_in_single<Method>(q, params, kept[i], counters, hits, hit_room, undecided)) continue;
-    if (Method::screen_after_single(q, params)) continue;
-    std::uint32_t found = 0;
-    lwsccd::detail::Noted<T> noted;
-    const int count = Filter::intervals(q, params, found, noted);
-    // A lower bound noted: with no interval left the search's answer is undecided from it (the
-    // fallback's, once settle_undecided_kernel has looked); with some, the whole search decides (rare).
-    bool whole = count < 0 || (count > 0 && noted.any);
-    if (count == 0 && noted.any) undecided[append_index(counters + kUndecided)] = FeatureHit<T>{kept[i].first, kept[i].second, noted.lower};
-    if (count > 0 && !whole) {
-      bool fits = true;
-      const unsigned long long base = append_run(counters + kIntervals, static_cast<unsigned>(count), interval_room, fits);
-      whole = !fits;
-      const bool expandable = Filter::expandable(count);
-      for (int k = 0; k < count; ++k, found &= found - 1u)
-        if (base + k < interval_room)
-          intervals[base + k] = whole ? kNoInterval : filter_item(i, expandable, static_cast<unsigned>(__ffs(found) - 1));
+  const std::size_t whole = kWithWhole ? whole_searched_early(counters, warp_below) : 0;
+  LWSCCD_GRID_STRIDE(i, n + whole) {
+    if (i < n) {
+      filter_pair<Method, kVertexFace>(mesh, x0, x1, kept, i, params, counters, intervals, interval_room, hits, hit_room, undecided,
+                                       deferred);
+    } else if constexpr (kWithWhole) {
+      refine_deferred_entry<Method, kVertexFace, kHand>(mesh, x0, x1, kept, room, deferred, i - n, params, counters, hits, hit_room,
+                                                        undecided, handed);
     }
-    if (whole) deferred[append_index(counters + kDeferred)] = static_cast<unsigned>(i);
   }
 }
 
@@ -476,35 +530,24 @@ __global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
 
 // Second part: the deferred searches, whole (a grid-stride loop keeps the warps full). kHand: the
 // search in double of a pair single precision left (the double filter's pairs, and those the
-// search in float did not decide) is not run here but handed on (its bit set in `handed`, a bit
-// per deferred entry, zeroed; refine_handed_kernel searches
-// it): those searches are the long ones
+// search in float did not decide) is not run here but handed on (its entry listed in `handed`;
+// refine_handed_kernel searches it): those searches are the long ones
 // (cloth-ball: 3.4 K of 106 K edge-edge pairs, up to ~50x the median's work on the CPU), and one of
 // them on a thread held the whole kernel up; the kernel also holds no code for them.
+// `after_whole`: the entries filter_kernel searched (whole_searched_early) are skipped.
 template <class Method, bool kVertexFace, bool kHand, class T, class P>
 __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                        const std::pair<index_t, index_t>* kept, std::size_t room, const unsigned* deferred,
                                        CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
                                        FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
-                                       unsigned* handed) {
+                                       unsigned* handed, bool after_whole) {
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
   if (n <= warp_below) return;  // refine_deferred_warp_kernel's
-  LWSCCD_GRID_STRIDE(w, n) {
-    const unsigned at = deferred[w];
-    const std::pair<index_t, index_t> p = kept[at];
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    // The pairs sent whole take the search in single precision and the double screen here; the
-    // double filter's pairs took them in filter_kernel (or refine_kernel).
-    if (sent_whole(at, room, counters) &&
-        (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided) || Method::screen_after_single(q, params)))
-      continue;
-    if constexpr (kHand) {
-      atomicOr(handed + w / 32, 1u << (w % 32));
-      append_index(counters + kHandedToWarps);
-    } else {
-      settle_refined(Method::template refine<false>(q, params), p.first, p.second, counters, hits, hit_room, undecided);
-    }
+  const std::size_t from = after_whole ? whole_searched_early(counters, warp_below) : 0;
+  LWSCCD_GRID_STRIDE(i, from < n ? n - from : 0) {
+    refine_deferred_entry<Method, kVertexFace, kHand>(mesh, x0, x1, kept, room, deferred, from + i, params, counters, hits, hit_room,
+                                                      undecided, handed);
   }
 }
 
@@ -603,15 +646,14 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
   }
 }
 
-// The searches refine_deferred_kernel handed on (the deferred entries whose bit is set in
-// `handed`: past the search in single precision and the double screen). At most `warp_limit`
-// handed searches (a few waves of warps) run a warp each (kWarpEach), as
-// refine_deferred_warp_kernel searches: a warp looks at every `warps`-th entry, because the handed
-// ones lie close together in the list (the double filter's pairs are appended together) and a warp
-// per word of bits searched up to 32 of them one after the other (cloth-ball: 1.7 ms). More run a
-// thread each (!kWarpEach), the warp's lanes taking the set bits of one word in order (the lanes
-// stay busy), since a warp's search costs ~30 lanes' work for a few long ones. Both forms are
-// launched; the one whose case does not hold returns at once.
+// The searches refine_deferred_kernel handed on (the deferred entries listed in `handed`, their
+// number in counters[kHandedToWarps]: past the search in single precision and the double screen).
+// At most `warp_limit` handed searches (a few waves of warps) run a warp each (kWarpEach), as
+// refine_deferred_warp_kernel searches; a warp takes the next search when its own ends (a ticket,
+// counters[kHandedTaken]), so the few long ones do not queue behind each other on the warps a fixed
+// share would give them. More run a thread each (!kWarpEach), the list's entries in order, since a
+// warp's search costs ~30 lanes' work for a few long ones. Both forms are launched; the one whose
+// case does not hold returns at once.
 template <class Method, bool kVertexFace, bool kWarpEach, class T, class P>
 __global__ void refine_handed_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1,
                                      const std::pair<index_t, index_t>* kept, const unsigned* deferred, const unsigned* handed,
@@ -619,23 +661,21 @@ __global__ void refine_handed_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
                                      FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
                                      std::size_t warp_limit) {
   if (control[kSkip]) return;
-  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
-  if (n <= warp_below || (counters[kHandedToWarps] <= warp_limit) != kWarpEach) return;  // (the other kernels' lists)
-  const int lane = static_cast<int>(threadIdx.x) % 32;
-  const std::size_t warps = static_cast<std::size_t>(gridDim.x) * (blockDim.x / 32);
-  const std::size_t first_warp = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32;
+  const std::size_t n = static_cast<std::size_t>(counters[kDeferred]), count = static_cast<std::size_t>(counters[kHandedToWarps]);
+  if (n <= warp_below || (count <= warp_limit) != kWarpEach) return;  // (the other kernels' lists)
   if constexpr (kWarpEach) {
-    for (std::size_t w = first_warp; w < n; w += warps) {
-      if (((handed[w / 32] >> (w % 32)) & 1u) == 0) continue;
-      const std::pair<index_t, index_t> p = kept[deferred[w]];
+    const int lane = static_cast<int>(threadIdx.x) % 32;
+    for (;;) {
+      unsigned long long k = 0;
+      if (lane == 0) k = atomicAdd(counters + kHandedTaken, 1ull);
+      k = __shfl_sync(0xffffffffu, k, 0);
+      if (k >= count) break;
+      const std::pair<index_t, index_t> p = kept[deferred[handed[k]]];
       warp_refine<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, lane, counters, hits, hit_room, undecided);
     }
   } else {
-    for (std::size_t word = first_warp; word < (n + 31) / 32; word += warps) {
-      const unsigned bits = handed[word];
-      if (lane >= __popc(bits)) continue;
-      const std::size_t w = 32 * word + __fns(bits, 0, lane + 1);  // this lane's set bit
-      const std::pair<index_t, index_t> p = kept[deferred[w]];
+    LWSCCD_GRID_STRIDE(k, count) {
+      const std::pair<index_t, index_t> p = kept[deferred[handed[k]]];
       settle_refined(Method::template refine<false>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params), p.first, p.second,
                      counters, hits, hit_room, undecided);
     }

@@ -84,6 +84,7 @@ enum NarrowCounter : int {
   kSingleSearchMisses,  // the search in single precision: certain misses (pairs the single passes left)
   kSingleDescents,  // its contacts settled by a double tail (certain hits)
   kHandedToWarps,   // deferred searches in double a thread handed on (to a warp each, or a thread each past the limit)
+  kHandedTaken,     // of those, the ones a warp took (refine_handed_kernel's tickets)
   kKeptSlots,       // FP32 first: slots of the double filter's list asked for (more than the room: the run is repeated with more)
   kKeptSlotsPeak,   // the most asked for by an earlier window of mode earliest
   kSeparated,       // FP32 first: pairs the screen passed and the filter's separating directions decided there

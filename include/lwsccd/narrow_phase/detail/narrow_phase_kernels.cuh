@@ -99,9 +99,9 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     if (kCertified) {
       l.undecided.resize_discard(l.refine_room);
       l.deferred.resize_discard(l.refine_room);
-      // (Only a deferred list longer than kRefineWarpBelow hands searches on.)
-      if (Policy::kHandOnDoubleSearches && l.refine_room > static_cast<std::size_t>(Policy::kRefineWarpBelow))
-        l.handed.resize_discard((l.refine_room + 31) / 32);
+      // (Any list may hand searches on: planned for a GPU with little FP64, a thread each takes
+      // every deferred list, however short.)
+      if (Policy::kHandOnDoubleSearches) l.handed.resize_discard(l.refine_room);
       if (Policy::kRefineFilter && params.mode != CcdMode::set) {  // mode set does not run the filter
         // (FP32 first: the double filter's lists hold only what single precision leaves.)
         const std::size_t filter_percent = kSingleFirst ? Policy::kDoubleAfterSingleRoomPercent : Policy::kFilterRoomPercent;
@@ -254,6 +254,22 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // single-precision filter leaves.
     const Pair* kept = l.survivors.data();
     int kept_counter = detail::kSurvivors;
+    // The deferred pairs: a warp each when they are few (the long searches' latency is the
+    // list's), else a thread each; each kernel returns at once where the other one's case holds.
+    // A warp each only on a GPU with FP64 to spare (kHandedWarpsMaxFp64Ratio): every lane of a
+    // warp's search repeats its FP64 instructions.
+    const std::size_t warp_below =
+        fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio ? static_cast<std::size_t>(Policy::kRefineWarpBelow) : 0;
+    // (With kHandOnDoubleSearches the thread kernels run only where `handed` has room for every entry.)
+    constexpr bool kHand = Policy::kHandOnDoubleSearches;
+    unsigned* handed = kHand && list.handed.size() > 0 ? list.handed.data() : nullptr;
+    // FP32 first: the contacts the single-precision filter sends whole are searched by the double
+    // filter's kernel, beside its pairs (filter_kernel), where a thread each takes them. Planned
+    // from the list's last run (whether it sent more than the warps take); the device decides
+    // which entries that kernel searched and refine_deferred_kernel skips, so a plan that misses
+    // costs only time. A list whose whole searches go to warps keeps the filter's kernel alone.
+    bool whole_in_filter = false;
+    whole_beside_filter_above_ = static_cast<std::size_t>(-1);
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       if constexpr (kSingleFirst) {
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
@@ -287,13 +303,19 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         }
         kept = l.double_kept.data();
         kept_counter = detail::kDoubleKept;
+        whole_in_filter = Policy::kWholeBesideFilter && list.sent_whole > warp_below;
+        if (whole_in_filter) whole_beside_filter_above_ = warp_below;
       }
       const unsigned interval_blocks = grid_for(l.interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
       const bool deeper = second_round(params.mode);
       record(out, lp, [=](List& l) {
-        detail::filter_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-            mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
-            l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data());
+        const auto launch = [&](auto kernel) {
+          kernel<<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+              mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
+              l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data(), warp_below, handed);
+        };
+        if (whole_in_filter) launch(detail::filter_kernel<Method, kVertexFace, true, kHand, T, P>);
+        else launch(detail::filter_kernel<Method, kVertexFace, false, kHand, T, P>);
       });
       record(out, lp, [=](List& l) {
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
@@ -322,20 +344,10 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
                 l.hit_room, l.undecided.data(), l.deferred.data());
       });
     }
-    // The deferred pairs: a warp each when they are few (the long searches' latency is the
-    // list's), else a thread each; each kernel returns at once where the other one's case holds.
-    // A warp each only on a GPU with FP64 to spare (kHandedWarpsMaxFp64Ratio): every lane of a
-    // warp's search repeats its FP64 instructions.
-    const std::size_t warp_below =
-        fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio ? static_cast<std::size_t>(Policy::kRefineWarpBelow) : 0;
-    // (With kHandOnDoubleSearches the thread kernel runs only where `handed` has a bit per entry.)
-    constexpr bool kHand = Policy::kHandOnDoubleSearches;
-    unsigned* handed = kHand && list.handed.size() > 0 ? list.handed.data() : nullptr;
     record(out, lp, [=](List& l) {
-      if (handed) LWSCCD_CUDA_CHECK(cudaMemsetAsync(handed, 0, l.handed.size() * sizeof(unsigned), l.stream));
       detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
           mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
-          l.hit_room, l.undecided.data(), warp_below, handed);
+          l.hit_room, l.undecided.data(), warp_below, handed, whole_in_filter);
     });
     if (handed) {  // a warp or a thread each, by their number (one of the two kernels returns at once)
       const std::size_t warp_limit = fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio
@@ -344,7 +356,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       handed_warp_limit_ = warp_limit;
       auto launch_handed = [=, &out](auto kernel) {
         record(out, lp, [=](List& l) {
-          kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+          kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(  // (a warp per entry at most)
               mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
               l.undecided.data(), warp_below, warp_limit);
         });
@@ -482,6 +494,9 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     l.handed_searches = static_cast<std::size_t>(c[detail::kHandedToWarps]);
     // (As the two kernels decide on the device: a warp each up to the limit.)
     l.handed_in_warps = l.handed_searches <= handed_warp_limit_ ? l.handed_searches : 0;
+    // (As filter_kernel decides on the device: whole_searched_early.)
+    l.sent_whole = kCertified ? static_cast<std::size_t>(c[detail::kSingleWhole]) : 0;
+    l.whole_beside_filter = l.sent_whole > whole_beside_filter_above_ ? l.sent_whole : 0;
     l.counts = {};
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors] + c[detail::kSeparated]) : 0;
