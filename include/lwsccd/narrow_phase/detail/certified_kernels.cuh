@@ -437,7 +437,7 @@ __device__ void refine_deferred_entry(const MeshFeatures& mesh, const Vec3<P>* x
 // first counters[kSingleWhole] of `deferred`, since the single-precision kernels list them before
 // any other; none where the whole list would fit refine_deferred_warp_kernel's warps, which take
 // every entry): FP32 first's contacts, which filter_kernel searches beside the double filter's
-// pairs (FilterWithWhole), and refine_deferred_kernel then skips.
+// pairs (filter_kernel with kWithWhole), and refine_deferred_kernel then skips.
 __device__ inline std::size_t whole_searched_early(const unsigned long long* counters, std::size_t warp_below) {
   const auto whole = static_cast<std::size_t>(counters[kSingleWhole]);
   return whole > warp_below ? whole : 0;

@@ -260,9 +260,10 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // warp's search repeats its FP64 instructions.
     const std::size_t warp_below =
         fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio ? static_cast<std::size_t>(Policy::kRefineWarpBelow) : 0;
-    // (With kHandOnDoubleSearches the thread kernels run only where `handed` has room for every entry.)
+    // kHandOnDoubleSearches: the thread kernels list the searches in double they hand on in `handed`
+    // (room for every deferred entry, allocated with the list).
     constexpr bool kHand = Policy::kHandOnDoubleSearches;
-    unsigned* handed = kHand && list.handed.size() > 0 ? list.handed.data() : nullptr;
+    unsigned* handed = kHand ? list.handed.data() : nullptr;
     // FP32 first: the contacts the single-precision filter sends whole are searched by the double
     // filter's kernel, beside its pairs (filter_kernel), where a thread each takes them. Planned
     // from the list's last run (whether it sent more than the warps take); the device decides
