@@ -217,6 +217,17 @@ struct NoDescentJumpPolicy : CertifiedPolicy {
   static constexpr bool kDescentJump = false;
 };
 
+// The double tail proves its leaf from the cubic built in double only (no values at the points).
+struct NoJumpAtPointsPolicy : CertifiedPolicy {
+  static constexpr bool kJumpAtPoints = false;
+};
+
+// The sound policy with the bounds of f at a point from the query's points (B15) scaled.
+template <int kPoint>
+struct ShrunkPointPolicy : CertifiedPolicy {
+  static constexpr double kPointBound = kPoint / 100.0;
+};
+
 // The halving search alone, without the certain descent.
 struct NoDescentPolicy : CertifiedPolicy {
   static constexpr bool kCertainDescent = false;

@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <cstdio>
@@ -275,6 +276,58 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
   std::printf("  the cubic at a point: %zu values outside the bound (sound), %zu (bound removed)\n", point_sound, point_mutated);
   CHECK(point_sound == 0);
   CHECK(point_mutated > 0);
+
+  // f at a point from the query's points (CubicAtPoints, B15), against long double: near-contact
+  // pairs near and far from the origin, at random dyadic times of 1 to 30 bits, stay within `exact`
+  // of f for the query as given and within `bound` of f for the query with every coordinate moved
+  // by u m_k (either way at random); with the bounds removed they do not.
+  std::size_t at_points_sound = 0, at_points_mutated = 0, moved_sound = 0, moved_mutated = 0;
+  using LongVec = std::array<long double, 3>;
+  const auto f_long = [](const std::array<LongVec, 8>& x, bool vertex_face, long double t) {
+    // coplanarity_of's differences (vertex-face: p - a, b - a, c - a; edge-edge: c - a, b - a, d - c)
+    const int vf[3][2] = {{0, 1}, {2, 1}, {3, 1}}, ee[3][2] = {{2, 0}, {1, 0}, {3, 2}};
+    const int(&first)[3][2] = vertex_face ? vf : ee;
+    LongVec d[3];
+    for (int v = 0; v < 3; ++v)
+      for (int k = 0; k < 3; ++k) {
+        const long double at0 = x[first[v][0]][k] - x[first[v][1]][k], at1 = x[4 + first[v][0]][k] - x[4 + first[v][1]][k];
+        d[v][k] = at0 + t * (at1 - at0);
+      }
+    const LongVec c{d[1][1] * d[2][2] - d[1][2] * d[2][1], d[1][2] * d[2][0] - d[1][0] * d[2][2], d[1][0] * d[2][1] - d[1][1] * d[2][0]};
+    return d[0][0] * c[0] + d[0][1] * c[1] + d[0][2] * c[2];
+  };
+  const double u = detail::unit_roundoff<double>();
+  std::mt19937_64 rng64(17);
+  for (int n = 0; n < 4000; ++n) {
+    const auto [vf, ee] = near_contact_pairs(rng64, 24);
+    const auto check = [&](const auto& q, bool vertex_face) {
+      const Vec3<double> m = detail::coordinate_magnitude(q);
+      const detail::CubicAtPoints<CertifiedPolicy, double> sound(q, m, u);
+      const detail::CubicAtPoints<ShrunkPointPolicy<0>, double> mutated(q, m, u);
+      const int bits = 1 + int(rng64() % 30);
+      const double t = std::ldexp(double(rng64() % (1ull << bits)), -bits);
+      std::array<LongVec, 8> given, moved;
+      for (int i = 0; i < 8; ++i)
+        for (int k = 0; k < 3; ++k) {
+          given[i][k] = q.points()[i][k];
+          moved[i][k] = given[i][k] + ((rng64() & 1) ? 1.0L : -1.0L) * static_cast<long double>(u) * m[k];
+        }
+      const long double exact_value = f_long(given, vertex_face, t), moved_value = f_long(moved, vertex_face, t);
+      const auto s = sound.at(t), w = mutated.at(t);
+      at_points_sound += std::fabs(static_cast<long double>(s.value) - exact_value) > s.exact;
+      at_points_mutated += std::fabs(static_cast<long double>(w.value) - exact_value) > w.exact;
+      moved_sound += std::fabs(static_cast<long double>(s.value) - moved_value) > s.bound;
+      moved_mutated += std::fabs(static_cast<long double>(w.value) - moved_value) > w.bound;
+    };
+    check(vf, true);
+    check(ee, false);
+  }
+  std::printf("  f from the points: %zu values outside the bound as given, %zu moved (sound); %zu, %zu (bounds removed)\n",
+              at_points_sound, moved_sound, at_points_mutated, moved_mutated);
+  CHECK(at_points_sound == 0);
+  CHECK(moved_sound == 0);
+  CHECK(at_points_mutated > 0);
+  CHECK(moved_mutated > 0);
 }
 
 TEST_CASE("single precision: the input bound covers rounding to float; without it a contact is lost (mutation check)",
@@ -511,6 +564,7 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
   std::size_t pairs = 0, descents = 0, hits = 0, differ = 0, decided_more = 0, earlier_noted = 0, past_toi = 0;
   std::size_t known_hits = 0, known_descents = 0;  // of the contacts at known times
   std::size_t tail_differ = 0;                      // the leaf proved against the halvings
+  std::size_t points_differ = 0;                    // the leaf proved from the points against the cubic's
   auto compare = [&](const auto& q, double toi) {
     using T = std::decay_t<decltype(q.points()[0].x)>;
     const CcdParams<T> params;
@@ -538,6 +592,12 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
     const bool tail_same = mixed.certainty == halved.certainty && mixed.lo == halved.lo && mixed.hi == halved.hi;
     tail_differ += !tail_same && !(mixed.certainty == Certainty::hit && halved.certainty == Certainty::hit &&
                                    mixed.hi == halved.hi && halved.lo < mixed.lo);
+    // The leaf proved from the points (B15) against the one proved from the cubic built in double:
+    // the same answer, or the same leaf with an earlier lower bound the cubic's path noted.
+    const CertifiedAnswer<T> cubic = detail::certified_classify<NoJumpAtPointsPolicy>(q, params);
+    const bool points_same = mixed.certainty == cubic.certainty && mixed.lo == cubic.lo && mixed.hi == cubic.hi;
+    points_differ += !points_same && !(mixed.certainty == Certainty::hit && cubic.certainty == Certainty::hit &&
+                                       mixed.hi == cubic.hi && cubic.lo < mixed.lo);
     ++pairs;
   };
   for (int n = 0; n < 20000; ++n) {
@@ -568,6 +628,8 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
   CHECK(descents * 4 > hits);
   std::printf("  the double tail's leaf proved by its ends' signs against the halvings: %zu differences\n", tail_differ);
   CHECK(tail_differ == 0);
+  std::printf("  the leaf proved from the points against the cubic's: %zu differences\n", points_differ);
+  CHECK(points_differ == 0);
   CHECK(differ == 0);
   CHECK(past_toi == 0);
 }

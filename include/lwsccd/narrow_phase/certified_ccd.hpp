@@ -96,6 +96,12 @@ struct CertifiedPolicy {
   /// two ends, the leaf guessed in float, instead of halving down to it (about a third of the
   /// tail's FP64 instructions); false, or where those signs are not certain: the halvings.
   static constexpr bool kDescentJump = true;
+  /// The leaf is first proved from f computed at its ends from the query's points, with the root
+  /// guessed by the search in single precision (detail::CubicAtPoints, B15), and the cubic built in
+  /// double only where that cannot prove it: about a third of the double tail's FP64 instructions.
+  static constexpr bool kJumpAtPoints = true;
+  /// Multiplier of B15's bounds (1 = as derived; only the mutation tests change it).
+  static constexpr double kPointBound = 1.0;
   /// Mode earliest: the certified pass (and its fallback) first look only at the window
   /// [0, 2^-kEarliestFirst), then at windows kEarliestStep binary orders wider, up to the whole
   /// step, and stop at the first window that holds a contact. A step's earliest contact is

@@ -244,6 +244,27 @@ LWSCCD_HD DescentEnd certain_descent(BernsteinPiece<W>& piece, std::uint32_t& in
   }
 }
 
+/// Where in [0, 1] the piece's cubic has its root (one sign change certain): regula falsi on the
+/// control polygon, then Newton steps, in float. Only where to look: the caller proves the leaf.
+template <class W>
+LWSCCD_HD float estimated_root(const BernsteinPiece<W>& p) {
+  const float c0 = static_cast<float>(p.c[0]), c1 = static_cast<float>(p.c[1]), c2 = static_cast<float>(p.c[2]),
+              c3 = static_cast<float>(p.c[3]);
+  float t = c0 / fsub(c0, c3);
+  for (int k = 0; k < 4; ++k) {
+    if (!(t >= 0.0f && t <= 1.0f)) return 0.5f;
+    const float s = fsub(1.0f, t);
+    // f and f' in the Bernstein basis.
+    const float b0 = fmul(s, fmul(s, s)), b1 = fmul(3.0f, fmul(t, fmul(s, s))), b2 = fmul(3.0f, fmul(fmul(t, t), s)), b3 = fmul(t, fmul(t, t));
+    const float f = fadd(fadd(fmul(c0, b0), fmul(c1, b1)), fadd(fmul(c2, b2), fmul(c3, b3)));
+    const float d = fmul(3.0f, fadd(fadd(fmul(fsub(c1, c0), fmul(s, s)), fmul(fmul(2.0f, fsub(c2, c1)), fmul(t, s))),
+                                    fmul(fsub(c3, c2), fmul(t, t))));
+    if (!(d != 0.0f)) break;
+    t = fsub(t, f / d);
+  }
+  return t >= 0.0f && t <= 1.0f ? t : 0.5f;
+}
+
 /// Where single precision's search handed a contact to double (FP32 first for contacts,
 /// Policy::kSingleDescent): the interval `index` of `level` over which every query within the
 /// single-precision perturbation (bound B9, so the input as given and every query the double path
@@ -254,6 +275,7 @@ struct SingleHandoff {
   bool valid = false;
   int level = 0, first = 0;
   std::uint32_t index = 0;
+  float guess = -1.0f;  ///< where in [0, 1] the float cubic's root lies (estimated_root on the interval's piece)
 };
 
 /// The certified search over [0, 1] from the cubic's piece `root` of the query q (in W, m its
@@ -366,7 +388,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W p
         // after any descent: the interval starts right after everything excluded.
         if (end == DescentEnd::past_limit) return CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
         if ((end == DescentEnd::within_tolerance || end == DescentEnd::on_grid) && !saved_has_lower && handoff)
-          *handoff = SingleHandoff{true, level, first, index};
+          *handoff = SingleHandoff{true, level, first, index,
+                                   fmul(fadd(static_cast<float>(index), estimated_root(piece)), exact_pow2_neg<float>(level))};
         return undecided;
       } else {
         const T step = exact_pow2_neg<T>(level);
@@ -502,26 +525,46 @@ LWSCCD_HD LWSCCD_HOST_INLINE PointValue<W> bernstein_at(const BernsteinPiece<W>&
   return {c[0], fadd(p.bound, added), fadd(p.exact, added)};
 }
 
-/// Where in [0, 1] the piece's cubic has its root (one sign change certain): regula falsi on the
-/// control polygon, then Newton steps, in float. Only where to look: the caller proves the leaf.
+/// The majorant of a triple product x . (y x z) whose factors are at most a, b, c componentwise.
 template <class W>
-LWSCCD_HD float estimated_root(const BernsteinPiece<W>& p) {
-  const float c0 = static_cast<float>(p.c[0]), c1 = static_cast<float>(p.c[1]), c2 = static_cast<float>(p.c[2]),
-              c3 = static_cast<float>(p.c[3]);
-  float t = c0 / fsub(c0, c3);
-  for (int k = 0; k < 4; ++k) {
-    if (!(t >= 0.0f && t <= 1.0f)) return 0.5f;
-    const float s = fsub(1.0f, t);
-    // f and f' in the Bernstein basis.
-    const float b0 = fmul(s, fmul(s, s)), b1 = fmul(3.0f, fmul(t, fmul(s, s))), b2 = fmul(3.0f, fmul(fmul(t, t), s)), b3 = fmul(t, fmul(t, t));
-    const float f = fadd(fadd(fmul(c0, b0), fmul(c1, b1)), fadd(fmul(c2, b2), fmul(c3, b3)));
-    const float d = fmul(3.0f, fadd(fadd(fmul(fsub(c1, c0), fmul(s, s)), fmul(fmul(2.0f, fsub(c2, c1)), fmul(t, s))),
-                                    fmul(fsub(c3, c2), fmul(t, t))));
-    if (!(d != 0.0f)) break;
-    t = fsub(t, f / d);
-  }
-  return t >= 0.0f && t <= 1.0f ? t : 0.5f;
+LWSCCD_HD LWSCCD_HOST_INLINE W triple_majorant(const Vec3<W>& a, const Vec3<W>& b, const Vec3<W>& c) {
+  return vdot(a, abs_cross(b, c));
 }
+
+/// The coplanarity cubic f(t) of a query computed from its points at t (B15): the differences
+/// X0, X1 of coplanarity_of at t = 0 and t = 1 taken once, X(t) = X0 + t (X1 - X0) and the triple
+/// product P(t) . (A(t) x B(t)) at each t. Its two bounds hold for every t in [0, 1]: `exact`
+/// covers the rounding (the query as given), `bound` the inputs' perturbation as well (every
+/// coordinate within `perturbation` m_k). Where t is exact in W, as the dyadic leaf ends are.
+template <class Policy, class W>
+struct CubicAtPoints {
+  Coplanarity<W> x;      // X0 and X1 of P, A, B
+  Vec3<W> dp, da, db;    // X1 - X0
+  W exact = W(0), bound = W(0);
+  bool finite = false;
+
+  template <class Q>
+  LWSCCD_HD CubicAtPoints(const Q& q, const Vec3<W>& m, W perturbation) : x(coplanarity_of(q)) {
+    dp = vsub(x.p1, x.p0), da = vsub(x.a1, x.a0), db = vsub(x.b1, x.b0);
+    const W u = unit_roundoff<W>();
+    // The computed X(t) within 13 u m_k of the exact one (B15), and above max(|X0|, |X1|) by less
+    // than that: base magnitudes of every factor at any t, and their errors with the perturbation.
+    const Vec3<W> e = vscale(m, W(14) * u), ep = vadd(e, vscale(m, fmul(W(2), perturbation)));
+    const Vec3<W> bp = vadd(max(abs(x.p0), abs(x.p1)), e), ba = vadd(max(abs(x.a0), abs(x.a1)), e),
+                  bb = vadd(max(abs(x.b0), abs(x.b1)), e);
+    const W base = triple_majorant(bp, ba, bb);
+    const W rounded = triple_majorant(vadd(bp, e), vadd(ba, e), vadd(bb, e));
+    const W perturbed = triple_majorant(vadd(bp, ep), vadd(ba, ep), vadd(bb, ep));
+    const W k = W(Policy::kPointBound), slack = underflow_slack(fmul(W(4), max_component(m)), 3);
+    exact = fmul(k, fadd(fadd(fsub(rounded, base), fmul(W(24) * u, rounded)), slack));
+    bound = fmul(k, fadd(fadd(fsub(perturbed, base), fmul(W(24) * u, perturbed)), slack));
+    finite = finite_value(bound);
+  }
+  LWSCCD_HD PointValue<W> at(W t) const {
+    const Vec3<W> P = vadd_scaled(x.p0, dp, t), A = vadd_scaled(x.a0, da, t), B = vadd_scaled(x.b0, db, t);
+    return {vdot(P, vcross(A, B)), bound, exact};
+  }
+};
 
 /// The double tail of a contact that single precision handed over. What the hand-off states
 /// (SingleHandoff) holds for every query the double path covers, so no stack, no inside test and
@@ -544,37 +587,58 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
   whole = true;
   const auto q = q_in.template cast<W>();
   const Vec3<W> m = coordinate_magnitude(q);
+  const int max_level = certified_max_level(params.tolerance);
+  // The leaves: the first level at or below the hand-off's within the tolerance (or the finest),
+  // as certain_descent stops.
+  int leaf_level = handoff.level;
+  while (leaf_level < max_level && !(exact_pow2_neg<T>(leaf_level) <= params.tolerance)) ++leaf_level;
+  // The leaf that holds the root, from the leaf `guess` (a leaf index, in float) and f's values at
+  // leaf ends (`value_at`): see the function comment.
+  const auto prove_leaf = [&](float guess, const auto& value_at, CertifiedAnswer<T>& answer) {
+    const T width = exact_pow2_neg<T>(leaf_level);
+    const std::uint32_t per = 1u << (leaf_level - handoff.level), first_leaf = handoff.index * per, last_leaf = first_leaf + per - 1u;
+    std::uint32_t k = guess >= static_cast<float>(first_leaf) ? static_cast<std::uint32_t>(guess) : first_leaf;
+    k = k > last_leaf ? last_leaf : k;
+    for (int tries = 0; tries < 3; ++tries) {
+      const T from = static_cast<T>(k) * width, to = static_cast<T>(k + 1u) * width;
+      if (to > params.time_limit) return false;  // the descent's rules at the limit
+      const PointValue<W> start = value_at(W(from)), end = value_at(W(to));
+      const int at_start = sign_beyond(start.value, start.exact), at_end = sign_beyond(end.value, end.exact);
+      if (at_start == -handoff.first && k > first_leaf) {  // the root is left of this leaf
+        --k;
+        continue;
+      }
+      if (at_end == handoff.first && k < last_leaf) {  // right of it
+        ++k;
+        continue;
+      }
+      if (at_start != handoff.first || at_end != -handoff.first || sign_beyond(start.value, start.bound) != handoff.first)
+        return false;
+      answer = {Certainty::hit, from, to};
+      return true;
+    }
+    return false;
+  };
+  CertifiedAnswer<T> proved;
+  if constexpr (Policy::kDescentJump && Policy::kJumpAtPoints) {
+    // First from the query's points, with float's own guess: no cubic is built (B15).
+    if (leaf_level <= 30 && handoff.guess >= 0.0f) {
+      const CubicAtPoints<Policy, W> points(q, m, W(unit_roundoff<T>()));
+      if (points.finite &&
+          prove_leaf(fmul(handoff.guess, exact_pow2_neg<float>(-leaf_level)), [&](W t) { return points.at(t); }, proved)) {
+        whole = false;
+        return proved;
+      }
+    }
+  }
   BernsteinPiece<W> piece;
   if (!cubic_on_step<Policy>(q, fmul(W(4), max_component(m)), W(unit_roundoff<T>()), piece)) return {};
-  const int max_level = certified_max_level(params.tolerance);
   if constexpr (Policy::kDescentJump) {
-    // The leaves: the first level at or below the hand-off's within the tolerance (or the finest),
-    // as certain_descent stops.
-    int leaf_level = handoff.level;
-    while (leaf_level < max_level && !(exact_pow2_neg<T>(leaf_level) <= params.tolerance)) ++leaf_level;
-    if (leaf_level <= 30) {
-      const T width = exact_pow2_neg<T>(leaf_level);
-      const std::uint32_t per = 1u << (leaf_level - handoff.level), first_leaf = handoff.index * per, last_leaf = first_leaf + per - 1u;
-      const float guess = fmul(estimated_root(piece), exact_pow2_neg<float>(-leaf_level));
-      std::uint32_t k = guess >= static_cast<float>(first_leaf) ? static_cast<std::uint32_t>(guess) : first_leaf;
-      k = k > last_leaf ? last_leaf : k;
-      for (int tries = 0; tries < 3; ++tries) {
-        const T from = static_cast<T>(k) * width, to = static_cast<T>(k + 1u) * width;
-        if (to > params.time_limit) break;  // the descent's rules at the limit
-        const PointValue<W> start = bernstein_at<Policy>(piece, W(from)), end = bernstein_at<Policy>(piece, W(to));
-        const int at_start = sign_beyond(start.value, start.exact), at_end = sign_beyond(end.value, end.exact);
-        if (at_start == -handoff.first && k > first_leaf) {  // the root is left of this leaf
-          --k;
-          continue;
-        }
-        if (at_end == handoff.first && k < last_leaf) {  // right of it
-          ++k;
-          continue;
-        }
-        if (at_start != handoff.first || at_end != -handoff.first || sign_beyond(start.value, start.bound) != handoff.first) break;
-        whole = false;
-        return {Certainty::hit, from, to};
-      }
+    if (leaf_level <= 30 &&
+        prove_leaf(fmul(estimated_root(piece), exact_pow2_neg<float>(-leaf_level)),
+                   [&](W t) { return bernstein_at<Policy>(piece, t); }, proved)) {
+      whole = false;
+      return proved;
     }
   }
   for (int d = handoff.level - 1; d >= 0; --d) {
