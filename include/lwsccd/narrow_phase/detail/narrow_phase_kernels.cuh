@@ -29,6 +29,7 @@ void NarrowPhase<Method, T, Policy>::ensure_streams() {
   LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&sms_, cudaDevAttrMultiProcessorCount, device));
   sms_ = std::max(1, sms_);
   LWSCCD_CUDA_CHECK(cudaDeviceGetAttribute(&fp64_ratio_, cudaDevAttrSingleToDoublePrecisionPerfRatio, device));
+  overlap_launches_ = Policy::kOverlapLaunches && lwsccd::detail::device_overlaps_launches(device);
   control_.resize_discard(detail::kNarrowControlWords);
   for (auto& l : lists_) {
     l.host_counters = PinnedBuffer<unsigned long long>(detail::kNarrowCounters);
@@ -241,7 +242,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     const unsigned blocks = grid_for(in.count.room, Policy::kBlock, Policy::kGridBlocksPerSm);
     if (blocks == 0) return;
     record(out, lp, [=](List& l) {
-      detail::screen_kernel<Method, kVertexFace, Policy::kBlock, T, P><<<blocks, Policy::kBlock, 0, l.stream>>>(
+      chain(detail::screen_kernel<Method, kVertexFace, Policy::kBlock, T, P>, blocks, Policy::kBlock, l.stream,
           mesh, x0, x1, single_.data(), in, params, control_.data(), l.survivors.data(), l.work_room, l.counters.data());
     });
   }
@@ -276,27 +277,27 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
         const bool single_deeper = single_second_round(params.mode);
         record(out, lp, [=](List& l) {
-          detail::single_filter_kernel<Method, kVertexFace, T>
-              <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+          chain(detail::single_filter_kernel<Method, kVertexFace, T>,
+                grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
                   mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
                   l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room);
         });
         record(out, lp, [=](List& l) {
           LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
-          detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+          chain(detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>, single_blocks, Policy::kBlock, l.stream,
               mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
               l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
               single_deeper ? l.single_expanded.data() : nullptr);
         });
         if (single_deeper) {
           record(out, lp, [=](List& l) {
-            detail::single_expand_kernel<Method, kVertexFace, T><<<single_blocks, Policy::kBlock, 0, l.stream>>>(
+            chain(detail::single_expand_kernel<Method, kVertexFace, T>, single_blocks, Policy::kBlock, l.stream,
                 mesh, single_.data(), l.survivors.data(), params, control_.data(), l.counters.data(), l.single_expanded.data(),
                 l.single_deep.data(), l.single_deep_room, l.single_failed.data(), l.double_kept.data(), l.refine_room);
           });
           record(out, lp, [=](List& l) {
-            detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>
-                <<<grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+            chain(detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>,
+                  grid_for(l.single_deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
                     mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(),
                     detail::kSingleDeepIntervals, l.single_deep.data(), l.single_deep_room, l.single_failed.data(),
                     l.double_kept.data(), l.deferred.data(), nullptr);
@@ -311,7 +312,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       const bool deeper = second_round(params.mode);
       record(out, lp, [=](List& l) {
         const auto launch = [&](auto kernel) {
-          kernel<<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+          chain(kernel, grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
               mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
               l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data(), warp_below, handed);
         };
@@ -320,33 +321,33 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       });
       record(out, lp, [=](List& l) {
         LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
-        detail::filter_inside_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
+        chain(detail::filter_inside_kernel<Method, kVertexFace, T, P>, interval_blocks, Policy::kBlock, l.stream,
             mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
             l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
       });
       if (deeper) {
         record(out, lp, [=](List& l) {
-          detail::filter_expand_kernel<Method, kVertexFace, T, P><<<interval_blocks, Policy::kBlock, 0, l.stream>>>(
+          chain(detail::filter_expand_kernel<Method, kVertexFace, T, P>, interval_blocks, Policy::kBlock, l.stream,
               mesh, x0, x1, kept, params, control_.data(), l.counters.data(), l.expanded.data(), l.deep.data(),
               l.deep_room, l.listed.data(), l.deferred.data());
         });
         record(out, lp, [=](List& l) {
-          detail::filter_inside_kernel<Method, kVertexFace, T, P>
-              <<<grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+          chain(detail::filter_inside_kernel<Method, kVertexFace, T, P>,
+                grid_for(l.deep_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
                   mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kDeepIntervals,
                   l.deep.data(), l.deep_room, l.listed.data(), l.deferred.data(), nullptr);
         });
       }
     } else {
       record(out, lp, [=](List& l) {
-        detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>
-            <<<grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
+        chain(detail::refine_kernel<Method, kVertexFace, Policy::kRefineDeferLevel, Policy::kBlock, Policy::kRefineMinBlocks, T, P>,
+              grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
                 mesh, x0, x1, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(), l.hits.data(),
                 l.hit_room, l.undecided.data(), l.deferred.data());
       });
     }
     record(out, lp, [=](List& l) {
-      detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P><<<grid_for(room, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(
+      chain(detail::refine_deferred_kernel<Method, kVertexFace, kHand, T, P>, grid_for(room, Policy::kBlock, 8), Policy::kBlock, l.stream,
           mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
           l.hit_room, l.undecided.data(), warp_below, handed, whole_in_filter);
     });
@@ -357,7 +358,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       handed_warp_limit_ = warp_limit;
       auto launch_handed = [=, &out](auto kernel) {
         record(out, lp, [=](List& l) {
-          kernel<<<grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, 0, l.stream>>>(  // (a warp per entry at most)
+          chain(kernel, grid_for(l.handed.size() * 32, Policy::kBlock, 8), Policy::kBlock, l.stream,  // (a warp per entry at most)
               mesh, x0, x1, kept, l.deferred.data(), handed, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
               l.undecided.data(), warp_below, warp_limit);
         });
@@ -368,15 +369,15 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     if (warp_below > 0) {
       const std::size_t warp_room = std::min(room, warp_below);
       record(out, lp, [=](List& l) {
-        detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>
-            <<<static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0, l.stream>>>(
+        chain(detail::refine_deferred_warp_kernel<Method, kVertexFace, T, P>,
+              static_cast<unsigned>((warp_room * 32 + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, l.stream,
                 mesh, x0, x1, kept, l.refine_room, l.deferred.data(), params, control_.data(), l.counters.data(), l.hits.data(),
                 l.hit_room, l.undecided.data(), warp_below);
       });
     }
     // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
     record(out, lp, [=](List& l) {
-      detail::settle_undecided_kernel<Method, kVertexFace, T, P><<<grid_for(room, Policy::kBlock, 1), Policy::kBlock, 0, l.stream>>>(
+      chain(detail::settle_undecided_kernel<Method, kVertexFace, T, P>, grid_for(room, Policy::kBlock, 1), Policy::kBlock, l.stream,
           mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.refine_room);
     });
   }
