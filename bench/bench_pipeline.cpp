@@ -4,7 +4,8 @@
 // reported apart from the steady state (refit, traversal from the front: medians of --reps steps).
 // The default sweep adds, on the GPU: a second pipeline's first step on new memory (first2, the
 // median of five), device-resident steady steps (device), host-to-host steady steps into one kept
-// result (kept), and fresh steps, device-resident, each after a step of another configuration of
+// result (kept), both again from the positions rounded to float (device-f32, kept-f32: float32
+// input), and fresh steps, device-resident, each after a step of another configuration of
 // the mesh, from that stale front (fresh) or from the root (fresh-root), and a pipeline's first
 // step made after the scene's others are gone (first-warm: their device blocks in the process's
 // cache).
@@ -213,6 +214,49 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
     }
     outcomes.back().contacts = kept.contacts;  // (scored against the ground truth)
     rows.push_back(make_row("kept", 1, outcomes.size()));
+    outcomes = kept_outcomes;
+  }
+  // The same two from float positions (the step's double positions rounded to float: what a
+  // simulation that keeps float32 positions passes; they cross as float and are widened on the
+  // device): device-f32 and kept-f32. Their contacts are those of the rounded positions, so they
+  // are not scored against the ground truth.
+  if (resident && device == "gpu" && steps > 1) {
+    const auto rounded = [](const std::vector<lwsccd::Vec3d>& x) {
+      std::vector<lwsccd::Vec3f> out(x.size());
+      for (std::size_t v = 0; v < x.size(); ++v) out[v] = x[v].cast<float>();
+      return out;
+    };
+    const std::vector<ccd_app::StepOutcome> kept_outcomes = std::move(outcomes);
+    {
+      auto p = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+      outcomes.clear();
+      for (std::size_t i = 0; i < steps; ++i) {
+        const lwsccd::Step step = sc.step(i);
+        const std::optional<lwsccd::StepStats> stats = ccd_app::device_resident_step(*p, rounded(step.x0), rounded(step.x1));
+        ccd_app::StepOutcome o;
+        if (stats) o.stats = *stats;
+        outcomes.push_back(std::move(o));
+      }
+      Row r = make_row("device-f32", 1, outcomes.size());
+      r.has_truth = false;
+      rows.push_back(r);
+    }
+    {
+      auto p = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+      outcomes.clear();
+      lwsccd::StepOutcome kept;
+      for (std::size_t i = 0; i < steps; ++i) {
+        const lwsccd::Step step = sc.step(i);
+        const std::vector<lwsccd::Vec3f> f0 = rounded(step.x0), f1 = rounded(step.x1);
+        p->step_into(lwsccd::Span<const lwsccd::Vec3f>(f0), lwsccd::Span<const lwsccd::Vec3f>(f1), kept);
+        ccd_app::StepOutcome o;
+        o.stats = kept.stats;
+        outcomes.push_back(std::move(o));
+      }
+      Row r = make_row("kept-f32", 1, outcomes.size());
+      r.has_truth = false;
+      rows.push_back(r);
+    }
     outcomes = kept_outcomes;
   }
   // Fresh steps (GPU, device-resident): each measured step follows a step of another configuration

@@ -57,5 +57,9 @@ void release_gpu_cached_memory();
 /// left there (AnyPipeline::step_on_device); nothing for the CPU backend.
 std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline& pipeline, const std::vector<lwsccd::Vec3d>& x0,
                                                       const std::vector<lwsccd::Vec3d>& x1);
+/// The same from float positions (AnyPipeline::step_on_device's Vec3f form: they cross as float
+/// and are widened on the device).
+std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline& pipeline, const std::vector<lwsccd::Vec3f>& x0,
+                                                      const std::vector<lwsccd::Vec3f>& x1);
 
 }  // namespace ccd_app

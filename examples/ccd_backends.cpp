@@ -16,6 +16,10 @@ std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline&, const std::v
                                                       const std::vector<lwsccd::Vec3d>&) {
   return std::nullopt;
 }
+std::optional<lwsccd::StepStats> device_resident_step(AnyPipeline&, const std::vector<lwsccd::Vec3f>&,
+                                                      const std::vector<lwsccd::Vec3f>&) {
+  return std::nullopt;
+}
 
 void release_gpu_cached_memory() {}
 
