@@ -29,6 +29,12 @@ __device__ __forceinline__ void allow_next_grid() {
 #endif
 }
 
+/// Both, the first thing in a kernel that launch_after_previous may launch.
+__device__ __forceinline__ void start_after_previous_grids() {
+  await_previous_grids();
+  allow_next_grid();
+}
+
 /// True where launch_after_previous can overlap launches: a device of compute capability 9.0 or
 /// later.
 inline bool device_overlaps_launches(int device) {

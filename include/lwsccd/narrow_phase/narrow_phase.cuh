@@ -72,7 +72,7 @@ struct NarrowPhasePolicy {
   /// blocks are set up while the last one's finish and wait on the device for it, instead of the
   /// stream draining between the two (NVIDIA H200: armadillo-rollers narrow 0.516 -> 0.494 ms, the
   /// other shared scenes within their spread). The same answers; false: plain launches. Every
-  /// kernel NarrowPhase::chain launches starts with detail::await_previous_grids.
+  /// kernel NarrowPhase::chain launches starts with detail::start_after_previous_grids.
   static constexpr bool kOverlapLaunches = true;
   /// At most this many handed searches per SM run a warp each; more run a thread each (in a kernel
   /// of their own, still apart from the short ones): a warp's search costs ~30 lanes' work, which
@@ -383,7 +383,7 @@ class NarrowPhase {
   static void record(Launches& out, List* list, Launch launch);
   /// One kernel of a list's first pass on `stream`, overlapping the one before it where
   /// overlap_launches_ (Policy::kOverlapLaunches on a device that can); the kernel waits for the
-  /// earlier work on the device (detail::await_previous_grids).
+  /// earlier work on the device (detail::start_after_previous_grids).
   template <class... Params, class... Args>
   void chain(void (*kernel)(Params...), unsigned grid, unsigned block, cudaStream_t stream, Args&&... args) const {
     lwsccd::detail::launch_after_previous(overlap_launches_, kernel, grid, block, stream, std::forward<Args>(args)...);

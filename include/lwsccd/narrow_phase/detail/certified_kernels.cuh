@@ -124,8 +124,7 @@ template <class Method, bool kVertexFace, int kBlock, class T, class P>
 __global__ void screen_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const SingleVertex* single, PairList in,
                               CcdParams<T> params, const unsigned long long* control, std::pair<index_t, index_t>* kept,
                               std::size_t room, unsigned long long* counters) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = in.count.get();
   if constexpr (lwsccd::detail::single_first_of<Method>::value) {
@@ -177,8 +176,7 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
                   const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
                   const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
                   std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
@@ -293,8 +291,7 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
                                      unsigned long long* intervals, std::size_t interval_room,
                                      std::pair<index_t, index_t>* double_kept, std::size_t kept_room) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const CcdParams<float> single_params = lwsccd::detail::single_params(params);
   const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
@@ -334,8 +331,7 @@ __global__ void single_inside_kernel(MeshFeatures mesh, const SingleVertex* sing
                                      unsigned* deferred, unsigned long long* expanded) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   using lwsccd::detail::InsideVerdict;
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = counters[counter] < interval_room ? static_cast<std::size_t>(counters[counter]) : interval_room;
   LWSCCD_GRID_STRIDE(j, n) {
@@ -363,8 +359,7 @@ __global__ void single_expand_kernel(MeshFeatures mesh, const SingleVertex* sing
                                      const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
                                      unsigned* failed, std::pair<index_t, index_t>* double_kept, std::size_t kept_room) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const CcdParams<float> single_params = lwsccd::detail::single_params(params);
   const std::size_t n = static_cast<std::size_t>(counters[kSingleExpanded]);
@@ -466,8 +461,7 @@ __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
                               unsigned long long* counters, unsigned long long* intervals, std::size_t interval_room,
                               FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred,
                               std::size_t warp_below, unsigned* handed) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = counters[kept_counter] < room ? static_cast<std::size_t>(counters[kept_counter]) : room;
   const std::size_t whole = kWithWhole ? whole_searched_early(counters, warp_below) : 0;
@@ -495,8 +489,7 @@ __global__ void filter_inside_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
                                      unsigned* deferred, unsigned long long* expanded) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   using lwsccd::detail::InsideVerdict;
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = counters[counter] < interval_room ? static_cast<std::size_t>(counters[counter]) : interval_room;
   LWSCCD_GRID_STRIDE(j, n) {
@@ -524,8 +517,7 @@ __global__ void filter_expand_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
                                      const unsigned long long* expanded, unsigned long long* deep, std::size_t deep_room,
                                      unsigned* listed, unsigned* deferred) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kExpanded]);
   LWSCCD_GRID_STRIDE(j, n) {
@@ -558,8 +550,7 @@ __global__ void refine_deferred_kernel(MeshFeatures mesh, const Vec3<P>* x0, con
                                        CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
                                        FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
                                        unsigned* handed, bool after_whole) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
   if (n <= warp_below) return;  // refine_deferred_warp_kernel's
@@ -646,8 +637,7 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
                                             CcdParams<T> params, const unsigned long long* control,
                                             unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room,
                                             FeatureHit<T>* undecided, std::size_t warp_below) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]);
   if (n > warp_below) return;
@@ -681,8 +671,7 @@ __global__ void refine_handed_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
                                      CcdParams<T> params, const unsigned long long* control, unsigned long long* counters,
                                      FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, std::size_t warp_below,
                                      std::size_t warp_limit) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kDeferred]), count = static_cast<std::size_t>(counters[kHandedToWarps]);
   if (n <= warp_below || (count <= warp_limit) != kWarpEach) return;  // (the other kernels' lists)
@@ -714,8 +703,7 @@ template <class Method, bool kVertexFace, class T, class P>
 __global__ void settle_undecided_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, CcdParams<T> params,
                                         const unsigned long long* control, unsigned long long* counters, FeatureHit<T>* hits,
                                         std::size_t hit_room, FeatureHit<T>* undecided, std::size_t room) {
-  lwsccd::detail::await_previous_grids();  // (launched by NarrowPhase::chain)
-  lwsccd::detail::allow_next_grid();
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
   const std::size_t n = counters[kUndecided] < room ? static_cast<std::size_t>(counters[kUndecided]) : room;
   LWSCCD_GRID_STRIDE(i, n) {
