@@ -547,8 +547,8 @@ struct CubicAtPoints {
   LWSCCD_HD CubicAtPoints(const Q& q, const Vec3<W>& m, W perturbation) : x(coplanarity_of(q)) {
     dp = vsub(x.p1, x.p0), da = vsub(x.a1, x.a0), db = vsub(x.b1, x.b0);
     const W u = unit_roundoff<W>();
-    // The computed X(t) within 13 u m_k of the exact one (B15), and above max(|X0|, |X1|) by less
-    // than that: base magnitudes of every factor at any t, and their errors with the perturbation.
+    // The computed X(t) within 12.01 u m_k of the exact one (B15), and above max(|X0|, |X1|) by less
+    // than 10.01 u m_k: base magnitudes of every factor at any t, and their errors with the perturbation.
     const Vec3<W> e = vscale(m, W(14) * u), ep = vadd(e, vscale(m, fmul(W(2), perturbation)));
     const Vec3<W> bp = vadd(max(abs(x.p0), abs(x.p1)), e), ba = vadd(max(abs(x.a0), abs(x.a1)), e),
                   bb = vadd(max(abs(x.b0), abs(x.b1)), e);
