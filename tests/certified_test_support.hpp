@@ -217,6 +217,12 @@ struct NoDescentJumpPolicy : CertifiedPolicy {
   static constexpr bool kDescentJump = false;
 };
 
+// The search in single precision halves its certain descent in float before it hands the
+// interval to double (as far as float decides the middle signs).
+struct NoHandOffAtDescentPolicy : CertifiedPolicy {
+  static constexpr bool kHandOffAtDescent = false;
+};
+
 // The double tail proves its leaf from the cubic built in double only (no values at the points).
 struct NoJumpAtPointsPolicy : CertifiedPolicy {
   static constexpr bool kJumpAtPoints = false;

@@ -565,6 +565,7 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
   std::size_t known_hits = 0, known_descents = 0;  // of the contacts at known times
   std::size_t tail_differ = 0;                      // the leaf proved against the halvings
   std::size_t points_differ = 0;                    // the leaf proved from the points against the cubic's
+  std::size_t handoff_differ = 0, handoff_same = 0;  // handed over at the descent against after float's halvings
   auto compare = [&](const auto& q, double toi) {
     using T = std::decay_t<decltype(q.points()[0].x)>;
     const CcdParams<T> params;
@@ -598,6 +599,14 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
     const bool points_same = mixed.certainty == cubic.certainty && mixed.lo == cubic.lo && mixed.hi == cubic.hi;
     points_differ += !points_same && !(mixed.certainty == Certainty::hit && cubic.certainty == Certainty::hit &&
                                        mixed.hi == cubic.hi && cubic.lo < mixed.lo);
+    // Handed to double where float's certain descent starts against after float's halvings: the
+    // same leaf, or the same leaf with an earlier lower bound the tail's halvings in double noted.
+    const CertifiedAnswer<T> halved_in_float = detail::certified_classify<NoHandOffAtDescentPolicy>(q, params);
+    const bool handoff_equal = mixed.certainty == halved_in_float.certainty && mixed.lo == halved_in_float.lo &&
+                               mixed.hi == halved_in_float.hi;
+    handoff_same += handoff_equal && mixed.certainty == Certainty::hit;
+    handoff_differ += !handoff_equal && !(mixed.certainty == Certainty::hit && halved_in_float.certainty == Certainty::hit &&
+                                          mixed.hi == halved_in_float.hi);
     ++pairs;
   };
   for (int n = 0; n < 20000; ++n) {
@@ -630,6 +639,10 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
   CHECK(tail_differ == 0);
   std::printf("  the leaf proved from the points against the cubic's: %zu differences\n", points_differ);
   CHECK(points_differ == 0);
+  std::printf("  handed to double at the descent against after float's halvings: %zu hits the same, %zu other differences\n",
+              handoff_same, handoff_differ);
+  CHECK(handoff_differ == 0);
+  CHECK(handoff_same * 10 > hits * 9);
   CHECK(differ == 0);
   CHECK(past_toi == 0);
 }

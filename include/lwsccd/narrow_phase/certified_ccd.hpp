@@ -92,6 +92,11 @@ struct CertifiedPolicy {
   /// test take 22), or whose motion is coplanar: such searches are long, and float rarely
   /// decides them.
   static constexpr int kSingleSearchSplits = 24;
+  /// Where the search in single precision reaches a certain descent, it hands the interval to
+  /// double as it is, with the root guessed on it (detail::estimated_root); false: it first
+  /// halves the interval in float as far as float can decide the middle signs. The double tail
+  /// proves the same leaf either way (docs/NARROW_PHASE.md, B10).
+  static constexpr bool kHandOffAtDescent = true;
   /// The double tail of such a contact proves the leaf that holds the root from f's signs at its
   /// two ends, the leaf guessed in float, instead of halving down to it (about a third of the
   /// tail's FP64 instructions); false, or where those signs are not certain: the halvings.

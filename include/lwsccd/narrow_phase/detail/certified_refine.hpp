@@ -376,6 +376,16 @@ LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W p
     // usual. Single precision hands the interval it reached to double instead.
     if (descent && inside == InsideVerdict::inside && !leaf && !has_open && single_crossing(c, bound)) {
       const int first = c[0] > W(0) ? 1 : -1;
+      if constexpr (kSingle) {
+        // Every fact the double tail needs holds from here on (B10), so the interval is handed
+        // over as it is, the root guessed on it, instead of halved in float first (the same leaf
+        // is proved; within the time limit, so no end of the descent but the leaf is left).
+        if (Policy::kHandOffAtDescent && !has_lower && handoff && hi <= params.time_limit) {
+          *handoff = SingleHandoff{true, e.level, first, e.index,
+                                   fmul(fadd(static_cast<float>(e.index), estimated_root(e.piece)), exact_pow2_neg<float>(e.level))};
+          return undecided;
+        }
+      }
       const T saved_lower = lower;
       const bool saved_has_lower = has_lower;
       const int saved_splits = splits;
