@@ -60,6 +60,12 @@ struct GrowFromCapacity : gpu::NarrowPhasePolicy {
   static constexpr bool kCountFirstRun = false;
 };
 
+// Every kernel launched plainly, one after the other on its stream (no programmatic dependent
+// launch, whatever the device).
+struct PlainLaunches : gpu::NarrowPhasePolicy {
+  static constexpr bool kOverlapLaunches = false;
+};
+
 // Returns the GPU's whole refinements (NarrowPhase::whole_searches).
 template <class Method, class T, class Policy = gpu::NarrowPhasePolicy>
 std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
@@ -126,6 +132,21 @@ TEST_CASE("GPU narrow phase equals the CPU backend on a folded cloth, with a gro
   // The same for the second round's list (mode contacts: the only one that runs it).
   compare_backends<CertifiedCcd, double, TinyDeepRoom>(m.mesh, m.x0, m.x1, fp, 1 << 16);
   compare_backends<CertifiedCcd, float, TinyDeepRoom>(m.mesh, m.x0, m.x1, fp, 1 << 16);
+}
+
+TEST_CASE("GPU narrow phase: launches overlapped where the device can, and plain launches, give the CPU's answers",
+          "[gpu][narrow]") {
+  int device = 0, major = 0;
+  REQUIRE(cudaGetDevice(&device) == cudaSuccess);
+  REQUIRE(cudaDeviceGetAttribute(&major, cudaDevAttrComputeCapabilityMajor, device) == cudaSuccess);
+  CHECK(gpu::NarrowPhase<CertifiedCcd, double>(1).overlaps_launches() == (major >= 9));
+  CHECK_FALSE(gpu::NarrowPhase<CertifiedCcd, double, PlainLaunches>(1).overlaps_launches());
+  const auto m = lwsccd_test::folded_cloth(40, 4);
+  const FeaturePairs fp = feature_pairs(m.mesh, brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1)));
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set}) {
+    compare_backends<CertifiedCcd, double, PlainLaunches>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, float, PlainLaunches>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+  }
 }
 
 TEST_CASE("GPU narrow phase: the filter's second round leaves fewer pairs to the whole search", "[gpu][narrow]") {

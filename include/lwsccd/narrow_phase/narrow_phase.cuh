@@ -280,6 +280,9 @@ class NarrowPhase {
   /// filter sent whole that the double filter's kernel ran beside its own pairs, a thread each, in
   /// the last run (none where a list's whole searches all went to warps).
   std::size_t whole_searches_beside_filter() const { return lists_[0].whole_beside_filter + lists_[1].whole_beside_filter; }
+  /// Whether a list's first-pass kernels are launched to overlap the kernel before them
+  /// (NarrowPhasePolicy::kOverlapLaunches on a device of compute capability 9.0 or later).
+  bool overlaps_launches() const { return overlap_launches_; }
   /// Plans the following runs as for a GPU whose FP32 runs `ratio` times faster than its FP64 (0:
   /// this device's own, cudaDevAttrSingleToDoublePrecisionPerfRatio): past
   /// kHandedWarpsMaxFp64Ratio the searches in double run a thread each. The answers do not change
