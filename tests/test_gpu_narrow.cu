@@ -139,10 +139,21 @@ TEST_CASE("GPU narrow phase: launches overlapped where the device can, and plain
   int device = 0, major = 0;
   REQUIRE(cudaGetDevice(&device) == cudaSuccess);
   REQUIRE(cudaDeviceGetAttribute(&major, cudaDevAttrComputeCapabilityMajor, device) == cudaSuccess);
-  CHECK(gpu::NarrowPhase<CertifiedCcd, double>(1).overlaps_launches() == (major >= 9));
-  CHECK_FALSE(gpu::NarrowPhase<CertifiedCcd, double, PlainLaunches>(1).overlaps_launches());
   const auto m = lwsccd_test::folded_cloth(40, 4);
   const FeaturePairs fp = feature_pairs(m.mesh, brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1)));
+  // How a narrow phase launched its kernels: known from its first run on.
+  const auto overlapped = [&](auto&& narrow) {
+    gpu::DeviceMeshFeatures features(m.mesh);
+    gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
+    gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
+    vf.upload(fp.vf);
+    ee.upload(fp.ee);
+    CHECK_FALSE(narrow.overlaps_launches());
+    narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), CcdParams<double>{});
+    return narrow.overlaps_launches();
+  };
+  CHECK(overlapped(gpu::NarrowPhase<CertifiedCcd, double>(1 << 16)) == (major >= 9));
+  CHECK_FALSE(overlapped(gpu::NarrowPhase<CertifiedCcd, double, PlainLaunches>(1 << 16)));
   for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest, CcdMode::set}) {
     compare_backends<CertifiedCcd, double, PlainLaunches>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, float, PlainLaunches>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);

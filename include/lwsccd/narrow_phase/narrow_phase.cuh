@@ -281,7 +281,8 @@ class NarrowPhase {
   /// the last run (none where a list's whole searches all went to warps).
   std::size_t whole_searches_beside_filter() const { return lists_[0].whole_beside_filter + lists_[1].whole_beside_filter; }
   /// Whether a list's first-pass kernels are launched to overlap the kernel before them
-  /// (NarrowPhasePolicy::kOverlapLaunches on a device of compute capability 9.0 or later).
+  /// (NarrowPhasePolicy::kOverlapLaunches on a device of compute capability 9.0 or later),
+  /// decided on the device of the first run: false before it.
   bool overlaps_launches() const { return overlap_launches_; }
   /// Plans the following runs as for a GPU whose FP32 runs `ratio` times faster than its FP64 (0:
   /// this device's own, cudaDevAttrSingleToDoublePrecisionPerfRatio): past
