@@ -283,9 +283,10 @@ struct SingleHandoff {
 /// certified_refine documents it. kSingle: q is single precision's query (relative_single), whose
 /// "as given" means nothing of the input; its as-given bounds are then made its perturbed ones
 /// (root.exact = root.bound; inside tests count the perturbation as given), so every claim holds
-/// for the input, and the search stops where double must take over: a certain descent that float
-/// can no longer halve, or one within the tolerance, sets *handoff (the answer is then undecided,
-/// for certified_descend_from); any other end that is not a miss is undecided without it.
+/// for the input, and the search stops where double must take over: a certain descent, where it
+/// starts (Policy::kHandOffAtDescent) or where float can no longer halve it or it is within the
+/// tolerance, sets *handoff (the answer is then undecided, for certified_descend_from); any other
+/// end that is not a miss is undecided without it.
 template <class Policy, int kStack, bool kSettle, bool kSingle, class QW, class W, class T, class InsideAt>
 LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W perturbation, const BernsteinPiece<W>& root,
                                               W inside_slack, const CcdParams<T>& params, int defer_level, bool* deferred,
@@ -378,8 +379,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W p
       const int first = c[0] > W(0) ? 1 : -1;
       if constexpr (kSingle) {
         // Every fact the double tail needs holds from here on (B10), so the interval is handed
-        // over as it is, the root guessed on it, instead of halved in float first (the same leaf
-        // is proved; within the time limit, so no end of the descent but the leaf is left).
+        // over as it is, the root guessed on it, instead of halved in float first: the tail proves
+        // the same leaf. (It ends within the time limit: the descent could end nowhere else.)
         if (Policy::kHandOffAtDescent && !has_lower && handoff && hi <= params.time_limit) {
           *handoff = SingleHandoff{true, e.level, first, e.index,
                                    fmul(fadd(static_cast<float>(e.index), estimated_root(e.piece)), exact_pow2_neg<float>(e.level))};
@@ -493,7 +494,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
 /// FP32 first for contacts (Policy::kSingleDescent): the search in single precision on the
 /// pair's float query (relative_single_in_double, bound B12), with its as-given bounds made its perturbed
 /// ones. A certain miss there is the input's (as the single-precision filter's); a certain
-/// descent it can no longer halve (or one within the tolerance) is handed to double through
+/// descent is handed to double where it starts (or where float can no longer halve it) through
 /// *handoff; anything else is undecided (the double search decides). Reads CcdParams<float>
 /// (single_params): no double arithmetic.
 template <class Policy, class Q>
