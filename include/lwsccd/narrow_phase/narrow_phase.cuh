@@ -67,7 +67,8 @@ struct NarrowPhasePolicy {
   /// than kRefineWarpBelow (the SMs' warp slots the two kernels left idle one after the other are
   /// shared; NVIDIA H200, cloth-ball narrow 0.83 -> 0.81 ms). The same answers; false: after it.
   static constexpr bool kWholeBesideFilter = true;
-  /// A list's kernels are launched to overlap the end of the one before them (programmatic
+  /// A list's first-pass kernels (the screen through settle_undecided_kernel; not the fallback's
+  /// nor the hits' sort) are launched to overlap the end of the one before them (programmatic
   /// dependent launch, compute capability 9.0 and later; elsewhere plain launches): a kernel's
   /// blocks are set up while the last one's finish and wait on the device for it, instead of the
   /// stream draining between the two (NVIDIA H200: armadillo-rollers narrow 0.516 -> 0.494 ms, the
