@@ -277,6 +277,12 @@ struct SingleHandoff {
   std::uint32_t index = 0;
   float guess = -1.0f;  ///< where in [0, 1] the float cubic's root lies (estimated_root on the interval's piece)
 };
+/// The hand-off of interval `index` of `level`, whose float cubic is `piece`, f's sign at its
+/// start `first`: the root guessed on it (estimated_root), as a time in [0, 1].
+template <class W>
+LWSCCD_HD SingleHandoff handoff_at(const BernsteinPiece<W>& piece, int level, std::uint32_t index, int first) {
+  return {true, level, first, index, fmul(fadd(static_cast<float>(index), estimated_root(piece)), exact_pow2_neg<float>(level))};
+}
 
 /// The certified search over [0, 1] from the cubic's piece `root` of the query q (in W, m its
 /// per-axis coordinate bound, `perturbation` the relative perturbation its bounds cover), as
@@ -382,8 +388,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W p
         // over as it is, the root guessed on it, instead of halved in float first: the tail proves
         // the same leaf. (It ends within the time limit: the descent could end nowhere else.)
         if (Policy::kHandOffAtDescent && !has_lower && handoff && hi <= params.time_limit) {
-          *handoff = SingleHandoff{true, e.level, first, e.index,
-                                   fmul(fadd(static_cast<float>(e.index), estimated_root(e.piece)), exact_pow2_neg<float>(e.level))};
+          *handoff = handoff_at(e.piece, e.level, e.index, first);
           return undecided;
         }
       }
@@ -399,8 +404,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W p
         // after any descent: the interval starts right after everything excluded.
         if (end == DescentEnd::past_limit) return CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
         if ((end == DescentEnd::within_tolerance || end == DescentEnd::on_grid) && !saved_has_lower && handoff)
-          *handoff = SingleHandoff{true, level, first, index,
-                                   fmul(fadd(static_cast<float>(index), estimated_root(piece)), exact_pow2_neg<float>(level))};
+          *handoff = handoff_at(piece, level, index, first);
         return undecided;
       } else {
         const T step = exact_pow2_neg<T>(level);
