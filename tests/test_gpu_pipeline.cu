@@ -50,27 +50,41 @@ void require_same_contacts(const StepResult<T>& gpu, const StepResult<T>& cpu) {
 namespace {
 
 // The GPU emitter over a candidate list equals the CPU emission over the same list: same pairs in
-// the same order; and, sorted, the brute-force (or sweep) feature oracle.
+// the same order; and, sorted, the brute-force (or sweep) feature oracle. The emitter tests the
+// faces' relative motion by default (the CPU's with face_corners); without it, the boxes' lists.
 void require_gpu_emission_equals_cpu(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
                                      const BodyLayout& layout, bool brute_force) {
   const RepresentativeTriangles rep(mesh, layout);
   const std::vector<Aabbf> boxes = feature_boxes(mesh, x0, x1);
+  const std::vector<FaceCorners> corners = face_corners(mesh, x0, x1);
   std::vector<TrianglePair> candidates =
       brute_force ? brute_force_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, x0, x1), layout)
                   : sweep_and_prune_pairs(mesh, swept_triangle_bvs<Aabbf>(mesh, x0, x1), layout);
-  const FeaturePairs cpu = emit_feature_pairs(rep, candidates, boxes);  // adjacent candidates kept: both skip them
+  const FeaturePairs cpu = emit_feature_pairs(rep, candidates, boxes, &corners);  // adjacent candidates kept: both skip them
+  const FeaturePairs cpu_boxes_only = emit_feature_pairs(rep, candidates, boxes);
   gpu::DeviceBuffer<TrianglePair> d_candidates;
   gpu::DeviceBuffer<Vec3d> d_x0, d_x1;
   d_candidates.upload(candidates);
   d_x0.upload(x0);
   d_x1.upload(x1);
   gpu::FeatureEmitter<> emitter(rep);
-  for (int run = 0; run < 2; ++run) {  // a second run reuses the buffers
-    emitter.run(d_x0.data(), d_x1.data(), d_candidates.data(), candidates.size());
+  REQUIRE(emitter.face_motion_test());
+  // Runs 0, 1 (the buffers reused), without the test, and with it again (its corners recomputed
+  // though the boxes are current).
+  for (int run = 0; run < 4; ++run) {
+    emitter.set_face_motion_test(run != 2);
+    emitter.enqueue(d_x0.data(), d_x1.data(), d_candidates.data(), candidates.size(), nullptr, true, run == 3);
+    LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+    if (!emitter.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
     const FeaturePairs gpu_pairs = emitter.download();
-    REQUIRE(gpu_pairs.vf == cpu.vf);
-    REQUIRE(gpu_pairs.ee == cpu.ee);
+    const FeaturePairs& expected = run == 2 ? cpu_boxes_only : cpu;
+    REQUIRE(gpu_pairs.vf == expected.vf);
+    REQUIRE(gpu_pairs.ee == expected.ee);
   }
+  // A box margin (a minimum separation) turns the test off.
+  emitter.set_box_margin(1e-3);
+  CHECK_FALSE(emitter.face_motion_test());
+  emitter.set_box_margin(0);
   // Without waiting: buffers sized by a run over an eighth of the candidates; the whole list may
   // outgrow them (collect() says so, grows them and writes again) and nothing is lost.
   gpu::FeatureEmitter<> unwaited(rep);
@@ -94,18 +108,20 @@ void require_gpu_emission_equals_cpu(const TriangleMesh& mesh, const std::vector
   LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
   if (!unwaited.collect()) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(nullptr));
   const FeaturePairs half_pairs = unwaited.download();
-  const FeaturePairs cpu_half = emit_feature_pairs(rep, candidates.data(), half, boxes, true);
+  const FeaturePairs cpu_half = emit_feature_pairs(rep, candidates.data(), half, boxes, true, &corners);
   REQUIRE(half_pairs.vf == cpu_half.vf);
   REQUIRE(half_pairs.ee == cpu_half.ee);
   FeaturePairs sorted = cpu;
   std::sort(sorted.vf.begin(), sorted.vf.end());
   std::sort(sorted.ee.begin(), sorted.ee.end());
-  const FeaturePairs oracle = brute_force ? brute_force_feature_pairs(rep, boxes) : sweep_feature_pairs(rep, boxes);
+  const FeaturePairs oracle =
+      brute_force ? brute_force_feature_pairs(rep, boxes, &corners) : sweep_feature_pairs(rep, boxes, &corners);
   REQUIRE(sorted.vf == oracle.vf);
   REQUIRE(sorted.ee == oracle.ee);
-  std::printf("GPU emission: %d faces, %zu candidates -> %zu + %zu feature pairs (%zu + %zu orphans listed), equal to the "
-              "CPU's in order and to the feature oracle\n",
-              mesh.num_faces(), candidates.size(), cpu.vf.size(), cpu.ee.size(), rep.orphans().vf.size(), rep.orphans().ee.size());
+  std::printf("GPU emission: %d faces, %zu candidates -> %zu + %zu feature pairs (%zu + %zu by the boxes alone; %zu + %zu "
+              "orphans listed), equal to the CPU's in order and to the feature oracle\n",
+              mesh.num_faces(), candidates.size(), cpu.vf.size(), cpu.ee.size(), cpu_boxes_only.vf.size(),
+              cpu_boxes_only.ee.size(), rep.orphans().vf.size(), rep.orphans().ee.size());
 }
 
 }  // namespace

@@ -27,8 +27,10 @@ TEST_CASE("CPU pipeline: refit + front tracking + culling + narrow phase equal t
     std::vector<TrianglePair> non_adjacent;
     for (const auto& p : brute_force_pairs(*mesh, swept_triangle_bvs<Aabbf>(*mesh, m.x0, m.x1)))
       if (!p.adjacent) non_adjacent.push_back(p);
-    // The feature pairs are the brute-force feature oracle's, each tested once.
-    const FeaturePairs features = brute_force_feature_pairs(rep, feature_boxes(*mesh, m.x0, m.x1));
+    // The feature pairs are the brute-force feature oracle's (with the test of the faces' relative
+    // motion, as the pipeline emits them), each tested once.
+    const std::vector<FaceCorners> corners = face_corners(*mesh, m.x0, m.x1);
+    const FeaturePairs features = brute_force_feature_pairs(rep, feature_boxes(*mesh, m.x0, m.x1), &corners);
     const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(*mesh, m.x0, m.x1, features);
     REQUIRE(r.stats.triangle_pairs == non_adjacent.size());
     REQUIRE(r.stats.feature_pairs_vf == features.vf.size());

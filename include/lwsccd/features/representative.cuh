@@ -17,6 +17,7 @@
 #include <cub/block/block_scan.cuh>
 #include <cub/device/device_scan.cuh>
 
+#include <cstring>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -49,6 +50,31 @@ LWSCCD_HD inline unsigned long long pack_counts(unsigned vf, unsigned ee) {
 struct PackedBoxes {
   float4* faces = nullptr;     ///< two per face: (lo, first), (hi, represents)
   float4* features = nullptr;  ///< two per represented vertex or edge: (lo, -), (hi, -)
+  /// Five per face (three sectors): its FaceCorners and two unused words, or null: the faces'
+  /// motion not tested.
+  float4* corners = nullptr;
+  static constexpr int kCornerWords = 5;
+  static_assert(sizeof(FaceCorners) == 18 * sizeof(float), "lwsccd: FaceCorners is 18 floats");
+
+  __device__ void put_corners(index_t f, const FaceCorners& c) const {
+    float v[4 * kCornerWords] = {};
+    memcpy(v, &c, sizeof c);
+    float4* at = corners + kCornerWords * static_cast<std::size_t>(f);
+#pragma unroll
+    for (int k = 0; k < kCornerWords; ++k) at[k] = make_float4(v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]);
+  }
+  __device__ FaceCorners corners_of(index_t f) const {
+    float v[4 * kCornerWords];
+    const float4* at = corners + kCornerWords * static_cast<std::size_t>(f);
+#pragma unroll
+    for (int k = 0; k < kCornerWords; ++k) {
+      const float4 w = __ldg(at + k);
+      v[4 * k] = w.x, v[4 * k + 1] = w.y, v[4 * k + 2] = w.z, v[4 * k + 3] = w.w;
+    }
+    FaceCorners c;
+    memcpy(&c, v, sizeof c);
+    return c;
+  }
 
   __device__ static void put(float4* at, const Aabbf& box, unsigned a, unsigned b) {
     at[0] = make_float4(box.lo.x, box.lo.y, box.lo.z, __uint_as_float(a));
@@ -71,7 +97,7 @@ struct PackedBoxes {
 };
 
 // A thread per face: its box and its represented features' boxes, each feature_box of its id (the
-// same values as the CPU's boxes), at the face's slots.
+// same values as the CPU's boxes), at the face's slots; its corners when the faces' motion is tested.
 template <class P>
 __global__ void packed_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec3<P>* x1, index_t num_faces, float margin,
                                     const unsigned* face_first, PackedBoxes packed) {
@@ -82,6 +108,7 @@ __global__ void packed_boxes_kernel(EmissionView m, const Vec3<P>* x0, const Vec
   PackedBoxes::put(packed.faces + 2 * static_cast<std::size_t>(f),
                    feature_box(m.faces, m.edges, m.num_vertices, m.num_edges, x0, x1, m.face_feature(f), margin), slot, r);
   const Face t = m.faces[f];
+  if (packed.corners) packed.put_corners(f, face_corners(t, x0, x1));
   const FaceEdgeIds e = m.face_edges[f];
 #pragma unroll
   for (int k = 0; k < 3; ++k)
@@ -132,16 +159,22 @@ __device__ inline Pair orphan_item(const Pair* orphan_vf, std::size_t num_orphan
 }
 
 // Item i: candidate triangle pair i (i < n), then vertex-face orphan i - n, then edge-edge orphan.
-// Its emission mask: emission_mask for a candidate; bit 0 (vertex-face) or bit 6 (edge-edge) for a
-// kept orphan (orphan_kept: the two features' packed boxes overlap; `feature_slot` gives a vertex's
-// or an edge's slot, every feature of an orphan having a representing face).
+// Its emission mask: emission_mask for a candidate (the boxes' mask, then, with corners, none for
+// faces apart by faces_apart: only candidates that keep a pair by their boxes pay for that test);
+// bit 0 (vertex-face) or bit 6 (edge-edge) for a kept orphan (orphan_kept: the two features'
+// packed boxes overlap; `feature_slot` gives a vertex's or an edge's slot, every feature of an
+// orphan having a representing face).
 template <class Pair>
 __device__ unsigned item_mask(const EmissionView& m, const PackedBoxes& packed, const unsigned* feature_slot,
                               const TrianglePair* candidates, std::size_t n, const Pair* orphan_vf, std::size_t num_orphan_vf,
                               const Pair* orphan_ee, std::size_t i) {
   if (i < n) {
     const TrianglePair p = candidates[i];
-    return p.adjacent ? 0u : packed_emission_mask(packed, p.a, p.b);
+    if (p.adjacent) return 0u;
+    // The boxes first: a quarter of cloth-ball's candidates keep no pair by them, and testing
+    // their faces first cost more than it saved (H200: the counting pass 203 -> 220 us).
+    const unsigned mask = packed_emission_mask(packed, p.a, p.b);
+    return mask != 0 && packed.corners && faces_apart(packed.corners_of(p.a), packed.corners_of(p.b)) ? 0u : mask;
   }
   const index_t faces_from = m.num_vertices + m.num_edges;
   auto box_of = [&](index_t id) {
@@ -362,7 +395,11 @@ class FeatureEmitter {
                   std::to_string(orphans.first + orphans.count) + ") is past the " + std::to_string(num_orphans()) +
                   " orphans");
     const EmissionView m = view();
-    const detail::PackedBoxes packed{packed_faces_.data(), packed_features_.data()};
+    const bool test_motion = face_motion_test();
+    if (test_motion) corners_.resize_discard(detail::PackedBoxes::kCornerWords * static_cast<std::size_t>(std::max<index_t>(num_faces_, 1)));
+    const detail::PackedBoxes packed{packed_faces_.data(), packed_features_.data(), test_motion ? corners_.data() : nullptr};
+    if (test_motion && !corners_current_) boxes_current = false;  // (the test was off when the boxes were computed)
+    corners_current_ = test_motion;
     if (!boxes_current && num_faces_ > 0) {
       detail::packed_boxes_kernel<<<static_cast<unsigned>((num_faces_ + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
                                     stream>>>(m, x0, x1, num_faces_, margin_, face_first_.data(), packed);
@@ -438,6 +475,12 @@ class FeatureEmitter {
   /// Grows every feature box by `margin` from the next run on (as feature_boxes' margin).
   void set_box_margin(double margin) { margin_ = lwsccd::detail::checked_margin<Aabbf>(margin, "gpu::FeatureEmitter"); }
 
+  /// Whether a candidate pair whose faces are apart by their relative motion (faces_apart) gives
+  /// no pairs, from the next run on (default on; emit_feature_pairs with face_corners gives the
+  /// same lists). A box margin (a minimum separation) turns the test off: it speaks of contact.
+  void set_face_motion_test(bool on) { face_motion_ = on; }
+  bool face_motion_test() const { return face_motion_ && !(margin_ > 0); }
+
   const Pair* vf() const { return vf_.data(); }
   const Pair* ee() const { return ee_.data(); }
   /// The numbers of pairs of the last collected run.
@@ -458,7 +501,7 @@ class FeatureEmitter {
   std::size_t device_bytes() const {
     return faces_.capacity_bytes() + edges_.capacity_bytes() + face_edges_.capacity_bytes() + represents_.capacity_bytes() +
            orphan_vf_.capacity_bytes() + orphan_ee_.capacity_bytes() + face_first_.capacity_bytes() + feature_slot_.capacity_bytes() +
-           packed_faces_.capacity_bytes() + packed_features_.capacity_bytes() + masks_.capacity_bytes() +
+           packed_faces_.capacity_bytes() + packed_features_.capacity_bytes() + corners_.capacity_bytes() + masks_.capacity_bytes() +
            block_totals_.capacity_bytes() + total_.capacity_bytes() +
            scratch_.capacity_bytes() + vf_.capacity_bytes() + ee_.capacity_bytes();
   }
@@ -489,6 +532,8 @@ class FeatureEmitter {
   DeviceBuffer<unsigned> face_first_;             ///< per face: its first slot in packed_features_
   DeviceBuffer<unsigned> feature_slot_;           ///< per vertex and edge id: its slot (~0u: none)
   DeviceBuffer<float4> packed_faces_, packed_features_;  ///< detail::PackedBoxes, from the last run's positions
+  DeviceBuffer<float4> corners_;                         ///< detail::PackedBoxes::corners (while the test is on)
+  bool face_motion_ = true, corners_current_ = false;
   DeviceBuffer<unsigned short> masks_;          ///< per item: its emission mask
   DeviceBuffer<unsigned long long> block_totals_;  ///< per block: packed counts, then their inclusive scan
   DeviceBuffer<unsigned long long> total_{1};     ///< the last run's packed totals (read by the narrow phase)

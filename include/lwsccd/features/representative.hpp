@@ -25,6 +25,8 @@
 #include <vector>
 
 #include "lwsccd/core/config.hpp"
+#include "lwsccd/core/detail/fp.hpp"
+#include "lwsccd/core/detail/rounding.hpp"
 #include "lwsccd/features/oracle.hpp"
 #include "lwsccd/features/orphans.hpp"
 #include "lwsccd/geometry/aabb.hpp"
@@ -38,6 +40,87 @@ struct FaceEdgeIds {
   index_t e[3];
 };
 
+/// A face's corners at t0 (at[0..2], in Face::v order) and at t1 (at[3..5]), each coordinate
+/// rounded to float: what the emission's test of two faces' relative motion reads (faces_apart).
+struct FaceCorners {
+  Vec3<float> at[6];
+};
+
+/// The corners of face `f` for positions x0, x1 (float input taken exactly).
+template <class P>
+LWSCCD_HD FaceCorners face_corners(const Face& f, const Vec3<P>* x0, const Vec3<P>* x1) {
+  FaceCorners c;
+  LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {
+    c.at[k] = x0[f.v[k]].template cast<float>();
+    c.at[3 + k] = x1[f.v[k]].template cast<float>();
+  }
+  return c;
+}
+
+/// Knobs of faces_apart.
+struct FaceMotionPolicy {
+  /// Scales the test's margins (1 = as derived, bound B15 of docs/NARROW_PHASE.md; the mutation
+  /// tests show that less is unsound).
+  static constexpr double kDifferenceBound = 1.0;
+};
+
+/// True when no point of face a ever meets a point of face b during the step (each corner moving
+/// linearly from t0 to t1), for the positions as given and for any within the certified narrow
+/// phase's perturbation of them: then none of the feature pairs the two faces represent touches.
+/// A contact at time t is a point of a equal to a point of b, and their difference is a convex
+/// combination of the corner differences a_i(t) - b_j(t), each on the segment between its values
+/// at t0 and t1 (B14 of docs/NARROW_PHASE.md, on 18 differences), so a direction along which all
+/// 18 are beyond their error parts the faces for the whole step. Tried: each axis (through each
+/// face's extremes at each time: rounding is monotone, so the smallest rounded difference is the
+/// rounded difference of the extremes), then c, the sum of the six corner differences, through
+/// each face's projections on c at each time, which needs 12 dot products instead of 18. In float,
+/// on the corners rounded to float; the margins (bound B15) cover that rounding, the narrow
+/// phase's perturbation, float's arithmetic and underflow. A value that is not finite decides
+/// nothing. Policy::kDifferenceBound scales the margins (1 = as derived).
+template <class Policy = FaceMotionPolicy>
+LWSCCD_HD bool faces_apart(const FaceCorners& a, const FaceCorners& b) {
+  using detail::fadd;
+  using detail::fmul;
+  using detail::fsub;
+  const float u = detail::unit_roundoff<float>(), p = fadd(u, u * 0x1p-18f);
+  const float scale = static_cast<float>(Policy::kDifferenceBound), smallest = scale > 0.0f ? 0x1p-126f : 0.0f;
+  // (Summaries made here, not stored with the corners: on the GPU 96-byte records with them were
+  // slower than 80-byte ones without, H200 cloth-ball's feature pairs 0.315 -> 0.331 ms.)
+  Vec3<float> m = abs(a.at[0]), c = detail::vsub(a.at[0], b.at[0]);
+  LWSCCD_UNROLL for (int s = 1; s < 6; ++s) {
+    m = max(m, abs(a.at[s]));
+    c = detail::vadd(c, detail::vsub(a.at[s], b.at[s]));
+  }
+  LWSCCD_UNROLL for (int s = 0; s < 6; ++s) m = max(m, abs(b.at[s]));
+  // (A corner that is not finite makes c, and so this margin, not finite.)
+  const float along_c = fadd(fmul(fmul(fadd(2.0f * p, 8.0f * u), scale), detail::vabs_dot(c, m)), smallest);
+  if (!detail::finite_value(along_c)) return false;
+  Vec3<float> lo_a[2], hi_a[2], lo_b[2], hi_b[2];
+  LWSCCD_UNROLL for (int t = 0; t < 2; ++t) {
+    lo_a[t] = min(a.at[3 * t], min(a.at[3 * t + 1], a.at[3 * t + 2]));
+    hi_a[t] = max(a.at[3 * t], max(a.at[3 * t + 1], a.at[3 * t + 2]));
+    lo_b[t] = min(b.at[3 * t], min(b.at[3 * t + 1], b.at[3 * t + 2]));
+    hi_b[t] = max(b.at[3 * t], max(b.at[3 * t + 1], b.at[3 * t + 2]));
+  }
+  const float per_axis = fmul(fadd(2.0f * p, 4.0f * u), scale);
+  LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {
+    const float margin = fadd(fmul(per_axis, m[k]), smallest);
+    const bool above = fsub(lo_a[0][k], hi_b[0][k]) > margin && fsub(lo_a[1][k], hi_b[1][k]) > margin;
+    const bool below = fsub(hi_a[0][k], lo_b[0][k]) < -margin && fsub(hi_a[1][k], lo_b[1][k]) < -margin;
+    if (above || below) return true;
+  }
+  LWSCCD_UNROLL for (int t = 0; t < 2; ++t) {
+    float lowest_a = detail::vdot(c, a.at[3 * t]), highest_b = detail::vdot(c, b.at[3 * t]);
+    LWSCCD_UNROLL for (int i = 1; i < 3; ++i) {
+      const float pa = detail::vdot(c, a.at[3 * t + i]), pb = detail::vdot(c, b.at[3 * t + i]);
+      lowest_a = pa < lowest_a ? pa : lowest_a;
+      highest_b = pb > highest_b ? pb : highest_b;
+    }
+    if (!(detail::finite_value(lowest_a) && detail::finite_value(highest_b) && fsub(lowest_a, highest_b) > along_c)) return false;
+  }
+  return true;
+}
+
 /// What the emission reads, as plain pointers (host or device memory): the faces, which features
 /// each face represents, and one box per feature id (vertices, then edges, then faces).
 struct EmissionView {
@@ -49,6 +132,9 @@ struct EmissionView {
   const unsigned char* represents = nullptr;
   const Aabbf* boxes = nullptr;  ///< indexed by feature id
   index_t num_vertices = 0, num_edges = 0;
+  /// Per face, or null: a candidate pair whose faces are apart by their relative motion
+  /// (faces_apart) keeps none of its feature pairs.
+  const FaceCorners* corners = nullptr;
 
   LWSCCD_HD index_t face_feature(index_t f) const { return num_vertices + num_edges + f; }
   LWSCCD_HD index_t edge_feature(index_t e) const { return num_vertices + e; }
@@ -82,7 +168,8 @@ LWSCCD_HD Aabbf feature_box(const Face* faces, const Edge* edges, index_t num_ve
 }
 
 /// Which feature pairs the non-adjacent candidate triangle pair (a, b) keeps (represented by a
-/// and b, boxes overlapping), as a mask: bit k (k < 3) the vertex faces[a].v[k] with face b, bit
+/// and b, boxes overlapping; none when the view has corners and the faces are apart by them), as
+/// a mask: bit k (k < 3) the vertex faces[a].v[k] with face b, bit
 /// 3 + k the vertex faces[b].v[k] with face a, bit 6 + 3x + y the edges face_edges[a].e[x] and
 /// face_edges[b].e[y]. The GPU's counting pass stores it; its writing pass only decodes it.
 LWSCCD_HD inline unsigned emission_mask(const EmissionView& m, index_t a, index_t b) {
@@ -100,15 +187,16 @@ LWSCCD_HD inline unsigned emission_mask(const EmissionView& m, index_t a, index_
     for (int k = 0; k < 3; ++k)
       if ((rb >> k) & 1u && m.boxes[t.v[k]].overlaps(box_a)) mask |= 1u << (3 + k);
   }
-  if ((ra >> 3) == 0 || (rb >> 3) == 0) return mask;
-  const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
-  for (int x = 0; x < 3; ++x) {
-    if (!((ra >> (3 + x)) & 1u)) continue;
-    const Aabbf box_x = m.boxes[m.edge_feature(ea.e[x])];
-    for (int y = 0; y < 3; ++y)
-      if ((rb >> (3 + y)) & 1u && box_x.overlaps(m.boxes[m.edge_feature(eb.e[y])])) mask |= 1u << (6 + 3 * x + y);
+  if ((ra >> 3) != 0 && (rb >> 3) != 0) {
+    const FaceEdgeIds ea = m.face_edges[a], eb = m.face_edges[b];
+    for (int x = 0; x < 3; ++x) {
+      if (!((ra >> (3 + x)) & 1u)) continue;
+      const Aabbf box_x = m.boxes[m.edge_feature(ea.e[x])];
+      for (int y = 0; y < 3; ++y)
+        if ((rb >> (3 + y)) & 1u && box_x.overlaps(m.boxes[m.edge_feature(eb.e[y])])) mask |= 1u << (6 + 3 * x + y);
+    }
   }
-  return mask;
+  return mask != 0 && m.corners && faces_apart(m.corners[a], m.corners[b]) ? 0u : mask;
 }
 
 /// Bits 0-5 of an emission mask (vertex-face pairs) and bits 6-14 (edge-edge pairs).
@@ -182,9 +270,9 @@ class RepresentativeTriangles {
   }
 
   /// The view over this object's host arrays and the given boxes (one per feature id).
-  EmissionView view(const Aabbf* boxes) const {
+  EmissionView view(const Aabbf* boxes, const FaceCorners* corners = nullptr) const {
     return {mesh_->faces().data(), face_edges_.data(), mesh_->edges().data(), represents_.data(), boxes,
-            mesh_->num_vertices(), mesh_->num_edges()};
+            mesh_->num_vertices(), mesh_->num_edges(), corners};
   }
 
  private:
@@ -217,6 +305,7 @@ struct PackedEmission {
   std::vector<PackedEmissionFace> faces;
   std::vector<PackedFeature> features;
   index_t face_feature_base = 0;  ///< face f's feature id is face_feature_base + f
+  const FaceCorners* corners = nullptr;  ///< per face, or null (EmissionView::corners)
 };
 
 }  // namespace detail
@@ -261,36 +350,51 @@ template <class P>
 std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1,
                                  double margin = 0);
 
+/// Each face's corners (face_corners) from the positions at t0 and t1, on all cores: what the
+/// emission's test of the faces' relative motion reads.
+template <class P>
+std::vector<FaceCorners> face_corners(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1);
+
 /// The feature pairs of the candidate triangle pairs and of the orphans, each produced once and
 /// kept when its feature boxes overlap, on all cores. Adjacent candidate pairs are skipped (the
 /// orphans hold what they would give). Order: the candidates' pairs in candidate order, then the
 /// kept orphans in order - not sorted (the GPU emitter gives the same lists in the same order).
+/// With `corners` (one per face, face_corners), a candidate pair whose faces are apart by their
+/// relative motion (faces_apart) gives none: none of its feature pairs can touch in the step. (The
+/// orphans' faces share a vertex, so that test never parts them.) Throws InputError when `boxes`
+/// or `corners` does not fit the mesh.
 FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::vector<TrianglePair>& candidates,
-                                const std::vector<Aabbf>& boxes);
+                                const std::vector<Aabbf>& boxes, const std::vector<FaceCorners>* corners = nullptr);
 /// The same for n candidates from `candidates`, with the orphans' pairs only when `with_orphans`
 /// (a step split into parts lists them with one part).
 FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
-                                const std::vector<Aabbf>& boxes, bool with_orphans);
+                                const std::vector<Aabbf>& boxes, bool with_orphans,
+                                const std::vector<FaceCorners>* corners = nullptr);
 /// The same into `out` (its lists' memory reused), through `parts` (the per-thread lists), kept
 /// for the next call: a caller that emits every step allocates nothing once warm.
 void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                              const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                             FeaturePairParts& parts);
+                             FeaturePairParts& parts, const std::vector<FaceCorners>* corners = nullptr);
 /// The feature pairs of candidates held in several lists, in their order (a work-stealing
 /// traversal's threads' lists, cpu::traverse_in_lists), read where they lie, left in the lists
 /// the threads emitting them filled (`out`'s memory reused): nothing is copied into one list.
 /// cpu::test_feature_pairs reads them there; out.joined() is emit_feature_pairs's list.
 void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
-                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& out);
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& out,
+                             const std::vector<FaceCorners>* corners = nullptr);
 
 /// The oracle: every non-incident vertex-face pair and every edge-edge pair without a common
 /// vertex whose feature boxes overlap (and, with a layout, that rep.considers), sorted; vertices
-/// of no face take no part. O(features^2): small meshes only.
-FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes);
+/// of no face take no part. With `corners` (face_corners), a pair whose two representing faces
+/// are apart by faces_apart is left out, as emit_feature_pairs leaves it out with them.
+/// O(features^2): small meshes only.
+FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes,
+                                       const std::vector<FaceCorners>* corners = nullptr);
 
 /// The same set as brute_force_feature_pairs, by sorting the boxes on x and sweeping: for the
 /// real scenes.
-FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes);
+FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes,
+                                 const std::vector<FaceCorners>* corners = nullptr);
 
 }  // namespace lwsccd
 

@@ -118,6 +118,7 @@ class CcdPipeline {
     std::size_t next_candidate = 0, part_first = 0, part_count = 0;
     bool orphans_due = true, orphans_in_part = false;
     std::vector<Aabbf> boxes;  ///< the step's feature boxes (computed by the first feature pairs)
+    std::vector<FaceCorners> corners;  ///< with them, for the test of the faces' motion (contact only)
     bool boxes_ready = false;
     FeaturePairs features;
   };
@@ -231,18 +232,26 @@ class CcdPipeline {
     return true;
   }
   void stage_feature_pairs(StepInProgress& step) {
-    if (!step.boxes_ready) step.boxes = feature_boxes(*mesh_, step.x0, step.x1, params_.min_separation / 2);
+    // Candidates whose faces are apart by their relative motion give no pairs (faces_apart, as the
+    // GPU's emission): a test of contact, so not with a minimum separation.
+    const bool test_motion = !(params_.min_separation > 0);
+    if (!step.boxes_ready) {
+      step.boxes = feature_boxes(*mesh_, step.x0, step.x1, params_.min_separation / 2);
+      if (test_motion) step.corners = face_corners(*mesh_, step.x0, step.x1);
+    }
     step.boxes_ready = true;
+    const std::vector<FaceCorners>* corners = test_motion ? &step.corners : nullptr;
     StepStats& stats = step.result.stats;
     if (step.in_parts) {
       emit_feature_pairs_into(representatives_, step.candidates.data() + step.part_first, step.part_count, step.boxes,
-                              step.orphans_in_part, step.features, feature_parts_);
+                              step.orphans_in_part, step.features, feature_parts_, corners);
       stats.feature_pairs_vf += step.features.vf.size();
       stats.feature_pairs_ee += step.features.ee.size();
       return;
     }
     // A whole step's pairs stay in the lists the threads filled: the narrow phase reads them there.
-    emit_feature_pairs_into(representatives_, step.candidate_lists->lists, step.boxes, step.orphans_in_part, feature_parts_);
+    emit_feature_pairs_into(representatives_, step.candidate_lists->lists, step.boxes, step.orphans_in_part, feature_parts_,
+                            corners);
     stats.feature_pairs_vf += feature_parts_.vf_size();
     stats.feature_pairs_ee += feature_parts_.ee_size();
   }

@@ -62,6 +62,12 @@ inline long double fmul(long double a, long double b) { return a * b; }
 inline long double fadd(long double a, long double b) { return a + b; }
 inline long double fsub(long double a, long double b) { return a - b; }
 
+/// False for NaN and infinities (a value that is not finite decides nothing).
+template <class T>
+LWSCCD_HD LWSCCD_HOST_INLINE bool finite_value(T x) {
+  return x - x == T(0);
+}
+
 template <class T> LWSCCD_HD Vec3<T> vadd(const Vec3<T>& a, const Vec3<T>& b) { return {fadd(a.x, b.x), fadd(a.y, b.y), fadd(a.z, b.z)}; }
 template <class T> LWSCCD_HD Vec3<T> vsub(const Vec3<T>& a, const Vec3<T>& b) { return {fsub(a.x, b.x), fsub(a.y, b.y), fsub(a.z, b.z)}; }
 template <class T> LWSCCD_HD Vec3<T> vscale(const Vec3<T>& a, T s) { return {fmul(a.x, s), fmul(a.y, s), fmul(a.z, s)}; }

@@ -224,16 +224,32 @@ std::vector<Aabbf> feature_boxes(const TriangleMesh& mesh, const std::vector<Vec
   return boxes;
 }
 
+template <class P>
+std::vector<FaceCorners> face_corners(const TriangleMesh& mesh, const std::vector<Vec3<P>>& x0, const std::vector<Vec3<P>>& x1) {
+  const auto nv = static_cast<std::size_t>(mesh.num_vertices());
+  if (x0.size() != nv || x1.size() != nv)
+    throw InputError("face_corners", x0.size() != nv ? "x0" : "x1",
+                     "has " + std::to_string((x0.size() != nv ? x0 : x1).size()) + " positions, the mesh has " +
+                         std::to_string(nv) + " vertices");
+  const auto nf = static_cast<std::size_t>(mesh.num_faces());
+  std::vector<FaceCorners> corners(nf);
+  detail::parallel_ranges(nf, detail::grain_for(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) corners[f] = face_corners(mesh.faces()[f], x0.data(), x1.data());
+  });
+  return corners;
+}
+
 inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const std::vector<TrianglePair>& candidates,
-                                       const std::vector<Aabbf>& boxes) {
-  return emit_feature_pairs(rep, candidates.data(), candidates.size(), boxes, true);
+                                       const std::vector<Aabbf>& boxes, const std::vector<FaceCorners>* corners) {
+  return emit_feature_pairs(rep, candidates.data(), candidates.size(), boxes, true, corners);
 }
 
 inline FeaturePairs emit_feature_pairs(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
-                                       const std::vector<Aabbf>& boxes, bool with_orphans) {
+                                       const std::vector<Aabbf>& boxes, bool with_orphans,
+                                       const std::vector<FaceCorners>* corners) {
   FeaturePairs out;
   FeaturePairParts parts;
-  emit_feature_pairs_into(rep, candidates, n, boxes, with_orphans, out, parts);
+  emit_feature_pairs_into(rep, candidates, n, boxes, with_orphans, out, parts, corners);
   return out;
 }
 
@@ -251,6 +267,7 @@ inline void pack_emission(const EmissionView& view, index_t num_faces, PackedEmi
   const auto nf = static_cast<std::size_t>(num_faces);
   out.faces.resize(nf);
   out.face_feature_base = view.face_feature(0);
+  out.corners = view.corners;
   std::uint32_t at = 0;
   for (std::size_t f = 0; f < nf; ++f) {
     out.faces[f].first = at;
@@ -280,6 +297,8 @@ inline void pack_emission(const EmissionView& view, index_t num_faces, PackedEmi
 
 // emit_triangle_pair over the packed boxes: the same pairs in the same order (vertices of a, of
 // b, then edge pairs in (a's, b's) order), each kept when emission_mask keeps it.
+// (With corners, the boxes' verdicts are gathered first, so that faces_apart runs only on the
+// pairs that keep a feature pair by their boxes.)
 template <class OnVf, class OnEe>
 void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t b, OnVf&& on_vf, OnEe&& on_ee) {
   const PackedEmissionFace& fa = packed.faces[static_cast<std::size_t>(a)];
@@ -289,16 +308,26 @@ void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t 
   const PackedFeature* of_a = packed.features.data() + fa.first;
   const PackedFeature* of_b = packed.features.data() + fb.first;
   const unsigned vertices_a = count_bits(ra & 7u), vertices_b = count_bits(rb & 7u);
-  for (unsigned i = 0; i < vertices_a; ++i)
-    if (of_a[i].box.overlaps(fb.box)) on_vf(of_a[i].id, packed.face_feature_base + b);
-  for (unsigned i = 0; i < vertices_b; ++i)
-    if (of_b[i].box.overlaps(fa.box)) on_vf(of_b[i].id, packed.face_feature_base + a);
   const unsigned edges_a = count_bits(ra >> 3), edges_b = count_bits(rb >> 3);
+  // Kept pairs by their order: bits 0-2 a's vertices, 3-5 b's, 6 + 3 x + y the edge pairs.
+  unsigned kept = 0;
+  for (unsigned i = 0; i < vertices_a; ++i)
+    if (of_a[i].box.overlaps(fb.box)) kept |= 1u << i;
+  for (unsigned i = 0; i < vertices_b; ++i)
+    if (of_b[i].box.overlaps(fa.box)) kept |= 1u << (3 + i);
+  for (unsigned x = 0; x < edges_a; ++x)
+    for (unsigned y = 0; y < edges_b; ++y)
+      if (of_a[vertices_a + x].box.overlaps(of_b[vertices_b + y].box)) kept |= 1u << (6 + 3 * x + y);
+  if (kept == 0 || (packed.corners && faces_apart(packed.corners[a], packed.corners[b]))) return;
+  for (unsigned i = 0; i < vertices_a; ++i)
+    if ((kept >> i) & 1u) on_vf(of_a[i].id, packed.face_feature_base + b);
+  for (unsigned i = 0; i < vertices_b; ++i)
+    if ((kept >> (3 + i)) & 1u) on_vf(of_b[i].id, packed.face_feature_base + a);
   for (unsigned x = 0; x < edges_a; ++x) {
     const PackedFeature& edge_x = of_a[vertices_a + x];
     for (unsigned y = 0; y < edges_b; ++y) {
       const PackedFeature& edge_y = of_b[vertices_b + y];
-      if (edge_x.box.overlaps(edge_y.box)) edge_x.id < edge_y.id ? on_ee(edge_x.id, edge_y.id) : on_ee(edge_y.id, edge_x.id);
+      if ((kept >> (6 + 3 * x + y)) & 1u) edge_x.id < edge_y.id ? on_ee(edge_x.id, edge_y.id) : on_ee(edge_y.id, edge_x.id);
     }
   }
 }
@@ -308,13 +337,18 @@ void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t 
 // kept): the candidates' parts, then the orphans' kept pairs when `with_orphans`.
 template <class CandidatesIn>
 void emit_feature_pair_parts(const RepresentativeTriangles& rep, std::size_t n, CandidatesIn&& candidates_in,
-                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& parts) {
+                             const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& parts,
+                             const std::vector<FaceCorners>* corners) {
   const TriangleMesh& mesh = rep.mesh();
   const std::size_t features = static_cast<std::size_t>(mesh.num_vertices() + mesh.num_edges() + mesh.num_faces());
   if (boxes.size() != features)
     throw InputError("emit_feature_pairs", "boxes",
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
-  const EmissionView view = rep.view(boxes.data());
+  if (corners && corners->size() != static_cast<std::size_t>(mesh.num_faces()))
+    throw InputError("emit_feature_pairs", "corners",
+                     "has " + std::to_string(corners->size()) + " entries, the mesh has " + std::to_string(mesh.num_faces()) +
+                         " faces");
+  const EmissionView view = rep.view(boxes.data(), corners ? corners->data() : nullptr);
   pack_emission(view, mesh.num_faces(), parts.packed);
   const PackedEmission& packed = parts.packed;
   ordered_parts(n, parts.candidates, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
@@ -342,25 +376,26 @@ void emit_feature_pair_parts(const RepresentativeTriangles& rep, std::size_t n, 
 
 inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const TrianglePair* candidates, std::size_t n,
                                     const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairs& out,
-                                    FeaturePairParts& parts) {
+                                    FeaturePairParts& parts, const std::vector<FaceCorners>* corners) {
   detail::emit_feature_pair_parts(
       rep, n,
       [candidates](std::size_t begin, std::size_t end, auto&& fn) {
         for (std::size_t i = begin; i < end; ++i) fn(candidates[i]);
       },
-      boxes, with_orphans, parts);
+      boxes, with_orphans, parts, corners);
   // One copy into `out`, each list reserved once (the orphans' pairs included).
   detail::copy_parts(parts.candidates, out, 0, 0, parts.orphans_vf, parts.orphans_ee);
 }
 
 inline void emit_feature_pairs_into(const RepresentativeTriangles& rep, const std::vector<std::vector<TrianglePair>>& candidate_lists,
-                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& out) {
+                                    const std::vector<Aabbf>& boxes, bool with_orphans, FeaturePairParts& out,
+                                    const std::vector<FaceCorners>* corners) {
   std::size_t n = 0;
   for (const auto& list : candidate_lists) n += list.size();
   detail::emit_feature_pair_parts(
       rep, n,
       [&candidate_lists](std::size_t begin, std::size_t end, auto&& fn) { detail::for_each_in_lists(candidate_lists, begin, end, fn); },
-      boxes, with_orphans, out);
+      boxes, with_orphans, out, corners);
 }
 
 inline FeaturePairs FeaturePairParts::joined() const {
@@ -371,8 +406,14 @@ inline FeaturePairs FeaturePairParts::joined() const {
 
 namespace detail {
 
-// Classifies a pair of features with overlapping boxes as a query (or none) and appends it.
-inline void add_feature_query(const RepresentativeTriangles& rep, index_t x, index_t y, FeaturePairs& out) {
+// Classifies a pair of features with overlapping boxes as a query (or none) and appends it;
+// with corners, not when the two representing faces are apart by faces_apart.
+inline void add_feature_query(const RepresentativeTriangles& rep, index_t x, index_t y, FeaturePairs& out,
+                              const FaceCorners* corners) {
+  if (corners) {
+    const index_t fx = rep.owner_of_feature(x), fy = rep.owner_of_feature(y);
+    if (fx >= 0 && fy >= 0 && faces_apart(corners[fx], corners[fy])) return;
+  }
   const TriangleMesh& mesh = rep.mesh();
   const index_t nv = mesh.num_vertices(), ne = mesh.num_edges();
   auto kind = [&](index_t id) { return id < nv ? 0 : id < nv + ne ? 1 : 2; };
@@ -397,9 +438,21 @@ inline FeaturePairs sorted_union(const std::vector<FeaturePairs>& parts) {
   return out;
 }
 
+// The oracles' checks of their arguments: the corners (when given) one per face.
+inline const FaceCorners* oracle_corners(const RepresentativeTriangles& rep, const std::vector<FaceCorners>* corners,
+                                         const char* where) {
+  if (corners && corners->size() != static_cast<std::size_t>(rep.mesh().num_faces()))
+    throw InputError(where, "corners",
+                     "has " + std::to_string(corners->size()) + " entries, the mesh has " +
+                         std::to_string(rep.mesh().num_faces()) + " faces");
+  return corners ? corners->data() : nullptr;
+}
+
 }  // namespace detail
 
-inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes) {
+inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes,
+                                              const std::vector<FaceCorners>* corners) {
+  const FaceCorners* with = detail::oracle_corners(rep, corners, "brute_force_feature_pairs");
   const TriangleMesh& mesh = rep.mesh();
   const index_t nv = mesh.num_vertices(), ne = mesh.num_edges(), nf = mesh.num_faces();
   const unsigned workers = detail::worker_count();
@@ -409,16 +462,18 @@ inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep
     for (index_t v = static_cast<index_t>(w); v < nv; v += static_cast<index_t>(nw))
       for (index_t f = 0; f < nf; ++f) {
         const index_t id = mesh.face_feature_id(f);
-        if (boxes[v].overlaps(boxes[id])) detail::add_feature_query(rep, v, id, out);
+        if (boxes[v].overlaps(boxes[id])) detail::add_feature_query(rep, v, id, out, with);
       }
     for (index_t e = static_cast<index_t>(w); e < ne; e += static_cast<index_t>(nw))
       for (index_t g = e + 1; g < ne; ++g)
-        if (boxes[nv + e].overlaps(boxes[nv + g])) detail::add_feature_query(rep, nv + e, nv + g, out);
+        if (boxes[nv + e].overlaps(boxes[nv + g])) detail::add_feature_query(rep, nv + e, nv + g, out, with);
   }, workers);
   return detail::sorted_union(parts);
 }
 
-inline FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes) {
+inline FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes,
+                                        const std::vector<FaceCorners>* corners) {
+  const FaceCorners* with = detail::oracle_corners(rep, corners, "sweep_feature_pairs");
   const index_t n = static_cast<index_t>(boxes.size());
   std::vector<index_t> order(static_cast<std::size_t>(n));
   std::iota(order.begin(), order.end(), 0);
@@ -431,7 +486,7 @@ inline FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, cons
     for (index_t k = static_cast<index_t>(w); k < n; k += static_cast<index_t>(nw)) {
       const Aabbf& box = boxes[order[k]];
       for (index_t m = k + 1; m < n && boxes[order[m]].lo.x <= box.hi.x; ++m)
-        if (box.overlaps(boxes[order[m]])) detail::add_feature_query(rep, order[k], order[m], parts[w]);
+        if (box.overlaps(boxes[order[m]])) detail::add_feature_query(rep, order[k], order[m], parts[w], with);
     }
   }, workers);
   return detail::sorted_union(parts);

@@ -120,11 +120,6 @@ LWSCCD_HD LWSCCD_HOST_INLINE T underflow_slack(T mag, int degree) {
   return underflow_slack_by_multiplication(f, degree);
 }
 
-template <class T>
-LWSCCD_HD LWSCCD_HOST_INLINE bool finite_value(T x) {
-  return x - x == T(0);  // false for NaN and infinities
-}
-
 /// The four Bernstein coefficients of the cubic on a dyadic interval and two bounds on their
 /// error: `bound` covers rounding and the inputs' perturbation (what may be excluded), `exact`
 /// rounding alone (what the query as given certainly does).
