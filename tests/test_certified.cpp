@@ -897,6 +897,26 @@ Vec3<double> far_point(const Vec3<long double>& p, const Vec3<long double>& offs
   for (int k = 0; k < 3; ++k) r[k] = q[axes[k]] * (((signs >> k) & 1) ? -1 : 1);
   return r.cast<double>();
 }
+
+// A random point far from the origin: each coordinate 2^20 .. 2^21 in 64ths (float rounds them).
+Vec3<long double> far_origin(std::mt19937& rng) {
+  auto one = [&] { return std::ldexp(1.0L, 20) + std::ldexp(static_cast<long double>(rng() % (1u << 26)), -6); };
+  return {one(), one(), one()};
+}
+
+// The axis orders a far_point may take.
+constexpr int kAxisOrders[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+
+// The verdicts of a margin's mutation check on cases below the margin whose moved copies touch:
+// none claimed apart with the margin, every one without it, every moved copy touching.
+void check_below_margin(const char* what, std::size_t cases, std::size_t claimed, std::size_t claimed_mutated,
+                        std::size_t touching_moved) {
+  std::printf("  %s below the margin: %zu; apart %zu (sound), %zu (margins removed); the moved copies that touch: %zu\n",
+              what, cases, claimed, claimed_mutated, touching_moved);
+  CHECK(claimed == 0);
+  CHECK(claimed_mutated == cases);
+  CHECK(touching_moved == cases);
+}
 }  // namespace
 
 TEST_CASE("single-precision filter: separating directions only for features apart, within their bound (mutation check)",
@@ -908,13 +928,10 @@ TEST_CASE("single-precision filter: separating directions only for features apar
   // passing over a face's plane beside it, an edge passing above another), nearer the origin:
   // declared apart.
   std::mt19937 rng(20261127);
-  const int axes[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+  const auto& axes = kAxisOrders;
   const float perturbation = detail::single_input_perturbation<CertifiedPolicy>();
   std::size_t touching = 0, claimed = 0, claimed_mutated = 0, apart = 0, separated = 0;
-  auto offset = [&] {
-    auto one = [&] { return std::ldexp(1.0L, 20) + std::ldexp(static_cast<long double>(rng() % (1u << 26)), -6); };
-    return Vec3<long double>{one(), one(), one()};
-  };
+  auto offset = [&] { return far_origin(rng); };
   for (int n = 0; n < 4000; ++n) {
     const int* axis = axes[rng() % 6];
     const int signs = static_cast<int>(rng() % 8);
@@ -1011,7 +1028,7 @@ TEST_CASE("screen: features moving together are apart by their relative motion, 
   // touches, and it is within the perturbation the screen's misses cover, so the differences must
   // not call it apart; without the margins they do. (The query itself is apart: its misses by the
   // double path stay misses.)
-  const int axes[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+  const auto& axes = kAxisOrders;
   std::size_t passing = 0, claimed = 0, claimed_mutated = 0, touching_moved = 0;
   for (int n = 0; n < 400; ++n) {
     const int* axis = axes[rng() % 6];
@@ -1032,11 +1049,7 @@ TEST_CASE("screen: features moving together are apart by their relative motion, 
       claimed_mutated += differences_apart_single<ShrunkDifferencePolicy<0>>(q);
     }
   }
-  std::printf("  a vertex passing a corner below the margin: %zu; apart by the differences %zu (sound), %zu (margins "
-              "removed); the moved copies that touch: %zu\n", passing, claimed, claimed_mutated, touching_moved);
-  CHECK(claimed == 0);
-  CHECK(claimed_mutated == passing);
-  CHECK(touching_moved == passing);
+  check_below_margin("a vertex passing a corner (the features' differences)", passing, claimed, claimed_mutated, touching_moved);
 
   // A vertex moving straight onto an edge's midpoint, far from the origin with the axes turned by
   // 45 degrees: along the differences' sum two of them are exactly 0, and float's rounding of the
@@ -1045,9 +1058,7 @@ TEST_CASE("screen: features moving together are apart by their relative motion, 
   for (int n = 0; n < 4000; ++n) {
     const int* axis = axes[rng() % 6];
     const int signs = static_cast<int>(rng() % 8);
-    // (Coordinates of 2^20 .. 2^21 in 64ths: float rounds them.)
-    auto one = [&] { return std::ldexp(1.0L, 20) + std::ldexp(static_cast<long double>(rng() % (1u << 26)), -6); };
-    const Vec3<long double> o{one(), one(), one()};
+    const Vec3<long double> o = far_origin(rng);
     const long double a = eighth(rng, 8, 128), c = eighth(rng, 8, 128), y = eighth(rng, 1, 128), z = eighth(rng, 0, 64);
     auto at = [&](long double pu, long double pv, long double pz) { return far_point({pu + pv, pu - pv, pz}, o, axis, signs); };
     const VertexFaceQuery<double> q{at(0, y, z), at(-a, 0, 0), at(a, 0, 0), at(0, -c, 0),
@@ -1068,7 +1079,7 @@ TEST_CASE("screen: features moving together are apart by their relative motion, 
 
 TEST_CASE("emission: faces apart by their relative motion, within its bound (mutation check)", "[representative][certified]") {
   std::mt19937 rng(20261128);
-  const int axes[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+  const auto& axes = kAxisOrders;
   auto corners_of = [](const std::array<Vec3<double>, 3>& at0, const std::array<Vec3<double>, 3>& at1) {
     FaceCorners c;
     for (int k = 0; k < 3; ++k) c.at[k] = at0[k].cast<float>(), c.at[3 + k] = at1[k].cast<float>();
@@ -1099,11 +1110,8 @@ TEST_CASE("emission: faces apart by their relative motion, within its bound (mut
       claimed_mutated += faces_apart<ShrunkDifferencePolicy<0>>(first, second);
     }
   }
-  std::printf("  a face's corner passing another's below the margin: %zu; apart by the faces' differences %zu (sound), %zu "
-              "(margins removed); the moved copies that touch: %zu\n", passing, claimed, claimed_mutated, touching_moved);
-  CHECK(claimed == 0);
-  CHECK(claimed_mutated == passing);
-  CHECK(touching_moved == passing);
+  check_below_margin("a face's corner passing another's (the faces' differences)", passing, claimed, claimed_mutated,
+                     touching_moved);
 
   // A face's corner moving straight onto another face's edge midpoint, far from the origin with
   // the axes turned by 45 degrees, the moving face beyond that edge: the faces touch at t = 1, and
@@ -1113,8 +1121,7 @@ TEST_CASE("emission: faces apart by their relative motion, within its bound (mut
   for (int n = 0; n < 4000; ++n) {
     const int* axis = axes[rng() % 6];
     const int signs = static_cast<int>(rng() % 8);
-    auto one = [&] { return std::ldexp(1.0L, 20) + std::ldexp(static_cast<long double>(rng() % (1u << 26)), -6); };
-    const Vec3<long double> o{one(), one(), one()};
+    const Vec3<long double> o = far_origin(rng);
     const long double a = eighth(rng, 8, 128), c = eighth(rng, 8, 128), y = eighth(rng, 1, 128), z = eighth(rng, 0, 64),
                       s = eighth(rng, 1, 64), r = eighth(rng, 1, 64);
     auto at = [&](long double pu, long double pv, long double pz) { return far_point({pu + pv, pu - pv, pz}, o, axis, signs); };
