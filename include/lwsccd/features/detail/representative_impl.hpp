@@ -332,6 +332,16 @@ void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t 
   }
 }
 
+// The corners an emission or an oracle was given (null: none), checked to hold one per face.
+inline const FaceCorners* checked_corners(const RepresentativeTriangles& rep, const std::vector<FaceCorners>* corners,
+                                          const char* where) {
+  if (corners && corners->size() != static_cast<std::size_t>(rep.mesh().num_faces()))
+    throw InputError(where, "corners",
+                     "has " + std::to_string(corners->size()) + " entries, the mesh has " +
+                         std::to_string(rep.mesh().num_faces()) + " faces");
+  return corners ? corners->data() : nullptr;
+}
+
 // The feature pairs of n candidates, candidates_in(begin, end, fn) calling fn on the candidates
 // [begin, end) in order, left in `parts` (FeaturePairParts: each list emptied first, its memory
 // kept): the candidates' parts, then the orphans' kept pairs when `with_orphans`.
@@ -344,11 +354,7 @@ void emit_feature_pair_parts(const RepresentativeTriangles& rep, std::size_t n, 
   if (boxes.size() != features)
     throw InputError("emit_feature_pairs", "boxes",
                      "has " + std::to_string(boxes.size()) + " entries, the mesh has " + std::to_string(features) + " features");
-  if (corners && corners->size() != static_cast<std::size_t>(mesh.num_faces()))
-    throw InputError("emit_feature_pairs", "corners",
-                     "has " + std::to_string(corners->size()) + " entries, the mesh has " + std::to_string(mesh.num_faces()) +
-                         " faces");
-  const EmissionView view = rep.view(boxes.data(), corners ? corners->data() : nullptr);
+  const EmissionView view = rep.view(boxes.data(), checked_corners(rep, corners, "emit_feature_pairs"));
   pack_emission(view, mesh.num_faces(), parts.packed);
   const PackedEmission& packed = parts.packed;
   ordered_parts(n, parts.candidates, [&](std::size_t begin, std::size_t end, FeaturePairs& part) {
@@ -438,21 +444,11 @@ inline FeaturePairs sorted_union(const std::vector<FeaturePairs>& parts) {
   return out;
 }
 
-// The oracles' checks of their arguments: the corners (when given) one per face.
-inline const FaceCorners* oracle_corners(const RepresentativeTriangles& rep, const std::vector<FaceCorners>* corners,
-                                         const char* where) {
-  if (corners && corners->size() != static_cast<std::size_t>(rep.mesh().num_faces()))
-    throw InputError(where, "corners",
-                     "has " + std::to_string(corners->size()) + " entries, the mesh has " +
-                         std::to_string(rep.mesh().num_faces()) + " faces");
-  return corners ? corners->data() : nullptr;
-}
-
 }  // namespace detail
 
 inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes,
                                               const std::vector<FaceCorners>* corners) {
-  const FaceCorners* with = detail::oracle_corners(rep, corners, "brute_force_feature_pairs");
+  const FaceCorners* with = detail::checked_corners(rep, corners, "brute_force_feature_pairs");
   const TriangleMesh& mesh = rep.mesh();
   const index_t nv = mesh.num_vertices(), ne = mesh.num_edges(), nf = mesh.num_faces();
   const unsigned workers = detail::worker_count();
@@ -473,7 +469,7 @@ inline FeaturePairs brute_force_feature_pairs(const RepresentativeTriangles& rep
 
 inline FeaturePairs sweep_feature_pairs(const RepresentativeTriangles& rep, const std::vector<Aabbf>& boxes,
                                         const std::vector<FaceCorners>* corners) {
-  const FaceCorners* with = detail::oracle_corners(rep, corners, "sweep_feature_pairs");
+  const FaceCorners* with = detail::checked_corners(rep, corners, "sweep_feature_pairs");
   const index_t n = static_cast<index_t>(boxes.size());
   std::vector<index_t> order(static_cast<std::size_t>(n));
   std::iota(order.begin(), order.end(), 0);
