@@ -59,7 +59,7 @@ LWSCCD_HD FaceCorners face_corners(const Face& f, const Vec3<P>* x0, const Vec3<
 
 /// Knobs of faces_apart.
 struct FaceMotionPolicy {
-  /// Scales the test's margins (1 = as derived, bound B15 of docs/NARROW_PHASE.md; the mutation
+  /// Scales the test's margins (1 = as derived, bound B16 of docs/NARROW_PHASE.md; the mutation
   /// tests show that less is unsound).
   static constexpr double kDifferenceBound = 1.0;
 };
@@ -74,7 +74,7 @@ struct FaceMotionPolicy {
 /// face's extremes at each time: rounding is monotone, so the smallest rounded difference is the
 /// rounded difference of the extremes), then c, the sum of the six corner differences, through
 /// each face's projections on c at each time, which needs 12 dot products instead of 18. In float,
-/// on the corners rounded to float; the margins (bound B15) cover that rounding, the narrow
+/// on the corners rounded to float; the margins (bound B16) cover that rounding, the narrow
 /// phase's perturbation, float's arithmetic and underflow. A value that is not finite decides
 /// nothing. Policy::kDifferenceBound scales the margins (1 = as derived).
 template <class Policy = FaceMotionPolicy>
