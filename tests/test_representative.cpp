@@ -2,7 +2,9 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <string>
@@ -252,6 +254,43 @@ TEST_CASE("representatives: the CPU's packed emission keeps the view's pairs, in
     if (!with) kept_without = expected.size();
     else CHECK(expected.size() < kept_without);
   }
+}
+
+TEST_CASE("representatives: faces_apart from the faces' summaries gives faces_apart's verdict", "[representative]") {
+  // Random faces near each other (every coordinate on a coarse grid half the time, so that ties
+  // and differences at the margins occur), some coordinates replaced by values that are not
+  // finite, zeros of either sign, huge, tiny or subnormal ones: the overload the CPU emission
+  // calls with summaries made once a face agrees with the one from the corners, both ways round.
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> at(-1.0f, 1.0f), motion(-0.05f, 0.05f);
+  const float specials[] = {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
+                            -std::numeric_limits<float>::infinity(), -0.0f, 0.0f, 1e30f, -1e30f, 0x1p-140f, 3e38f};
+  auto random_face = [&](const Vec3f& centre, bool on_grid) {
+    FaceCorners f;
+    for (int k = 0; k < 3; ++k) {
+      f.at[k] = {centre.x + 0.3f * at(rng), centre.y + 0.3f * at(rng), centre.z + 0.3f * at(rng)};
+      f.at[3 + k] = {f.at[k].x + motion(rng), f.at[k].y + motion(rng), f.at[k].z + motion(rng)};
+    }
+    if (on_grid)
+      for (auto& corner : f.at)
+        for (int axis = 0; axis < 3; ++axis) corner[axis] = std::round(corner[axis] * 8.0f) / 8.0f;
+    if (rng() % 8 == 0) f.at[rng() % 6][static_cast<int>(rng() % 3)] = specials[rng() % std::size(specials)];
+    return f;
+  };
+  std::size_t apart = 0, not_apart = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const Vec3f centre{0.8f * at(rng), 0.8f * at(rng), 0.8f * at(rng)};
+    const FaceCorners a = random_face({0.0f, 0.0f, 0.0f}, i % 2 == 0), b = random_face(centre, i % 2 == 0);
+    const FaceCornerSummary sa = summarize_corners(a), sb = summarize_corners(b);
+    const bool expected = faces_apart(a, b);
+    if (faces_apart(sa, a, sb, b) != expected || faces_apart(sb, b, sa, a) != faces_apart(b, a)) {
+      FAIL("pair " << i << ": the verdict from summaries differs");
+    }
+    ++(expected ? apart : not_apart);
+  }
+  INFO(apart << " pairs apart, " << not_apart << " not");
+  CHECK(apart > 10000);
+  CHECK(not_apart > 10000);
 }
 
 TEST_CASE("representatives: emission equals the brute-force feature oracle, each pair once", "[representative]") {

@@ -64,6 +64,57 @@ struct FaceMotionPolicy {
   static constexpr double kDifferenceBound = 1.0;
 };
 
+namespace detail {
+
+// faces_apart's margins (B16): u, p and the smallest normal, all scaled by Policy::kDifferenceBound.
+template <class Policy>
+struct FaceMotionMargins {
+  float u = unit_roundoff<float>(), p = fadd(u, u * 0x1p-18f), scale = static_cast<float>(Policy::kDifferenceBound);
+  float smallest = scale > 0.0f ? 0x1p-126f : 0.0f;
+  // Along c: (2 p + 8 u) |c| . m + the smallest normal (not finite where a corner is not).
+  LWSCCD_HD float along(const Vec3<float>& c, const Vec3<float>& m) const {
+    return fadd(fmul(fmul(fadd(2.0f * p, 8.0f * u), scale), vabs_dot(c, m)), smallest);
+  }
+  // On axis k: (2 p + 4 u) m_k + the smallest normal.
+  LWSCCD_HD float axis(const Vec3<float>& m, int k) const { return fadd(fmul(fmul(fadd(2.0f * p, 4.0f * u), scale), m[k]), smallest); }
+};
+
+// The faces apart on an axis, from each face's smallest and largest coordinates at each time.
+template <class Margins>
+LWSCCD_HD bool faces_apart_on_axes(const Margins& margins, const Vec3<float>& m, const Vec3<float> (&lo_a)[2], const Vec3<float> (&hi_a)[2],
+                                   const Vec3<float> (&lo_b)[2], const Vec3<float> (&hi_b)[2]) {
+  LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {
+    const float margin = margins.axis(m, k);
+    const bool above = fsub(lo_a[0][k], hi_b[0][k]) > margin && fsub(lo_a[1][k], hi_b[1][k]) > margin;
+    const bool below = fsub(hi_a[0][k], lo_b[0][k]) < -margin && fsub(hi_a[1][k], lo_b[1][k]) < -margin;
+    if (above || below) return true;
+  }
+  return false;
+}
+
+// The faces apart along c at both times: a's lowest projection above b's highest by the margin.
+LWSCCD_HD inline bool faces_apart_along(const Vec3<float>& c, float along_c, const FaceCorners& a, const FaceCorners& b) {
+  LWSCCD_UNROLL for (int t = 0; t < 2; ++t) {
+    float lowest_a = vdot(c, a.at[3 * t]), highest_b = vdot(c, b.at[3 * t]);
+    LWSCCD_UNROLL for (int i = 1; i < 3; ++i) {
+      const float pa = vdot(c, a.at[3 * t + i]), pb = vdot(c, b.at[3 * t + i]);
+      lowest_a = pa < lowest_a ? pa : lowest_a;
+      highest_b = pb > highest_b ? pb : highest_b;
+    }
+    if (!(finite_value(lowest_a) && finite_value(highest_b) && fsub(lowest_a, highest_b) > along_c)) return false;
+  }
+  return true;
+}
+
+// c of faces_apart: the sum of the six corner differences a_s - b_s, in that order.
+LWSCCD_HD inline Vec3<float> summed_corner_difference(const FaceCorners& a, const FaceCorners& b) {
+  Vec3<float> c = vsub(a.at[0], b.at[0]);
+  LWSCCD_UNROLL for (int s = 1; s < 6; ++s) c = vadd(c, vsub(a.at[s], b.at[s]));
+  return c;
+}
+
+}  // namespace detail
+
 /// True when no point of face a ever meets a point of face b during the step (each corner moving
 /// linearly from t0 to t1), for the positions as given and for any within the certified narrow
 /// phase's perturbation of them: then none of the feature pairs the two faces represent touches.
@@ -73,27 +124,19 @@ struct FaceMotionPolicy {
 /// 18 are beyond their error parts the faces for the whole step. Tried: each axis (through each
 /// face's extremes at each time: rounding is monotone, so the smallest rounded difference is the
 /// rounded difference of the extremes), then c, the sum of the six corner differences, through
-/// each face's projections on c at each time, which needs 12 dot products instead of 18. In float,
-/// on the corners rounded to float; the margins (bound B16) cover that rounding, the narrow
+/// each face's projections on c at each time, which needs 12 dot products instead of 18. In
+/// float, on the corners rounded to float; the margins (bound B16) cover that rounding, the narrow
 /// phase's perturbation, float's arithmetic and underflow. A value that is not finite decides
 /// nothing. Policy::kDifferenceBound scales the margins (1 = as derived).
 template <class Policy = FaceMotionPolicy>
 LWSCCD_HD bool faces_apart(const FaceCorners& a, const FaceCorners& b) {
-  using detail::fadd;
-  using detail::fmul;
-  using detail::fsub;
-  const float u = detail::unit_roundoff<float>(), p = fadd(u, u * 0x1p-18f);
-  const float scale = static_cast<float>(Policy::kDifferenceBound), smallest = scale > 0.0f ? 0x1p-126f : 0.0f;
-  // (Summaries made here, not stored with the corners: on the GPU 96-byte records with them were
-  // slower than 80-byte ones without, H200 cloth-ball's feature pairs 0.315 -> 0.331 ms.)
-  Vec3<float> m = abs(a.at[0]), c = detail::vsub(a.at[0], b.at[0]);
-  LWSCCD_UNROLL for (int s = 1; s < 6; ++s) {
-    m = max(m, abs(a.at[s]));
-    c = detail::vadd(c, detail::vsub(a.at[s], b.at[s]));
-  }
+  const detail::FaceMotionMargins<Policy> margins;
+  Vec3<float> m = abs(a.at[0]);
+  LWSCCD_UNROLL for (int s = 1; s < 6; ++s) m = max(m, abs(a.at[s]));
   LWSCCD_UNROLL for (int s = 0; s < 6; ++s) m = max(m, abs(b.at[s]));
+  const Vec3<float> c = detail::summed_corner_difference(a, b);
   // (A corner that is not finite makes c, and so this margin, not finite.)
-  const float along_c = fadd(fmul(fmul(fadd(2.0f * p, 8.0f * u), scale), detail::vabs_dot(c, m)), smallest);
+  const float along_c = margins.along(c, m);
   if (!detail::finite_value(along_c)) return false;
   Vec3<float> lo_a[2], hi_a[2], lo_b[2], hi_b[2];
   LWSCCD_UNROLL for (int t = 0; t < 2; ++t) {
@@ -102,23 +145,43 @@ LWSCCD_HD bool faces_apart(const FaceCorners& a, const FaceCorners& b) {
     lo_b[t] = min(b.at[3 * t], min(b.at[3 * t + 1], b.at[3 * t + 2]));
     hi_b[t] = max(b.at[3 * t], max(b.at[3 * t + 1], b.at[3 * t + 2]));
   }
-  const float per_axis = fmul(fadd(2.0f * p, 4.0f * u), scale);
-  LWSCCD_UNROLL for (int k = 0; k < 3; ++k) {
-    const float margin = fadd(fmul(per_axis, m[k]), smallest);
-    const bool above = fsub(lo_a[0][k], hi_b[0][k]) > margin && fsub(lo_a[1][k], hi_b[1][k]) > margin;
-    const bool below = fsub(hi_a[0][k], lo_b[0][k]) < -margin && fsub(hi_a[1][k], lo_b[1][k]) < -margin;
-    if (above || below) return true;
-  }
+  if (detail::faces_apart_on_axes(margins, m, lo_a, hi_a, lo_b, hi_b)) return true;
+  return detail::faces_apart_along(c, along_c, a, b);
+}
+
+/// What faces_apart reads of a face besides its corners, computed from them alone: each time's
+/// smallest and largest coordinates and the largest magnitudes. The CPU emission makes it once a
+/// face and step (a face is in dozens of candidates) and tests the pairs with the overload below.
+/// (The GPU's counting kernel tests from the corners alone, in faces_apart's order: testing from
+/// summaries made per candidate there took cloth-ball's feature-pairs stage 0.29 -> 0.32 ms on an
+/// H200, and 96-byte records holding summaries were slower than the 80-byte corners alone.)
+struct FaceCornerSummary {
+  Vec3<float> lo[2], hi[2];  ///< per time (0: t0, 1: t1), the smallest and largest coordinates of the three corners
+  Vec3<float> magnitude;     ///< per axis, the largest |coordinate| of the six corners (exact)
+};
+
+/// The summary of a face's corners (FaceCornerSummary).
+LWSCCD_HD inline FaceCornerSummary summarize_corners(const FaceCorners& f) {
+  FaceCornerSummary s;
   LWSCCD_UNROLL for (int t = 0; t < 2; ++t) {
-    float lowest_a = detail::vdot(c, a.at[3 * t]), highest_b = detail::vdot(c, b.at[3 * t]);
-    LWSCCD_UNROLL for (int i = 1; i < 3; ++i) {
-      const float pa = detail::vdot(c, a.at[3 * t + i]), pb = detail::vdot(c, b.at[3 * t + i]);
-      lowest_a = pa < lowest_a ? pa : lowest_a;
-      highest_b = pb > highest_b ? pb : highest_b;
-    }
-    if (!(detail::finite_value(lowest_a) && detail::finite_value(highest_b) && fsub(lowest_a, highest_b) > along_c)) return false;
+    s.lo[t] = min(f.at[3 * t], min(f.at[3 * t + 1], f.at[3 * t + 2]));
+    s.hi[t] = max(f.at[3 * t], max(f.at[3 * t + 1], f.at[3 * t + 2]));
   }
-  return true;
+  // (A largest magnitude is at a smallest or a largest coordinate.)
+  s.magnitude = max(max(abs(s.lo[0]), abs(s.hi[0])), max(abs(s.lo[1]), abs(s.hi[1])));
+  return s;
+}
+
+/// faces_apart(a, b) from the faces' summaries (sa = summarize_corners(a), sb = summarize_corners(b)):
+/// the same values in the same tests, so the same verdict (tested on random and non-finite corners).
+template <class Policy = FaceMotionPolicy>
+LWSCCD_HD bool faces_apart(const FaceCornerSummary& sa, const FaceCorners& a, const FaceCornerSummary& sb, const FaceCorners& b) {
+  const detail::FaceMotionMargins<Policy> margins;
+  const Vec3<float> m = max(sa.magnitude, sb.magnitude), c = detail::summed_corner_difference(a, b);
+  const float along_c = margins.along(c, m);
+  if (!detail::finite_value(along_c)) return false;
+  if (detail::faces_apart_on_axes(margins, m, sa.lo, sa.hi, sb.lo, sb.hi)) return true;
+  return detail::faces_apart_along(c, along_c, a, b);
 }
 
 /// What the emission reads, as plain pointers (host or device memory): the faces, which features
@@ -306,6 +369,8 @@ struct PackedEmission {
   std::vector<PackedFeature> features;
   index_t face_feature_base = 0;  ///< face f's feature id is face_feature_base + f
   const FaceCorners* corners = nullptr;  ///< per face, or null (EmissionView::corners)
+  /// With corners, each face's summary (made once a step: every face is in many candidates).
+  std::vector<FaceCornerSummary> corner_summaries;
 };
 
 }  // namespace detail

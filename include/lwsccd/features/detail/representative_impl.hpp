@@ -262,7 +262,8 @@ inline unsigned count_bits(unsigned bits) {
 }
 
 // Fills `out` from the view's boxes: each face's box and the boxes and ids of the features it
-// represents, face after face (the offsets a serial pass, the boxes on all cores).
+// represents, face after face (the offsets a serial pass, the boxes on all cores), and with corners
+// each face's summary of them.
 inline void pack_emission(const EmissionView& view, index_t num_faces, PackedEmission& out) {
   const auto nf = static_cast<std::size_t>(num_faces);
   out.faces.resize(nf);
@@ -275,8 +276,10 @@ inline void pack_emission(const EmissionView& view, index_t num_faces, PackedEmi
     at += count_bits(view.represents[f] & 0x3fu);
   }
   out.features.resize(at);
+  out.corner_summaries.resize(view.corners ? nf : 0);
   parallel_ranges(nf, grain_for(nf), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
+      if (view.corners) out.corner_summaries[f] = summarize_corners(view.corners[f]);
       PackedEmissionFace& face = out.faces[f];
       face.box = view.boxes[view.face_feature(static_cast<index_t>(f))];
       PackedFeature* next = out.features.data() + face.first;
@@ -318,7 +321,12 @@ void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t 
   for (unsigned x = 0; x < edges_a; ++x)
     for (unsigned y = 0; y < edges_b; ++y)
       if (of_a[vertices_a + x].box.overlaps(of_b[vertices_b + y].box)) kept |= 1u << (6 + 3 * x + y);
-  if (kept == 0 || (packed.corners && faces_apart(packed.corners[a], packed.corners[b]))) return;
+  if (kept == 0) return;
+  if (packed.corners) {
+    const auto fa_id = static_cast<std::size_t>(a), fb_id = static_cast<std::size_t>(b);
+    if (faces_apart(packed.corner_summaries[fa_id], packed.corners[fa_id], packed.corner_summaries[fb_id], packed.corners[fb_id]))
+      return;
+  }
   for (unsigned i = 0; i < vertices_a; ++i)
     if ((kept >> i) & 1u) on_vf(of_a[i].id, packed.face_feature_base + b);
   for (unsigned i = 0; i < vertices_b; ++i)
