@@ -300,14 +300,19 @@ inline void pack_emission(const EmissionView& view, index_t num_faces, PackedEmi
 
 // emit_triangle_pair over the packed boxes: the same pairs in the same order (vertices of a, of
 // b, then edge pairs in (a's, b's) order), each kept when emission_mask keeps it.
-// (With corners, the boxes' verdicts are gathered first, so that faces_apart runs only on the
-// pairs that keep a feature pair by their boxes.)
+// (With corners, faces_apart first, from the faces' summaries: the pairs apart skip the boxes'
+// tests, as on the GPU. Boxes first took cloth-ball's emission 87 -> 120 ms on two cores.)
 template <class OnVf, class OnEe>
 void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t b, OnVf&& on_vf, OnEe&& on_ee) {
   const PackedEmissionFace& fa = packed.faces[static_cast<std::size_t>(a)];
   const PackedEmissionFace& fb = packed.faces[static_cast<std::size_t>(b)];
   const unsigned ra = fa.represents, rb = fb.represents;
   if ((ra | rb) == 0) return;
+  if (packed.corners) {
+    const auto fa_id = static_cast<std::size_t>(a), fb_id = static_cast<std::size_t>(b);
+    if (faces_apart(packed.corner_summaries[fa_id], packed.corners[fa_id], packed.corner_summaries[fb_id], packed.corners[fb_id]))
+      return;
+  }
   const PackedFeature* of_a = packed.features.data() + fa.first;
   const PackedFeature* of_b = packed.features.data() + fb.first;
   const unsigned vertices_a = count_bits(ra & 7u), vertices_b = count_bits(rb & 7u);
@@ -322,11 +327,6 @@ void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t 
     for (unsigned y = 0; y < edges_b; ++y)
       if (of_a[vertices_a + x].box.overlaps(of_b[vertices_b + y].box)) kept |= 1u << (6 + 3 * x + y);
   if (kept == 0) return;
-  if (packed.corners) {
-    const auto fa_id = static_cast<std::size_t>(a), fb_id = static_cast<std::size_t>(b);
-    if (faces_apart(packed.corner_summaries[fa_id], packed.corners[fa_id], packed.corner_summaries[fb_id], packed.corners[fb_id]))
-      return;
-  }
   for (unsigned i = 0; i < vertices_a; ++i)
     if ((kept >> i) & 1u) on_vf(of_a[i].id, packed.face_feature_base + b);
   for (unsigned i = 0; i < vertices_b; ++i)
