@@ -259,12 +259,14 @@ TEST_CASE("representatives: the CPU's packed emission keeps the view's pairs, in
 TEST_CASE("representatives: faces_apart from the faces' summaries gives faces_apart's verdict", "[representative]") {
   // Random faces near each other (every coordinate on a coarse grid half the time, so that ties
   // and differences at the margins occur), some coordinates replaced by values that are not
-  // finite, zeros of either sign, huge, tiny or subnormal ones: the overload the CPU emission
-  // calls with summaries made once a face agrees with the one from the corners, both ways round.
+  // finite, zeros of either sign, huge, tiny or subnormal ones, or next to 2^60 (where the
+  // summaries stop being tame): the overload the CPU emission calls with summaries made once a
+  // face agrees with the one from the corners, both ways round.
   std::mt19937 rng(21);
   std::uniform_real_distribution<float> at(-1.0f, 1.0f), motion(-0.05f, 0.05f);
   const float specials[] = {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
-                            -std::numeric_limits<float>::infinity(), -0.0f, 0.0f, 1e30f, -1e30f, 0x1p-140f, 3e38f};
+                            -std::numeric_limits<float>::infinity(), -0.0f, 0.0f, 1e30f, -1e30f, 0x1p-140f, 3e38f,
+                            0x1.fffffep59f, -0x1.fffffep59f, 0x1p60f};  // (around the summaries' tame bound)
   auto random_face = [&](const Vec3f& centre, bool on_grid) {
     FaceCorners f;
     for (int k = 0; k < 3; ++k) {

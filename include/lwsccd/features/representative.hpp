@@ -20,6 +20,7 @@
 // one of them: the lowest-numbered face among those with the fewest features represented).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -158,6 +159,7 @@ LWSCCD_HD bool faces_apart(const FaceCorners& a, const FaceCorners& b) {
 struct FaceCornerSummary {
   Vec3<float> lo[2], hi[2];  ///< per time (0: t0, 1: t1), the smallest and largest coordinates of the three corners
   Vec3<float> magnitude;     ///< per axis, the largest |coordinate| of the six corners (exact)
+  bool tame = false;         ///< every coordinate finite and below 2^60 in magnitude
 };
 
 /// The summary of a face's corners (FaceCornerSummary).
@@ -169,6 +171,9 @@ LWSCCD_HD inline FaceCornerSummary summarize_corners(const FaceCorners& f) {
   }
   // (A largest magnitude is at a smallest or a largest coordinate.)
   s.magnitude = max(max(abs(s.lo[0]), abs(s.hi[0])), max(abs(s.lo[1]), abs(s.hi[1])));
+  s.tame = true;
+  for (const Vec3<float>& corner : f.at)
+    for (int k = 0; k < 3; ++k) s.tame = s.tame && std::fabs(corner[k]) < 0x1p60f;  // (false for NaN)
   return s;
 }
 
@@ -177,7 +182,15 @@ LWSCCD_HD inline FaceCornerSummary summarize_corners(const FaceCorners& f) {
 template <class Policy = FaceMotionPolicy>
 LWSCCD_HD bool faces_apart(const FaceCornerSummary& sa, const FaceCorners& a, const FaceCornerSummary& sb, const FaceCorners& b) {
   const detail::FaceMotionMargins<Policy> margins;
-  const Vec3<float> m = max(sa.magnitude, sb.magnitude), c = detail::summed_corner_difference(a, b);
+  const Vec3<float> m = max(sa.magnitude, sb.magnitude);
+  // Tame corners make c's margin finite (|c_k| < 12 2^60, |c| . m < 2^126), so faces_apart's check
+  // of it cannot decide and the axes may go first: a pair parted by an axis then needs no c.
+  if (Policy::kDifferenceBound <= 1.0 && sa.tame && sb.tame) {
+    if (detail::faces_apart_on_axes(margins, m, sa.lo, sa.hi, sb.lo, sb.hi)) return true;
+    const Vec3<float> c = detail::summed_corner_difference(a, b);
+    return detail::faces_apart_along(c, margins.along(c, m), a, b);
+  }
+  const Vec3<float> c = detail::summed_corner_difference(a, b);
   const float along_c = margins.along(c, m);
   if (!detail::finite_value(along_c)) return false;
   if (detail::faces_apart_on_axes(margins, m, sa.lo, sa.hi, sb.lo, sb.hi)) return true;
