@@ -316,26 +316,16 @@ void emit_packed_triangle_pair(const PackedEmission& packed, index_t a, index_t 
   const PackedFeature* of_a = packed.features.data() + fa.first;
   const PackedFeature* of_b = packed.features.data() + fb.first;
   const unsigned vertices_a = count_bits(ra & 7u), vertices_b = count_bits(rb & 7u);
+  for (unsigned i = 0; i < vertices_a; ++i)
+    if (of_a[i].box.overlaps(fb.box)) on_vf(of_a[i].id, packed.face_feature_base + b);
+  for (unsigned i = 0; i < vertices_b; ++i)
+    if (of_b[i].box.overlaps(fa.box)) on_vf(of_b[i].id, packed.face_feature_base + a);
   const unsigned edges_a = count_bits(ra >> 3), edges_b = count_bits(rb >> 3);
-  // Kept pairs by their order: bits 0-2 a's vertices, 3-5 b's, 6 + 3 x + y the edge pairs.
-  unsigned kept = 0;
-  for (unsigned i = 0; i < vertices_a; ++i)
-    if (of_a[i].box.overlaps(fb.box)) kept |= 1u << i;
-  for (unsigned i = 0; i < vertices_b; ++i)
-    if (of_b[i].box.overlaps(fa.box)) kept |= 1u << (3 + i);
-  for (unsigned x = 0; x < edges_a; ++x)
-    for (unsigned y = 0; y < edges_b; ++y)
-      if (of_a[vertices_a + x].box.overlaps(of_b[vertices_b + y].box)) kept |= 1u << (6 + 3 * x + y);
-  if (kept == 0) return;
-  for (unsigned i = 0; i < vertices_a; ++i)
-    if ((kept >> i) & 1u) on_vf(of_a[i].id, packed.face_feature_base + b);
-  for (unsigned i = 0; i < vertices_b; ++i)
-    if ((kept >> (3 + i)) & 1u) on_vf(of_b[i].id, packed.face_feature_base + a);
   for (unsigned x = 0; x < edges_a; ++x) {
     const PackedFeature& edge_x = of_a[vertices_a + x];
     for (unsigned y = 0; y < edges_b; ++y) {
       const PackedFeature& edge_y = of_b[vertices_b + y];
-      if ((kept >> (6 + 3 * x + y)) & 1u) edge_x.id < edge_y.id ? on_ee(edge_x.id, edge_y.id) : on_ee(edge_y.id, edge_x.id);
+      if (edge_x.box.overlaps(edge_y.box)) edge_x.id < edge_y.id ? on_ee(edge_x.id, edge_y.id) : on_ee(edge_y.id, edge_x.id);
     }
   }
 }
