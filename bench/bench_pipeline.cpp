@@ -551,8 +551,10 @@ int main(int argc, char** argv) {
       j["screened"] = v.screened + e.screened;
       // Where the pairs were decided: single precision, contacts in single precision with a double
       // tail, double, the fallback search.
-      j["decided_fp32"] = v.single_misses + e.single_misses;
-      j["decided_fp32_fp64_tail"] = v.single_descents + e.single_descents;
+      // (Contacts whose leaf pairs of floats proved took no FP64: decided in FP32.)
+      j["decided_fp32"] = v.single_misses + e.single_misses + v.float_pair_leaves + e.float_pair_leaves;
+      j["decided_fp32_float_pair_leaf"] = v.float_pair_leaves + e.float_pair_leaves;
+      j["decided_fp32_fp64_tail"] = v.single_descents + e.single_descents - v.float_pair_leaves - e.float_pair_leaves;
       j["decided_fp64"] = v.pairs + e.pairs - v.single_misses - e.single_misses - v.single_descents - e.single_descents -
                           v.fallbacks - e.fallbacks;
       j["rebuilds"] = r.rebuilds;

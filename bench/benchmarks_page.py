@@ -541,16 +541,19 @@ def fp_section(rows):
         tail = d.get("fp32_fp64_tail", 0) if d else 0
         share = f"{100.0 * (pairs - d['fp32'] - tail) / pairs:.2f}%" if d and pairs else "-"
         label = r["input"].split("/")[-1] if "/" in r["input"] else r["input"].replace("--triangles ", "built-in ")
+        in_pairs = d.get("fp32_float_pair_leaf") if d else None
         body.append([label, count(pairs), f"{r['fp64_per_pair']:.1f}", f"{r['fp32_per_pair']:.1f}",
-                     count(d.get("fp32")) if d else "-", count(tail) if "fp32_fp64_tail" in d else "-", share,
-                     ms(r["fp64_ms_at_0.6T"])])
+                     count(d.get("fp32")) if d else "-", count(in_pairs) if in_pairs is not None else "-",
+                     count(tail) if "fp32_fp64_tail" in d else "-", share, ms(r["fp64_ms_at_0.6T"])])
     return ["Thread instructions of one steady step (all kernels; `bench/fp_instructions.py`: Nsight Compute, "
-            "`--steps 3` minus `--steps 1`, over two), per feature pair; where the pairs were decided (in FP32; "
-            "contacts found in FP32 whose time of impact took an FP64 tail; the rest, searched in FP64 or by the "
-            "fallback); and the time the FP64 instructions alone would take at 0.6e12 per second, a GPU of "
-            "today's size that runs FP64 at 1/64 of FP32 (the RTX and L40 classes):", "",
-            table(["scene", "feature pairs", "FP64 / pair", "FP32 / pair", "decided in FP32", "contacts with an FP64 tail",
-                   "pairs searched in FP64", "FP64 ms at 0.6 T/s"], body)]
+            "`--steps 3` minus `--steps 1`, over two), per feature pair; where the pairs were decided (in FP32, "
+            "of them contacts whose time of impact's leaf pairs of floats proved (only on a GPU with little FP64, "
+            "or planned for one: NARROW_PHASE.md B17); contacts found in FP32 whose time of impact took an FP64 "
+            "tail; the rest, searched in FP64 or by the fallback); and the time the FP64 instructions alone would "
+            "take at 0.6e12 per second, a GPU of today's size that runs FP64 at 1/64 of FP32 (the RTX and L40 "
+            "classes):", "",
+            table(["scene", "feature pairs", "FP64 / pair", "FP32 / pair", "decided in FP32", "of them leaves in pairs of floats",
+                   "contacts with an FP64 tail", "pairs searched in FP64", "FP64 ms at 0.6 T/s"], body)]
 
 
 # --- the page ------------------------------------------------------------------------------------

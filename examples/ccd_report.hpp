@@ -26,15 +26,18 @@ struct StepReport {
 
 /// Where a step's feature pairs were decided: in single precision (the screen, the filter, the
 /// search), contacts searched in single precision with the certain descent's last levels in double,
-/// the double-precision certified path (its screen and refinement), the fallback search.
+/// the double-precision certified path (its screen and refinement), the fallback search. Contacts
+/// whose leaf pairs of floats proved (CcdParams::leaves_in_float_pairs: no FP64) count as single.
 struct Decided {
   std::size_t single = 0, single_then_double = 0, double_ = 0, fallback = 0;
+  std::size_t float_pair_leaves = 0;  ///< of `single`, contacts whose leaf pairs of floats proved
 };
 inline Decided decided_by(const lwsccd::StepStats& s) {
   Decided d;
   for (const lwsccd::NarrowPhaseCounts* c : {&s.narrow_vf, &s.narrow_ee}) {
-    d.single += c->single_misses;
-    d.single_then_double += c->single_descents;
+    d.single += c->single_misses + c->float_pair_leaves;
+    d.float_pair_leaves += c->float_pair_leaves;
+    d.single_then_double += c->single_descents - c->float_pair_leaves;
     d.fallback += c->fallbacks;
     d.double_ += c->pairs - c->single_misses - c->single_descents - c->fallbacks;
   }
@@ -69,8 +72,9 @@ inline void print_table(const StepSource& src, const std::string& backend, const
                   s.narrow_vf.screened, s.narrow_ee.screened, s.narrow_vf.certified_hits, s.narrow_ee.certified_hits,
                   s.narrow_vf.certified_misses, s.narrow_ee.certified_misses, s.narrow_vf.fallbacks, s.narrow_ee.fallbacks);
       const Decided d = decided_by(s);
-      std::printf("  pairs decided in FP32 %zu, in FP32 with an FP64 tail %zu, in FP64 %zu, by the fallback %zu\n", d.single,
-                  d.single_then_double, d.double_, d.fallback);
+      std::printf("  pairs decided in FP32 %zu (of them contacts whose leaf pairs of floats proved %zu), in FP32 with an FP64 "
+                  "tail %zu, in FP64 %zu, by the fallback %zu\n",
+                  d.single, d.float_pair_leaves, d.single_then_double, d.double_, d.fallback);
     }
     if (s.narrow_survivors)
       std::printf("  narrow phase: %zu pairs past the first pass, %zu of them searched by a warp\n", s.narrow_survivors,
@@ -147,7 +151,11 @@ inline void print_json(const StepSource& src, const std::string& backend, const 
     };
     step["certified"] = {{"vf", certified(s.narrow_vf)}, {"ee", certified(s.narrow_ee)}};
     const Decided d = decided_by(s);
-    step["decided"] = {{"fp32", d.single}, {"fp32_fp64_tail", d.single_then_double}, {"fp64", d.double_}, {"fallback", d.fallback}};
+    step["decided"] = {{"fp32", d.single},
+                       {"fp32_float_pair_leaf", d.float_pair_leaves},
+                       {"fp32_fp64_tail", d.single_then_double},
+                       {"fp64", d.double_},
+                       {"fallback", d.fallback}};
     if (r.has_truth)
       step["truth"] = {{"true_contacts", r.truth.true_contacts}, {"false_negatives", r.truth.false_negatives},
                        {"false_positives", r.truth.false_positives}};

@@ -234,6 +234,12 @@ struct ShrunkPointPolicy : CertifiedPolicy {
   static constexpr double kPointBound = kPoint / 100.0;
 };
 
+// The sound policy with B17's own bound (the pairs of floats against the query as given) scaled.
+template <int kPairs>
+struct ShrunkFloatPairPolicy : CertifiedPolicy {
+  static constexpr double kFloatPairBound = kPairs / 100.0;
+};
+
 // The halving search alone, without the certain descent.
 struct NoDescentPolicy : CertifiedPolicy {
   static constexpr bool kCertainDescent = false;

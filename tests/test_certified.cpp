@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "certified_test_support.hpp"
@@ -36,6 +37,35 @@ std::pair<VertexFaceQuery<double>, EdgeEdgeQuery<double>> near_contact_pairs(std
                                  point(-1, jitter(rng), -0.2 * jitter(rng)), point(1, jitter(rng), -0.2 * jitter(rng)),
                                  point(0, -1, 0), point(0, 1, 0)};
   return {vf, ee};
+}
+
+// A vertex through a triangle's interior and an edge through an edge at t = toi, the plane z = 0
+// at that time (off the dyadic grid, where the descent cannot halve; the coordinates' rounding
+// moves the exact time by ~1e-16), and toi.
+std::tuple<VertexFaceQuery<double>, EdgeEdgeQuery<double>, double> contacts_at_known_time(std::mt19937_64& rng) {
+    const double toi = (std::uniform_int_distribution<int>(1, 1022)(rng) + 1.0 / 3.0) / 1024.0, speed = 1.0 + rng() % 8;
+    const double x = std::uniform_int_distribution<int>(-64, 64)(rng) / 16.0;
+    const VertexFaceQuery<double> vf{{x + 1, 1, -speed * toi}, {x, 0, 0}, {x + 4, 0, 0}, {x, 4, 0},
+                                     {x + 1, 1, speed * (1 - toi)}, {x, 0, 0}, {x + 4, 0, 0}, {x, 4, 0}};
+    const EdgeEdgeQuery<double> ee{{-8, x, -speed * toi}, {8, x, -speed * toi}, {x, -8, 0}, {x, 8, 0},
+                                   {-8, x, speed * (1 - toi)}, {8, x, speed * (1 - toi)}, {x, -8, 0}, {x, 8, 0}};
+  return {vf, ee, toi};
+}
+
+using LongVec = std::array<long double, 3>;
+// The coplanarity function f at t of a query's eight points (in Q::points() order) in long double:
+// coplanarity_of's differences (vertex-face: p - a, b - a, c - a; edge-edge: c - a, b - a, d - c).
+long double f_long(const std::array<LongVec, 8>& x, bool vertex_face, long double t) {
+  const int vf[3][2] = {{0, 1}, {2, 1}, {3, 1}}, ee[3][2] = {{2, 0}, {1, 0}, {3, 2}};
+  const int(&first)[3][2] = vertex_face ? vf : ee;
+  LongVec d[3];
+  for (int v = 0; v < 3; ++v)
+    for (int k = 0; k < 3; ++k) {
+      const long double at0 = x[first[v][0]][k] - x[first[v][1]][k], at1 = x[4 + first[v][0]][k] - x[4 + first[v][1]][k];
+      d[v][k] = at0 + t * (at1 - at0);
+    }
+  const LongVec c{d[1][1] * d[2][2] - d[1][2] * d[2][1], d[1][2] * d[2][0] - d[1][0] * d[2][2], d[1][0] * d[2][1] - d[1][1] * d[2][0]};
+  return d[0][0] * c[0] + d[0][1] * c[1] + d[0][2] * c[2];
 }
 
 // Whether the single-precision screen and filter leave the pair to the refinement.
@@ -283,20 +313,6 @@ TEST_CASE("certified path: removing any error bound lets wrong answers through (
   // of f for the query as given and within `bound` of f for the query with every coordinate moved
   // by u m_k (either way at random); with the bounds removed they do not.
   std::size_t at_points_sound = 0, at_points_mutated = 0, moved_sound = 0, moved_mutated = 0;
-  using LongVec = std::array<long double, 3>;
-  const auto f_long = [](const std::array<LongVec, 8>& x, bool vertex_face, long double t) {
-    // coplanarity_of's differences (vertex-face: p - a, b - a, c - a; edge-edge: c - a, b - a, d - c)
-    const int vf[3][2] = {{0, 1}, {2, 1}, {3, 1}}, ee[3][2] = {{2, 0}, {1, 0}, {3, 2}};
-    const int(&first)[3][2] = vertex_face ? vf : ee;
-    LongVec d[3];
-    for (int v = 0; v < 3; ++v)
-      for (int k = 0; k < 3; ++k) {
-        const long double at0 = x[first[v][0]][k] - x[first[v][1]][k], at1 = x[4 + first[v][0]][k] - x[4 + first[v][1]][k];
-        d[v][k] = at0 + t * (at1 - at0);
-      }
-    const LongVec c{d[1][1] * d[2][2] - d[1][2] * d[2][1], d[1][2] * d[2][0] - d[1][0] * d[2][2], d[1][0] * d[2][1] - d[1][1] * d[2][0]};
-    return d[0][0] * c[0] + d[0][1] * c[1] + d[0][2] * c[2];
-  };
   const double u = detail::unit_roundoff<double>();
   std::mt19937_64 rng64(17);
   for (int n = 0; n < 4000; ++n) {
@@ -616,16 +632,9 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
     compare(ee, -1.0);
     compare(vf.cast<float>(), -1.0);
   }
-  // A vertex through a triangle's interior and an edge through an edge at t = toi, the plane z = 0
-  // at that time (off the dyadic grid, where the descent cannot halve; the coordinates' rounding
-  // moves the exact time by ~1e-16).
+  // Contacts at known times off the dyadic grid.
   for (int n = 0; n < 2000; ++n) {
-    const double toi = (std::uniform_int_distribution<int>(1, 1022)(rng) + 1.0 / 3.0) / 1024.0, speed = 1.0 + rng() % 8;
-    const double x = std::uniform_int_distribution<int>(-64, 64)(rng) / 16.0;
-    const VertexFaceQuery<double> vf{{x + 1, 1, -speed * toi}, {x, 0, 0}, {x + 4, 0, 0}, {x, 4, 0},
-                                     {x + 1, 1, speed * (1 - toi)}, {x, 0, 0}, {x + 4, 0, 0}, {x, 4, 0}};
-    const EdgeEdgeQuery<double> ee{{-8, x, -speed * toi}, {8, x, -speed * toi}, {x, -8, 0}, {x, 8, 0},
-                                   {-8, x, speed * (1 - toi)}, {8, x, speed * (1 - toi)}, {x, -8, 0}, {x, 8, 0}};
+    const auto [vf, ee, toi] = contacts_at_known_time(rng);
     compare(vf, toi);
     compare(ee, toi);
   }
@@ -646,6 +655,150 @@ TEST_CASE("single precision: contacts searched in float with a double tail agree
   CHECK(handoff_same * 10 > hits * 9);
   CHECK(differ == 0);
   CHECK(past_toi == 0);
+}
+
+TEST_CASE("pairs of floats: operations within their unit, the split within 2^-47 of a double, no FP64 (mutation check)",
+          "[narrow][certified][single]") {
+  using detail::FloatPair;
+  const auto value = [](const FloatPair& x) { return static_cast<long double>(x.hi) + static_cast<long double>(x.lo); };
+  const auto normalized = [](const FloatPair& x) {
+    return x.hi == 0.0f ? x.lo == 0.0f : std::fabs(x.lo) <= std::ldexp(1.0f, std::ilogb(x.hi) - 24);
+  };
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> unit(-1, 1);
+  std::size_t split_outside = 0, not_normalized = 0, op_outside = 0, ops = 0;
+  long double worst_split = 0, worst_op = 0;
+  for (int n = 0; n < 200000; ++n) {
+    // (significands in [1, 2), exponents in [-50, 49])
+    const auto number = [&] { return std::ldexp(std::copysign(1.0 + std::fabs(unit(rng)), unit(rng)), int(rng() % 100) - 50); };
+    const double x = number(), y = number();
+    FloatPair a, b;
+    REQUIRE(detail::split_to_pair(x, a));
+    REQUIRE(detail::split_to_pair(y, b));
+    for (const auto& [pair, exact] : {std::pair<FloatPair, double>{a, x}, std::pair<FloatPair, double>{b, y}}) {
+      const long double error = std::fabs(value(pair) - exact) / std::fabs(static_cast<long double>(exact));
+      worst_split = std::max(worst_split, error);
+      split_outside += error > std::ldexp(1.0L, -47);
+      not_normalized += !normalized(pair);
+    }
+    const float s = static_cast<float>(unit(rng));
+    const long double sum = value(a) + value(b), product = value(a) * value(b), scaled = value(a) * s;
+    for (const auto& [computed, exact] : {std::pair<FloatPair, long double>{detail::pair_add(a, b), sum},
+                                          std::pair<FloatPair, long double>{detail::pair_sub(a, b), value(a) - value(b)},
+                                          std::pair<FloatPair, long double>{detail::pair_mul(a, b), product},
+                                          std::pair<FloatPair, long double>{detail::pair_scale(a, s), scaled}}) {
+      ++ops;
+      if (exact == 0) continue;
+      const long double error = std::fabs(value(computed) - exact) / std::fabs(exact);
+      worst_op = std::max(worst_op, error / detail::kFloatPairUnit);
+      op_outside += error > detail::kFloatPairUnit;
+      not_normalized += !normalized(computed);
+    }
+  }
+  std::printf("  pairs of floats: split error at most %.3Lg of 2^-47, %zu operations at most %.3Lg of 6u^2; %zu outside, %zu "
+              "not normalized\n", worst_split * std::ldexp(1.0L, 47), ops, worst_op, split_outside + op_outside, not_normalized);
+  CHECK(split_outside == 0);
+  CHECK(op_outside == 0);
+  CHECK(not_normalized == 0);
+  // Doubles the split refuses: subnormal, from 2^60 on, not finite; 0 and the range's ends it takes.
+  FloatPair out;
+  CHECK_FALSE(detail::split_to_pair(std::numeric_limits<double>::denorm_min(), out));
+  CHECK_FALSE(detail::split_to_pair(std::ldexp(1.0, -61), out));
+  CHECK_FALSE(detail::split_to_pair(std::ldexp(1.0, 60), out));
+  CHECK_FALSE(detail::split_to_pair(std::numeric_limits<double>::infinity(), out));
+  CHECK_FALSE(detail::split_to_pair(std::numeric_limits<double>::quiet_NaN(), out));
+  CHECK(detail::split_to_pair(-0.0, out));
+  CHECK((out.hi == 0.0f && out.lo == 0.0f));
+  CHECK(detail::split_to_pair(std::nextafter(std::ldexp(1.0, 60), 0.0), out));
+  CHECK(value(out) == static_cast<long double>(static_cast<float>(std::ldexp(1.0, 60))));  // rounds up to 2^60 exactly
+  CHECK(detail::split_to_pair(-std::ldexp(1.0, -60) * (1 + std::ldexp(1.0, -40)), out));
+  CHECK(std::fabs(value(out) + std::ldexp(1.0L, -60) * (1 + std::ldexp(1.0L, -40))) <= std::ldexp(1.0L, -107));
+
+  // B17's value of f at a point against long double, on near-contact pairs (their coordinates up to
+  // 2^20) at dyadic times of 1 to 24 bits: within `own` of f for the query as given; with a tenth
+  // of that bound, values fall outside (the bound is within a few times the errors seen).
+  std::size_t usable = 0, checked = 0, sound_outside = 0, mutated_outside = 0;
+  long double worst = 0;
+  for (int n = 0; n < 4000; ++n) {
+    const auto [vf, ee] = near_contact_pairs(rng, 20);
+    const auto check = [&](const auto& q, bool vertex_face) {
+      ++checked;
+      const detail::CubicAtPointsInFloatPairs<CertifiedPolicy> sound(q);
+      const detail::CubicAtPointsInFloatPairs<ShrunkFloatPairPolicy<10>> mutated(q);
+      if (!sound.usable) return;
+      ++usable;
+      const int bits = 1 + int(rng() % 24);
+      const float t = std::ldexp(float(rng() % (1ull << bits)), -bits);
+      std::array<LongVec, 8> given;
+      for (int i = 0; i < 8; ++i)
+        for (int k = 0; k < 3; ++k) given[i][k] = q.points()[i][k];
+      const long double exact_value = f_long(given, vertex_face, t);
+      const long double sound_error = std::fabs(value(sound.pair_at(t)) - exact_value);
+      worst = std::max(worst, sound_error / sound.own);
+      sound_outside += sound_error > sound.own;
+      mutated_outside += std::fabs(value(mutated.pair_at(t)) - exact_value) > mutated.own;
+      CHECK(sound.threshold >= sound.own);
+    };
+    check(vf, true);
+    check(ee, false);
+    check(vf.cast<float>(), true);
+  }
+  std::printf("  f in pairs of floats: %zu of %zu queries usable; error at most %.3Lg of the bound; %zu values outside "
+              "(sound), %zu (a tenth of the bound)\n", usable, checked, worst, sound_outside, mutated_outside);
+  CHECK(usable * 10 > checked * 9);
+  CHECK(sound_outside == 0);
+  CHECK(mutated_outside > 0);
+  // Out of range: a coordinate past 2^20, or a subnormal one: not usable (double proves those).
+  auto far = near_contact_pairs(rng, 20).second;
+  far.a0.x = std::ldexp(1.0, 21);
+  CHECK_FALSE(detail::CubicAtPointsInFloatPairs<CertifiedPolicy>(far).usable);
+  far.a0.x = std::numeric_limits<double>::denorm_min();
+  CHECK_FALSE(detail::CubicAtPointsInFloatPairs<CertifiedPolicy>(far).usable);
+}
+
+TEST_CASE("single precision: contacts' leaves proved in pairs of floats give the double tail's answers bit for bit",
+          "[narrow][certified][single]") {
+  // CcdParams::leaves_in_float_pairs: where B17's values prove a leaf, B15's prove the same one, so
+  // every answer is the same as without it. Most contacts' leaves are proved that way; not all
+  // here, where features as small as 2^-10 lie up to 2^7 from the origin: the split's rounding
+  // (u^2 of a coordinate) then outweighs |f| at some leaf ends, which double still proves.
+  std::mt19937_64 rng(29);
+  std::size_t pairs = 0, descents = 0, in_pairs = 0, differ = 0, counted_differ = 0;
+  auto compare = [&](const auto& q) {
+    using T = std::decay_t<decltype(q.points()[0].x)>;
+    CcdParams<T> plain, with_pairs;
+    with_pairs.leaves_in_float_pairs = true;
+    const CertifiedAnswer<T> a = detail::certified_classify<CertifiedPolicy>(q, plain);
+    const CertifiedAnswer<T> b = detail::certified_classify<CertifiedPolicy>(q, with_pairs);
+    differ += !(a.certainty == b.certainty && a.lo == b.lo && a.hi == b.hi);
+    if (certified_first_passes_leave(q, plain)) {
+      bool done_plain = false, done_pairs = false, plain_flag = true, pairs_flag = false;
+      const CertifiedAnswer<T> s = detail::certified_refine_single_first<CertifiedPolicy>(q, plain, done_plain, &plain_flag);
+      const CertifiedAnswer<T> p = detail::certified_refine_single_first<CertifiedPolicy>(q, with_pairs, done_pairs, &pairs_flag);
+      counted_differ += plain_flag || done_plain != done_pairs || s.certainty != p.certainty || s.lo != p.lo || s.hi != p.hi;
+      descents += done_pairs && p.certainty == Certainty::hit;
+      in_pairs += pairs_flag;
+      if (pairs_flag) CHECK((done_pairs && p.certainty == Certainty::hit));
+    }
+    ++pairs;
+  };
+  for (int n = 0; n < 20000; ++n) {
+    const auto [vf, ee] = near_contact_pairs(rng, 8);
+    compare(vf);
+    compare(ee);
+    compare(vf.cast<float>());
+  }
+  for (int n = 0; n < 2000; ++n) {
+    const auto [vf, ee, toi] = contacts_at_known_time(rng);
+    compare(vf);
+    compare(ee);
+  }
+  std::printf("  leaves in pairs of floats: %zu pairs, %zu contacts with a tail, %zu of them proved in pairs; %zu answers "
+              "differ, %zu tails differ\n", pairs, descents, in_pairs, differ, counted_differ);
+  CHECK(differ == 0);
+  CHECK(counted_differ == 0);
+  CHECK(descents > 1000);
+  CHECK(in_pairs * 4 > descents * 3);
 }
 
 TEST_CASE("single precision: a contact claimed in float holds for the input; without the inside test's bound a miss is "

@@ -82,7 +82,11 @@ std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>&
   CcdParams<T> params;
   params.mode = mode;
   narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
-  const auto cpu_result = cpu::test_feature_pairs<Method, T>(mesh, x0, x1, pairs, params);
+  // (The CPU asked for the leaves in pairs of floats where the GPU's plan takes them: the same
+  // answers either way, and then the same counts of them too.)
+  CcdParams<T> cpu_params = params;
+  cpu_params.leaves_in_float_pairs = narrow.fp64_ratio() >= kFloatPairLeavesMinFp64Ratio;
+  const auto cpu_result = cpu::test_feature_pairs<Method, T>(mesh, x0, x1, pairs, cpu_params);
   const auto gpu_result = narrow.download();
   lwsccd_test::require_same_contacts(gpu_result, cpu_result);
   // An output with less room than the hits it needed ran again with more (and lost nothing),
@@ -96,6 +100,13 @@ std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>&
   if (lwsccd::detail::certified_of<Method>::value) {
     lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
     lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
+    REQUIRE(gpu_result.vf_counts.float_pair_leaves == cpu_result.vf_counts.float_pair_leaves);
+    REQUIRE(gpu_result.ee_counts.float_pair_leaves == cpu_result.ee_counts.float_pair_leaves);
+    if (!cpu_params.leaves_in_float_pairs) REQUIRE(gpu_result.ee_counts.float_pair_leaves + gpu_result.vf_counts.float_pair_leaves == 0);
+    if (fp64_ratio >= kFloatPairLeavesMinFp64Ratio)
+      std::printf("  planned for FP64 at 1/%d: %zu + %zu contacts' leaves proved in pairs of floats, of %zu + %zu tails\n",
+                  fp64_ratio, gpu_result.vf_counts.float_pair_leaves, gpu_result.ee_counts.float_pair_leaves,
+                  gpu_result.vf_counts.single_descents, gpu_result.ee_counts.single_descents);
   }
   const char* mode_name = mode == CcdMode::earliest ? "earliest" : mode == CcdMode::set ? "set" : "contacts";
   std::printf("  %s/%s/%s: %zu vf + %zu ee pairs -> %zu + %zu hits, earliest TOI %.9g; certified hits %zu + %zu, "
@@ -235,13 +246,17 @@ std::pair<std::size_t, std::size_t> whole_beside_filter_runs(const lwsccd_test::
   narrow.plan_for_fp64_ratio(fp64_ratio);
   CcdParams<T> params;
   params.mode = mode;
-  const auto cpu_result = cpu::test_feature_pairs<CertifiedCcd, T>(m.mesh, m.x0, m.x1, fp, params);
+  CcdParams<T> cpu_params = params;
+  cpu_params.leaves_in_float_pairs = narrow.fp64_ratio() >= kFloatPairLeavesMinFp64Ratio;
+  const auto cpu_result = cpu::test_feature_pairs<CertifiedCcd, T>(m.mesh, m.x0, m.x1, fp, cpu_params);
   for (int run = 0; run < 2; ++run) {
     narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
     const auto gpu_result = narrow.download();
     lwsccd_test::require_same_contacts(gpu_result, cpu_result);
     lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
     lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
+    REQUIRE(gpu_result.ee_counts.float_pair_leaves == cpu_result.ee_counts.float_pair_leaves);
+    REQUIRE(gpu_result.vf_counts.float_pair_leaves == cpu_result.vf_counts.float_pair_leaves);
     if (run == 0) CHECK(narrow.whole_searches_beside_filter() == 0);
   }
   return {narrow.whole_searches(), narrow.whole_searches_beside_filter()};

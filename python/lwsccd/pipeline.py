@@ -47,7 +47,9 @@ class Pipeline:
             GPU backend ignores it.
         fp64_ratio: GPU backend: plan the narrow phase as for a GPU whose FP32 runs this many
             times its FP64 (0, the default: the device's own; e.g. 64 to run on an H100 what an
-            RTX-class GPU runs); the same contacts. For measuring; the CPU backend ignores it.
+            RTX-class GPU runs); the same contacts. For measuring. From 8 on, both backends
+            prove contacts' leaves in pairs of floats first (the same contacts; the counts'
+            "float_pair_leaves" say how many).
         device: "auto" (the GPU when the package has it and a device is present, else the
             CPU), "gpu" or "cpu".
         devices: CUDA device ordinals to split each step over (e.g. [0, 1]: NCCL, one host

@@ -72,6 +72,7 @@ nb::dict counts_dict(const lwsccd::NarrowPhaseCounts& c) {
   d["screened"] = c.screened;
   d["single_misses"] = c.single_misses;
   d["single_descents"] = c.single_descents;
+  d["float_pair_leaves"] = c.float_pair_leaves;
   return d;
 }
 

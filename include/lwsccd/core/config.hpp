@@ -22,6 +22,14 @@
 #define LWSCCD_IN_DEVICE_CODE 0
 #endif
 
+// A function kept out of line on the device: a rarely taken path's registers stay out of its
+// callers' allocation.
+#if defined(__CUDACC__)
+#define LWSCCD_NOINLINE __noinline__
+#else
+#define LWSCCD_NOINLINE
+#endif
+
 // Full unrolling of short fixed-count loops, so that small arrays indexed by the loop counter
 // stay in registers on the device (no local-memory stack frame).
 #if defined(__CUDACC__)

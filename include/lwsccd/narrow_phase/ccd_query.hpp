@@ -47,6 +47,12 @@ struct EdgeEdgeQuery {
 ///  - set:      which pairs collide, each with some lower bound of its time of impact, unrefined.
 enum class CcdMode : unsigned char { contacts, earliest, set };
 
+/// The FP32-to-FP64 throughput ratio from which the pipelines prove contacts' leaves in pairs of
+/// floats (CcdParams::leaves_in_float_pairs): the GPU's own ratio or the one planned for
+/// (PipelineParams::fp64_ratio). There a tail's ~250 FP64 operations cost more than the pairs'
+/// ~1,000 FP32 ones; an H100's or H200's ratio is 2, an RTX's or L40's 32 to 64.
+inline constexpr int kFloatPairLeavesMinFp64Ratio = 8;
+
 /// Run-time parameters of the elemental tests.
 template <class T>
 struct CcdParams {
@@ -60,6 +66,12 @@ struct CcdParams {
   /// No contact happens before this time (a caller's proof, e.g. CertifiedCcd's exclusions):
   /// the inclusion search drops boxes that end before it. The reported TOI stays a lower bound.
   T time_from = T(0);
+  /// CertifiedCcd: prove each contact's time-of-impact leaf in pairs of floats before double
+  /// (docs/NARROW_PHASE.md, B17). The answers are the same either way; the contacts' tails then
+  /// take no FP64, which pays on GPUs whose FP64 runs at a small share of FP32 (RTX, L40), and
+  /// costs a little where FP64 is plentiful. gpu::NarrowPhase turns it on itself on such a GPU
+  /// (or where planned for one: PipelineParams::fp64_ratio).
+  bool leaves_in_float_pairs = false;
 };
 
 /// The answer to one query. `toi` is in [0, 1] when `hit`; conservative methods guarantee that

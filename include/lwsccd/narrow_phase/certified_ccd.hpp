@@ -107,6 +107,9 @@ struct CertifiedPolicy {
   static constexpr bool kJumpAtPoints = true;
   /// Multiplier of B15's bounds (1 = as derived; only the mutation tests change it).
   static constexpr double kPointBound = 1.0;
+  /// Multiplier of B17's own error bound (the pairs of floats against the query as given; 1 = as
+  /// derived; only the mutation tests change it).
+  static constexpr double kFloatPairBound = 1.0;
   /// Mode earliest: the certified pass (and its fallback) first look only at the window
   /// [0, 2^-kEarliestFirst), then at windows kEarliestStep binary orders wider, up to the whole
   /// step, and stop at the first window that holds a contact. A step's earliest contact is
@@ -209,9 +212,12 @@ struct CertifiedCcdT {
   /// (the certain descent's last levels in double) decide the pair (`done` set); on what it
   /// leaves, screen_after_single then refine (detail::certified_refine_after_single: the order
   /// classify runs them in).
+  /// `in_float_pairs`, where given, tells whether a contact's leaf was proved in pairs of floats
+  /// (CcdParams::leaves_in_float_pairs: no FP64 in its tail).
   template <bool kSettle = true, class Q, class T>
-  LWSCCD_HD static CertifiedAnswer<T> refine_single_first(const Q& q, const CcdParams<T>& params, bool& done) {
-    return detail::certified_refine_single_first<Policy, kSettle>(q, params, done);
+  LWSCCD_HD static CertifiedAnswer<T> refine_single_first(const Q& q, const CcdParams<T>& params, bool& done,
+                                                          bool* in_float_pairs = nullptr) {
+    return detail::certified_refine_single_first<Policy, kSettle>(q, params, done, in_float_pairs);
   }
   /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
   template <bool kSettle = true, class Q, class T>

@@ -87,6 +87,10 @@ struct NarrowPhasePolicy {
   /// and L40 classes): every lane of a warp's search repeats its FP64 instructions, which a GPU
   /// with little FP64 pays for; there they run a thread each.
   static constexpr int kHandedWarpsMaxFp64Ratio = 2;
+  /// CertifiedCcd: contacts' leaves proved in pairs of floats first (CcdParams::leaves_in_float_pairs,
+  /// the same answers) on GPUs whose FP32 throughput is at least this many times their FP64 one
+  /// (as planned: plan_for_fp64_ratio), whatever the caller's CcdParams say.
+  static constexpr int kFloatPairLeavesMinFp64Ratio = lwsccd::kFloatPairLeavesMinFp64Ratio;
   /// CertifiedCcd's refinement kernel: blocks per SM it must fit (__launch_bounds__), which caps
   /// its registers per thread. 1: no cap (255 registers); on an H100 caps of 3 and 4 blocks
   /// spilled and made the narrow phase 1.3x and 2.9x slower on cloth-ball.
@@ -288,7 +292,8 @@ class NarrowPhase {
   /// Plans the following runs as for a GPU whose FP32 runs `ratio` times faster than its FP64 (0:
   /// this device's own, cudaDevAttrSingleToDoublePrecisionPerfRatio): past
   /// kHandedWarpsMaxFp64Ratio the searches in double run a thread each. The answers do not change
-  /// (PipelineParams::fp64_ratio: measuring on one GPU the path another takes).
+  /// (PipelineParams::fp64_ratio: measuring on one GPU the path another takes). From
+  /// kFloatPairLeavesMinFp64Ratio on, contacts' leaves are proved in pairs of floats first.
   void plan_for_fp64_ratio(int ratio) {
     if (ratio < 0) throw InputError("gpu::NarrowPhase::plan_for_fp64_ratio", "ratio", "must be >= 0 (0: the device's own)");
     planned_fp64_ratio_ = ratio;

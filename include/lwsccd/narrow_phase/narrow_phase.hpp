@@ -41,6 +41,9 @@ struct NarrowPhaseCounts {
   /// CertifiedCcd: certain hits whose search ran in single precision, with only the certain
   /// descent's last levels in double (part of certified_hits; CertifiedPolicy::kSingleDescent).
   std::size_t single_descents = 0;
+  /// CertifiedCcd with CcdParams::leaves_in_float_pairs: of single_descents, the contacts whose
+  /// leaf pairs of floats proved, with no FP64 at all (the answers are the same either way).
+  std::size_t float_pair_leaves = 0;
 };
 
 /// Adds b's numbers to a's.
@@ -52,6 +55,7 @@ inline void add_counts(NarrowPhaseCounts& a, const NarrowPhaseCounts& b) {
   a.screened += b.screened;
   a.single_misses += b.single_misses;
   a.single_descents += b.single_descents;
+  a.float_pair_leaves += b.float_pair_leaves;
 }
 
 template <class T>
@@ -188,11 +192,12 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
           // The search in single precision first (its misses, and contacts with a double tail),
           // then the double screen and search on what it leaves.
           const auto q = gather(i);
-          bool done = false;
-          CertifiedAnswer<T> a = Method::refine_single_first(q, params, done);
+          bool done = false, in_float_pairs = false;
+          CertifiedAnswer<T> a = Method::refine_single_first(q, params, done, &in_float_pairs);
           if (done) {
             out.counts.single_misses += a.certainty == Certainty::miss;
             out.counts.single_descents += a.certainty == Certainty::hit;
+            out.counts.float_pair_leaves += in_float_pairs;
           } else if (Method::screen_after_single(q, params)) {
             a = {Certainty::miss, T(0), T(1)};
           } else {
@@ -228,6 +233,7 @@ void test_list(std::size_t n, Gather&& gather, GatherSingle&& gather_single, Pai
     counts.screened += part.counts.screened;
     counts.single_misses += part.counts.single_misses;
     counts.single_descents += part.counts.single_descents;
+    counts.float_pair_leaves += part.counts.float_pair_leaves;
     gave_up += part.gave_up;
   }
 }

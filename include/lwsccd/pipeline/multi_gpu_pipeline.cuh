@@ -157,21 +157,21 @@ class DeviceWorkers {
 };
 
 // A step's statistics as numbers, for the all-gather (and back).
-constexpr int kPackedCounts = 7;
+constexpr int kPackedCounts = 8;
 constexpr int kPackedFields = 24;
 // Entries read by name (the rest are unpacked by unpack_stats).
 constexpr int kPackedFront = 6, kPackedHitsVf = 10, kPackedRebuild = 21, kPackedRestart = 22, kPackedDone = 23;
 constexpr int kPackedStats = kPackedFields + 2 * kPackedCounts;
 inline void pack_counts(const NarrowPhaseCounts& c, double* out) {
   const std::size_t v[kPackedCounts] = {c.pairs, c.certified_hits, c.certified_misses, c.fallbacks, c.screened, c.single_misses,
-                                        c.single_descents};
+                                        c.single_descents, c.float_pair_leaves};
   for (int k = 0; k < kPackedCounts; ++k) out[k] = static_cast<double>(v[k]);
 }
 inline NarrowPhaseCounts unpack_counts(const double* in) {
   auto n = [&](int k) { return static_cast<std::size_t>(in[k]); };
   NarrowPhaseCounts c;
   c.pairs = n(0), c.certified_hits = n(1), c.certified_misses = n(2), c.fallbacks = n(3), c.screened = n(4), c.single_misses = n(5);
-  c.single_descents = n(6);
+  c.single_descents = n(6), c.float_pair_leaves = n(7);
   return c;
 }
 // Entries: the StepStats fields (front_size: the front the next step starts from), the share's

@@ -46,7 +46,10 @@ struct PipelineParams {
   /// hands on, and a short deferred list's) run a thread each rather than a warp each
   /// (NarrowPhasePolicy::kHandedWarpsMaxFp64Ratio);
   /// the answers are the same for every value. For measuring on one GPU the path another takes
-  /// (e.g. 64, an RTX- or L40-class GPU, counted on an H100: bench/fp_instructions.py).
+  /// (e.g. 64, an RTX- or L40-class GPU, counted on an H100: bench/fp_instructions.py). From
+  /// kFloatPairLeavesMinFp64Ratio (8) on, contacts' leaves are proved in pairs of floats first
+  /// (CcdParams::leaves_in_float_pairs), on either backend: the CPU follows the plan, so that its
+  /// counts of where pairs were decided are the GPU's (the answers are the same either way).
   int fp64_ratio = 0;
 
   /// Throws InputError naming the first parameter out of range.
@@ -100,6 +103,8 @@ CcdParams<T> ccd_params_of(const PipelineParams& params) {
   ccd.tolerance = static_cast<T>(params.tolerance);
   ccd.max_iterations = params.max_iterations;
   ccd.mode = params.mode;
+  // (The GPU backend also does so on a GPU of such a ratio, planned or not; the answers are the same.)
+  ccd.leaves_in_float_pairs = params.fp64_ratio >= kFloatPairLeavesMinFp64Ratio;
   return ccd;
 }
 // BodyLayout::body_self_collides as bytes (device-friendly), empty when every body self-collides

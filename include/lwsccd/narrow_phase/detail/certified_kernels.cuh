@@ -157,11 +157,12 @@ __device__ void settle_refined(const CertifiedAnswer<T>& a, index_t first, index
 template <class Method, class Q, class T>
 __device__ bool settled_in_single(const Q& q, const CcdParams<T>& params, std::pair<index_t, index_t> p, unsigned long long* counters,
                                   FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, bool store = true) {
-  bool done = false;
-  const CertifiedAnswer<T> a = Method::template refine_single_first<false>(q, params, done);
+  bool done = false, in_float_pairs = false;
+  const CertifiedAnswer<T> a = Method::template refine_single_first<false>(q, params, done, &in_float_pairs);
   if (!done || !store) return done;
   if (a.certainty == Certainty::miss) atomicAdd(counters + kSingleSearchMisses, 1ull);
   if (a.certainty == Certainty::hit) atomicAdd(counters + kSingleDescents, 1ull);
+  if (in_float_pairs) atomicAdd(counters + kFloatPairLeaves, 1ull);
   settle_refined(a, p.first, p.second, counters, hits, hit_room, undecided);
   return true;
 }

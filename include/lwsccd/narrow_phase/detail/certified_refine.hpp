@@ -11,6 +11,7 @@
 #include <limits>
 #include <type_traits>
 
+#include "lwsccd/core/detail/float_pair.hpp"
 #include "lwsccd/core/detail/fp.hpp"
 #include "lwsccd/core/detail/rounding.hpp"
 #include "lwsccd/narrow_phase/detail/certified_screen.hpp"
@@ -581,6 +582,152 @@ struct CubicAtPoints {
   }
 };
 
+/// The points' indices (in Q::points() order) of coplanarity_of's differences P, A, B: each the
+/// first point minus the second.
+template <class T>
+LWSCCD_HD constexpr int coplanarity_point(const VertexFaceQuery<T>&, int factor, int which) {
+  // P = p - a, A = b - a, B = c - a (points p, a, b, c)
+  return which == 1 ? 1 : (factor == 0 ? 0 : factor + 1);
+}
+template <class T>
+LWSCCD_HD constexpr int coplanarity_point(const EdgeEdgeQuery<T>&, int factor, int which) {
+  // P = c - a, A = b - a, B = d - c (points a, b, c, d)
+  return factor == 0 ? (which == 0 ? 2 : 0) : factor == 1 ? (which == 0 ? 1 : 0) : (which == 0 ? 3 : 2);
+}
+
+/// Majorant x . |y| x |z| (triple_majorant) of three float vectors given as arrays.
+LWSCCD_HD inline float triple_majorant_of(const float x[3], const float y[3], const float z[3]) {
+  return triple_majorant(Vec3<float>{x[0], x[1], x[2]}, Vec3<float>{y[0], y[1], y[2]}, Vec3<float>{z[0], z[1], z[2]});
+}
+
+/// The coplanarity cubic at a point in pairs of floats (B17): B15's computation, every value a
+/// FloatPair (no FP64), on the query's points split into pairs (split_to_pair). Its one bound,
+/// `threshold`, is meant for the double tail's leaf proof: a value v with |v| > threshold has the
+/// sign that the query's f has at t, and B15's double value there has that sign beyond both of
+/// its bounds (as given and perturbed; `threshold` covers the pairs' error against the query as
+/// given plus twice an upper bound of B15's bounds). So where these values prove a leaf, B15's
+/// would prove the same leaf by the same tries: the answer is the double tail's, bit for bit.
+/// `usable` is false where a coordinate is neither 0 nor within [2^-60, 2^20] in magnitude (the
+/// range the underflow slack of B17 holds for); then the double tail runs as before.
+template <class Policy>
+struct CubicAtPointsInFloatPairs {
+  FloatPair x0[3][3], dx[3][3];  // X0 and X1 - X0 of P, A, B, per axis
+  float own = 0.0f;        ///< the pairs' error against the query as given (kFloatPairBound times B17's)
+  float threshold = 0.0f;  ///< own plus twice an upper bound of B15's bounds, rounded up
+  bool usable = false;
+
+  template <class Q>
+  LWSCCD_HD explicit CubicAtPointsInFloatPairs(const Q& q) {
+    using T = std::remove_cv_t<std::remove_reference_t<decltype(q.points()->x)>>;
+    const auto* points = q.points();
+    FloatPair split[8][3];
+    float m[3] = {0.0f, 0.0f, 0.0f};  // at least every |coordinate| per axis (B17)
+    for (int i = 0; i < 8; ++i)
+      for (int k = 0; k < 3; ++k) {
+        if (!split_to_pair(points[i][k], split[i][k])) return;
+        m[k] = fmax_of(m[k], pair_magnitude_above(split[i][k]));
+      }
+    if (!(fmax_of(fmax_of(m[0], m[1]), m[2]) <= 0x1p20f)) return;
+    float base[3][3];  // at least max(|X0|, |X1|) per factor and axis
+    for (int f = 0; f < 3; ++f) {
+      const int i = coplanarity_point(q, f, 0), j = coplanarity_point(q, f, 1);
+      for (int k = 0; k < 3; ++k) {
+        x0[f][k] = pair_sub(split[i][k], split[j][k]);
+        const FloatPair x1 = pair_sub(split[i + 4][k], split[j + 4][k]);
+        dx[f][k] = pair_sub(x1, x0[f][k]);
+        base[f][k] = fmax_of(pair_magnitude_above(x0[f][k]), pair_magnitude_above(x1));
+      }
+    }
+    // The bound (B17), every term a sum and product of non-negative floats (each rounding at most
+    // u low; the factor 1 + 2^-17 at the end covers them all). d: the pairs' moves per factor and
+    // axis (14 units of rounding of the factor's size in X(t), and twice the split's u^2 m);
+    // dh: B15's (14 u_d + 2 p) m.
+    const float unit_double = 0x1p-53f, given = static_cast<float>(unit_roundoff<T>());
+    float d[3][3], dh[3], b[3][3], bd[3][3], bh[3][3], top[3][3];
+    for (int k = 0; k < 3; ++k) {
+      dh[k] = fmul(m[k], fadd(16.0f * unit_double, fmul(2.0f, given)));
+      for (int f = 0; f < 3; ++f) {
+        d[f][k] = fadd(fmul(base[f][k], 84.0f * 0x1p-48f), fmul(m[k], 2.0f * 0x1p-48f));
+        b[f][k] = fadd(base[f][k], d[f][k]);
+        bd[f][k] = fadd(b[f][k], d[f][k]);
+        bh[f][k] = fadd(b[f][k], dh[k]);
+        top[f][k] = fadd(b[f][k], fmax_of(d[f][k], dh[k]));
+      }
+    }
+    const float top_majorant = triple_majorant_of(top[0], top[1], top[2]);
+    // Mag(b + d) - Mag(b) of a trilinear majorant, exactly M(d, b1 + d, b2 + d) + M(b0, d, b2 + d) + M(b0, b1, d).
+    const float moved = fadd(fadd(triple_majorant_of(d[0], bd[1], bd[2]), triple_majorant_of(b[0], d[1], bd[2])),
+                             triple_majorant_of(b[0], b[1], d[2]));
+    const float moved_double = fadd(fadd(triple_majorant_of(dh, bh[1], bh[2]), triple_majorant_of(b[0], dh, bh[2])),
+                                    triple_majorant_of(b[0], b[1], dh));
+    own = fmul(float(Policy::kFloatPairBound),
+                           fadd(fadd(moved, fmul(31.0f * 0x1p-48f, top_majorant)), 0x1p-88f));
+    const float double_bounds = fmul(float(Policy::kPointBound),
+                                     fadd(fadd(moved_double, fmul(36.0f * unit_double, top_majorant)), 0x1p-120f));
+    threshold = fmul(fadd(own, fmul(2.0f, double_bounds)), 1.0f + 0x1p-17f);
+    usable = finite_value(threshold);
+  }
+  /// f at t (a float, exact: a leaf end at level 24 or above), as a float of its sign no larger in
+  /// magnitude, with `threshold` as both bounds.
+  LWSCCD_HD PointValue<float> at(float t) const { return {pair_toward_zero(pair_at(t)), threshold, threshold}; }
+  /// f at t as computed, a pair within `own` of the query's f as given.
+  LWSCCD_HD FloatPair pair_at(float t) const {
+    FloatPair x[3][3];
+    for (int f = 0; f < 3; ++f)
+      for (int k = 0; k < 3; ++k) x[f][k] = pair_add(x0[f][k], pair_scale(dx[f][k], t));
+    const FloatPair(&p)[3] = x[0], (&a)[3] = x[1], (&c)[3] = x[2];
+    const FloatPair cross[3] = {pair_sub(pair_mul(a[1], c[2]), pair_mul(a[2], c[1])),
+                                pair_sub(pair_mul(a[2], c[0]), pair_mul(a[0], c[2])),
+                                pair_sub(pair_mul(a[0], c[1]), pair_mul(a[1], c[0]))};
+    return pair_add(pair_add(pair_mul(p[0], cross[0]), pair_mul(p[1], cross[1])), pair_mul(p[2], cross[2]));
+  }
+};
+
+/// The double tail's leaf proof (certified_descend_from): from the leaf `guess` (a leaf index, in
+/// float), up to three tries on f's values at leaf ends (`value_at(t)`: a PointValue), each try
+/// moving one leaf where a certain sign puts the root. True with `answer` set where a leaf is
+/// proved. `times_in_float`: the leaf ends computed in float (exact at level 24 or above; no FP64).
+template <class T, class ValueAt>
+LWSCCD_HD bool prove_tail_leaf(const SingleHandoff& handoff, int leaf_level, const CcdParams<T>& params, float guess,
+                               bool times_in_float, const ValueAt& value_at, CertifiedAnswer<T>& answer) {
+  const T width = exact_pow2_neg<T>(leaf_level);
+  const std::uint32_t per = 1u << (leaf_level - handoff.level), first_leaf = handoff.index * per, last_leaf = first_leaf + per - 1u;
+  std::uint32_t k = guess >= static_cast<float>(first_leaf) ? static_cast<std::uint32_t>(guess) : first_leaf;
+  k = k > last_leaf ? last_leaf : k;
+  for (int tries = 0; tries < 3; ++tries) {
+    const T from = times_in_float ? static_cast<T>(fmul(static_cast<float>(k), exact_pow2_neg<float>(leaf_level)))
+                                  : static_cast<T>(k) * width;
+    const T to = times_in_float ? static_cast<T>(fmul(static_cast<float>(k + 1u), exact_pow2_neg<float>(leaf_level)))
+                                : static_cast<T>(k + 1u) * width;
+    if (to > params.time_limit) return false;  // the descent's rules at the limit
+    const auto start = value_at(from), end = value_at(to);
+    const int at_start = sign_beyond(start.value, start.exact), at_end = sign_beyond(end.value, end.exact);
+    if (at_start == -handoff.first && k > first_leaf) {  // the root is left of this leaf
+      --k;
+      continue;
+    }
+    if (at_end == handoff.first && k < last_leaf) {  // right of it
+      ++k;
+      continue;
+    }
+    if (at_start != handoff.first || at_end != -handoff.first || sign_beyond(start.value, start.bound) != handoff.first)
+      return false;
+    answer = {Certainty::hit, from, to};
+    return true;
+  }
+  return false;
+}
+
+/// The leaf proof in pairs of floats (B17), out of line on the device (its ~100 floats of state
+/// would otherwise count in its callers' registers, where it is not asked for). Level 24 or above.
+template <class Policy, class Q, class T>
+LWSCCD_NOINLINE LWSCCD_HD bool tail_leaf_in_float_pairs(const Q& q, const SingleHandoff& handoff, int leaf_level,
+                                                       const CcdParams<T>& params, float guess, CertifiedAnswer<T>& answer) {
+  const CubicAtPointsInFloatPairs<Policy> pairs(q);
+  return pairs.usable &&
+         prove_tail_leaf(handoff, leaf_level, params, guess, true, [&](T t) { return pairs.at(static_cast<float>(t)); }, answer);
+}
+
 /// The double tail of a contact that single precision handed over. What the hand-off states
 /// (SingleHandoff) holds for every query the double path covers, so no stack, no inside test and
 /// no look at earlier time is needed: the double cubic on [0, 1] (B1) and
@@ -597,9 +744,10 @@ struct CubicAtPoints {
 /// within double's own error: a root on the grid). kSettle as certified_refine's.
 template <class Policy, bool kSettle = true, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdParams<T>& params, const SingleHandoff& handoff,
-                                                    bool& whole) {
+                                                    bool& whole, bool* in_float_pairs = nullptr) {
   using W = typename certified_compute<T>::type;
   whole = true;
+  if (in_float_pairs) *in_float_pairs = false;
   const auto q = q_in.template cast<W>();
   const Vec3<W> m = coordinate_magnitude(q);
   const int max_level = certified_max_level(params.tolerance);
@@ -607,40 +755,21 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
   // as certain_descent stops.
   int leaf_level = handoff.level;
   while (leaf_level < max_level && !(exact_pow2_neg<T>(leaf_level) <= params.tolerance)) ++leaf_level;
-  // The leaf that holds the root, from the leaf `guess` (a leaf index, in float) and f's values at
-  // leaf ends (`value_at`): see the function comment.
-  const auto prove_leaf = [&](float guess, const auto& value_at, CertifiedAnswer<T>& answer) {
-    const T width = exact_pow2_neg<T>(leaf_level);
-    const std::uint32_t per = 1u << (leaf_level - handoff.level), first_leaf = handoff.index * per, last_leaf = first_leaf + per - 1u;
-    std::uint32_t k = guess >= static_cast<float>(first_leaf) ? static_cast<std::uint32_t>(guess) : first_leaf;
-    k = k > last_leaf ? last_leaf : k;
-    for (int tries = 0; tries < 3; ++tries) {
-      const T from = static_cast<T>(k) * width, to = static_cast<T>(k + 1u) * width;
-      if (to > params.time_limit) return false;  // the descent's rules at the limit
-      const PointValue<W> start = value_at(W(from)), end = value_at(W(to));
-      const int at_start = sign_beyond(start.value, start.exact), at_end = sign_beyond(end.value, end.exact);
-      if (at_start == -handoff.first && k > first_leaf) {  // the root is left of this leaf
-        --k;
-        continue;
-      }
-      if (at_end == handoff.first && k < last_leaf) {  // right of it
-        ++k;
-        continue;
-      }
-      if (at_start != handoff.first || at_end != -handoff.first || sign_beyond(start.value, start.bound) != handoff.first)
-        return false;
-      answer = {Certainty::hit, from, to};
-      return true;
-    }
-    return false;
-  };
   CertifiedAnswer<T> proved;
   if constexpr (Policy::kDescentJump && Policy::kJumpAtPoints) {
-    // First from the query's points, with float's own guess: no cubic is built (B15).
     if (leaf_level <= 30 && handoff.guess >= 0.0f) {
+      const float guess = fmul(handoff.guess, exact_pow2_neg<float>(-leaf_level));
+      // Where asked, first in pairs of floats (B17): what they prove, B15 proves the same way.
+      if (params.leaves_in_float_pairs && leaf_level <= 24 &&
+          tail_leaf_in_float_pairs<Policy>(q_in, handoff, leaf_level, params, guess, proved)) {
+        whole = false;
+        if (in_float_pairs) *in_float_pairs = true;
+        return proved;
+      }
+      // From the query's points, with float's own guess: no cubic is built (B15).
       const CubicAtPoints<Policy, W> points(q, m, W(unit_roundoff<T>()));
       if (points.finite &&
-          prove_leaf(fmul(handoff.guess, exact_pow2_neg<float>(-leaf_level)), [&](W t) { return points.at(t); }, proved)) {
+          prove_tail_leaf(handoff, leaf_level, params, guess, false, [&](W t) { return points.at(t); }, proved)) {
         whole = false;
         return proved;
       }
@@ -650,8 +779,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
   if (!cubic_on_step<Policy>(q, fmul(W(4), max_component(m)), W(unit_roundoff<T>()), piece)) return {};
   if constexpr (Policy::kDescentJump) {
     if (leaf_level <= 30 &&
-        prove_leaf(fmul(estimated_root(piece), exact_pow2_neg<float>(-leaf_level)),
-                   [&](W t) { return bernstein_at<Policy>(piece, t); }, proved)) {
+        prove_tail_leaf(handoff, leaf_level, params, fmul(estimated_root(piece), exact_pow2_neg<float>(-leaf_level)), false,
+                        [&](W t) { return bernstein_at<Policy>(piece, t); }, proved)) {
       whole = false;
       return proved;
     }
@@ -683,8 +812,10 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
 /// and settled by certified_descend_from); otherwise the double screen and certified_refine
 /// decide. A hand-off is a certain contact, which no screen rejects. kSettle as certified_refine's.
 template <class Policy, bool kSettle = true, class Q, class T>
-LWSCCD_HD CertifiedAnswer<T> certified_refine_single_first(const Q& q, const CcdParams<T>& params, bool& done) {
+LWSCCD_HD CertifiedAnswer<T> certified_refine_single_first(const Q& q, const CcdParams<T>& params, bool& done,
+                                                           bool* in_float_pairs = nullptr) {
   done = false;
+  if (in_float_pairs) *in_float_pairs = false;
   if constexpr (Policy::kSingleFirst && Policy::kSingleDescent) {
     SingleHandoff handoff;
     const CertifiedAnswer<float> s = certified_search_single<Policy>(q, single_params(params), handoff);
@@ -694,7 +825,7 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine_single_first(const Q& q, const Ccd
     }
     if (handoff.valid) {
       bool whole = true;
-      const CertifiedAnswer<T> a = certified_descend_from<Policy, kSettle>(q, params, handoff, whole);
+      const CertifiedAnswer<T> a = certified_descend_from<Policy, kSettle>(q, params, handoff, whole, in_float_pairs);
       done = !whole;
       return a;
     }

@@ -83,6 +83,7 @@ enum NarrowCounter : int {
   kSingleWhole,     // pairs it sends straight to the whole search (listed from the top of the double filter's list)
   kSingleSearchMisses,  // the search in single precision: certain misses (pairs the single passes left)
   kSingleDescents,  // its contacts settled by a double tail (certain hits)
+  kFloatPairLeaves, // of those, the ones whose leaf pairs of floats proved (no FP64)
   kHandedToWarps,   // deferred searches in double a thread handed on (to a warp each, or a thread each past the limit)
   kHandedTaken,     // of those, the ones a warp took (refine_handed_kernel's tickets)
   kKeptSlots,       // FP32 first: slots of the double filter's list asked for (more than the room: the run is repeated with more)

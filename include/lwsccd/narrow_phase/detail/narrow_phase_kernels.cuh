@@ -139,6 +139,7 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   unsigned long long* control = control_.data();
   for (int round = 0;; ++round) {
     CcdParams<T> limited = params;
+    if (fp64_ratio() >= Policy::kFloatPairLeavesMinFp64Ratio) limited.leaves_in_float_pairs = true;
     if constexpr (kCertified)
       if (windows) limited.time_limit = Method::earliest_window(round, params.time_limit);
     detail::window_begin_kernel<><<<1, 1, 0, stream>>>(control, lists_[0].counters.data(), lists_[1].counters.data(),
@@ -509,6 +510,7 @@ bool NarrowPhase<Method, T, Policy>::collect() {
                                               c[detail::kSingleFailed] + c[detail::kSingleSearchMisses])
                    : 0;
     l.counts.single_descents = kCertified ? static_cast<std::size_t>(c[detail::kSingleDescents]) : 0;
+    l.counts.float_pair_leaves = kCertified ? static_cast<std::size_t>(c[detail::kFloatPairLeaves]) : 0;
     l.counts.certified_hits = static_cast<std::size_t>(c[detail::kCertifiedHits]);
     // As the CPU backend counts (NarrowPhaseCounts): a method without the certified path answers
     // every pair by its own test, its quick rejections included, so every pair is a fallback.
