@@ -640,26 +640,29 @@ struct CubicAtPointsInFloatPairs {
     }
     // The bound (B17), every term a sum and product of non-negative floats (each rounding at most
     // u low; the factor 1 + 2^-17 at the end covers them all). d: the pairs' moves per factor and
-    // axis (14 units of rounding of the factor's size in X(t), and twice the split's u^2 m);
-    // dh: B15's (14 u_d + 2 p) m.
+    // axis (14 units of rounding of the factor's size in X(t), and twice the split's u^2 m), b the
+    // base they move from. B15's base is at most b + u^2 m (its differences are the query's as
+    // given, within 2 u^2 m of the split's, and its own 14 u_d m is below u^2 m / 2); dh: B15's
+    // moves (14 u_d + 2 p) m.
     const float unit_double = 0x1p-53f, given = static_cast<float>(unit_roundoff<T>());
-    float d[3][3], dh[3], b[3][3], bd[3][3], bh[3][3], top[3][3];
+    float d[3][3], dh[3], b[3][3], bd[3][3], b15[3][3], b15h[3][3], top[3][3];
     for (int k = 0; k < 3; ++k) {
       dh[k] = fmul(m[k], fadd(16.0f * unit_double, fmul(2.0f, given)));
       for (int f = 0; f < 3; ++f) {
         d[f][k] = fadd(fmul(base[f][k], 84.0f * 0x1p-48f), fmul(m[k], 2.0f * 0x1p-48f));
         b[f][k] = fadd(base[f][k], d[f][k]);
         bd[f][k] = fadd(b[f][k], d[f][k]);
-        bh[f][k] = fadd(b[f][k], dh[k]);
-        top[f][k] = fadd(b[f][k], fmax_of(d[f][k], dh[k]));
+        b15[f][k] = fadd(b[f][k], fmul(m[k], 0x1p-48f));
+        b15h[f][k] = fadd(b15[f][k], dh[k]);
+        top[f][k] = fmax_of(bd[f][k], b15h[f][k]);
       }
     }
     const float top_majorant = triple_majorant_of(top[0], top[1], top[2]);
     // Mag(b + d) - Mag(b) of a trilinear majorant, exactly M(d, b1 + d, b2 + d) + M(b0, d, b2 + d) + M(b0, b1, d).
     const float moved = fadd(fadd(triple_majorant_of(d[0], bd[1], bd[2]), triple_majorant_of(b[0], d[1], bd[2])),
                              triple_majorant_of(b[0], b[1], d[2]));
-    const float moved_double = fadd(fadd(triple_majorant_of(dh, bh[1], bh[2]), triple_majorant_of(b[0], dh, bh[2])),
-                                    triple_majorant_of(b[0], b[1], dh));
+    const float moved_double = fadd(fadd(triple_majorant_of(dh, b15h[1], b15h[2]), triple_majorant_of(b15[0], dh, b15h[2])),
+                                    triple_majorant_of(b15[0], b15[1], dh));
     own = fmul(float(Policy::kFloatPairBound),
                            fadd(fadd(moved, fmul(31.0f * 0x1p-48f, top_majorant)), 0x1p-88f));
     const float double_bounds = fmul(float(Policy::kPointBound),
