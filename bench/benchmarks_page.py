@@ -531,27 +531,38 @@ def rays_section(rows, kind, out_dir, gpu):
 
 
 # --- FP64 and FP32 instructions ------------------------------------------------------------------
-def fp_section(rows):
+def fp_section(rows, planned=None):
     if not rows:
         return ["*Not measured (no fp results: Nsight Compute's ncu was not found).*"]
+    out = fp_table(rows, "Thread instructions of one steady step (all kernels; `bench/fp_instructions.py`: Nsight Compute, "
+                   "`--steps 3` minus `--steps 1`, over two), per feature pair; where the pairs were decided (in FP32, "
+                   "of them contacts whose time of impact's leaf pairs of floats proved (only on a GPU with little FP64, "
+                   "or planned for one: NARROW_PHASE.md B17); contacts found in FP32 whose time of impact took an FP64 "
+                   "tail; the rest, searched in FP64 or by the fallback); and the time the FP64 instructions alone would "
+                   "take at 0.6e12 per second, a GPU of today's size that runs FP64 at 1/64 of FP32 (the RTX and L40 "
+                   "classes):")
+    if planned:
+        label = planned[0].get("label", "")
+        out += [""] + fp_table(planned, "The same, planned as for a GPU whose FP64 runs at 1/64 of its FP32 (`lwsccd-ccd "
+                               "--fp64-ratio 64`: its searches in double a thread each, contacts' leaves in pairs of "
+                               "floats; the same answers), counted on this GPU" + (f" ({label})" if label else "") + ":")
+    return out
+
+
+def fp_table(rows, caption):
     body = []
     for r in rows:
         d = r.get("decided") or {}
         pairs = r["feature_pairs"]
         tail = d.get("fp32_fp64_tail", 0) if d else 0
         share = f"{100.0 * (pairs - d['fp32'] - tail) / pairs:.2f}%" if d and pairs else "-"
-        label = r["input"].split("/")[-1] if "/" in r["input"] else r["input"].replace("--triangles ", "built-in ")
+        given = r["input"].replace(" --fp64-ratio 64", "")  # (the planned table says so once)
+        label = given.split("/")[-1] if "/" in given else given.replace("--triangles ", "built-in ")
         in_pairs = d.get("fp32_float_pair_leaf") if d else None
         body.append([label, count(pairs), f"{r['fp64_per_pair']:.1f}", f"{r['fp32_per_pair']:.1f}",
                      count(d.get("fp32")) if d else "-", count(in_pairs) if in_pairs is not None else "-",
                      count(tail) if "fp32_fp64_tail" in d else "-", share, ms(r["fp64_ms_at_0.6T"])])
-    return ["Thread instructions of one steady step (all kernels; `bench/fp_instructions.py`: Nsight Compute, "
-            "`--steps 3` minus `--steps 1`, over two), per feature pair; where the pairs were decided (in FP32, "
-            "of them contacts whose time of impact's leaf pairs of floats proved (only on a GPU with little FP64, "
-            "or planned for one: NARROW_PHASE.md B17); contacts found in FP32 whose time of impact took an FP64 "
-            "tail; the rest, searched in FP64 or by the fallback); and the time the FP64 instructions alone would "
-            "take at 0.6e12 per second, a GPU of today's size that runs FP64 at 1/64 of FP32 (the RTX and L40 "
-            "classes):", "",
+    return [caption, "",
             table(["scene", "feature pairs", "FP64 / pair", "FP32 / pair", "decided in FP32", "of them leaves in pairs of floats",
                    "contacts with an FP64 tail", "pairs searched in FP64", "FP64 ms at 0.6 T/s"], body)]
 
@@ -591,7 +602,8 @@ def main():
                 "stealing, the certified narrow phase in double precision, mode `contacts`.", ""]
         out += ["## Whole step per scene", ""] + whole_step_section(pipeline, kind, results, gpu) + [""]
         out += ["## Speed against accuracy", ""] + accuracy_section(pipeline, accuracy, kind, results, gpu) + [""]
-        out += ["## FP64 and FP32 instructions", ""] + fp_section(load(os.path.join(results, f"fp_{kind}.json"))) + [""]
+        out += ["## FP64 and FP32 instructions", ""] + fp_section(load(os.path.join(results, f"fp_{kind}.json")),
+                                                                 load(os.path.join(results, f"fp_planned_{kind}.json"))) + [""]
         out += ["## Schedulers", ""] + schedulers_section(load(os.path.join(results, f"traverse_{kind}.json")), kind,
                                                           results, gpu) + [""]
         out += ["## Scaling", ""] + scaling_section(pipeline, kind, results, gpu) + [""]

@@ -165,6 +165,11 @@ if [ -n "$gpu_name" ]; then
     scenes="${data:-$(sed -n 's/^LWSCCD_DATA_DIR:PATH=//p' "$build/CMakeCache.txt" 2>/dev/null || true)}/scenes"
     python3 bench/fp_instructions.py --ncu "$ncu" --program "$ccd" --json "$results/fp_$kind.json" -- \
         "$scenes/cloth-ball" -- "$scenes/armadillo-rollers" -- "$scenes/cloth-funnel" -- --triangles 100000
+    # The same, planned as for a GPU whose FP64 runs at 1/64 of its FP32 (the RTX and L40 classes).
+    python3 bench/fp_instructions.py --ncu "$ncu" --program "$ccd" --json "$results/fp_planned_$kind.json" \
+        --label "planned for a GPU with FP64 at 1/64 of FP32 (lwsccd-ccd --fp64-ratio 64)" -- \
+        "$scenes/cloth-ball" --fp64-ratio 64 -- "$scenes/armadillo-rollers" --fp64-ratio 64 -- \
+        "$scenes/cloth-funnel" --fp64-ratio 64 -- --triangles 100000 --fp64-ratio 64
   else
     echo "run_benchmarks.sh: no ncu or no $ccd: FP64/FP32 instruction counts not measured" >&2
   fi
