@@ -81,6 +81,24 @@ void require_gpu_emission_equals_cpu(const TriangleMesh& mesh, const std::vector
     REQUIRE(gpu_pairs.vf == expected.vf);
     REQUIRE(gpu_pairs.ee == expected.ee);
   }
+  // The boxes enqueued apart on a stream of their own (as a pipeline's step does beside its
+  // traversal), the emission after them on another stream: the same pairs.
+  {
+    gpu::CudaStream side(cudaStreamNonBlocking), main_stream(cudaStreamNonBlocking);
+    gpu::CudaEvent boxes_done(cudaEventDisableTiming);
+    gpu::FeatureEmitter<> apart(rep);
+    for (int run = 0; run < 2; ++run) {
+      apart.enqueue_boxes(d_x0.data(), d_x1.data(), side);
+      LWSCCD_CUDA_CHECK(cudaEventRecord(boxes_done, side));
+      LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(main_stream, boxes_done, 0));
+      apart.enqueue(d_x0.data(), d_x1.data(), d_candidates.data(), candidates.size(), main_stream, true, true);
+      LWSCCD_CUDA_CHECK(cudaStreamSynchronize(main_stream));
+      if (!apart.collect(main_stream)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(main_stream));
+      const FeaturePairs apart_pairs = apart.download();
+      REQUIRE(apart_pairs.vf == cpu.vf);
+      REQUIRE(apart_pairs.ee == cpu.ee);
+    }
+  }
   // A box margin (a minimum separation) turns the test off.
   emitter.set_box_margin(1e-3);
   CHECK_FALSE(emitter.face_motion_test());
@@ -423,6 +441,45 @@ TEST_CASE("GPU pipeline with bodies equals the CPU pipeline; positions from devi
     CHECK(d.stats.feature_pairs_vf + d.stats.feature_pairs_ee == c.stats.feature_pairs_vf + c.stats.feature_pairs_ee);
   }
   CHECK_THROWS_AS(fresh.step_on_device(scene.step.x0.data(), x1.data()), InputError);
+}
+
+TEST_CASE("GPU pipeline reads double positions in device memory in place, for the step only", "[gpu][pipeline][bodies]") {
+  const MultiBodyStep scene = make_cloth_ball_scene(20000);
+  // A second motion from the same start: half the step's displacement, fewer contacts.
+  std::vector<Vec3d> half_x1 = scene.step.x1;
+  for (std::size_t v = 0; v < half_x1.size(); ++v) half_x1[v] = scene.step.x0[v] + (scene.step.x1[v] - scene.step.x0[v]) * 0.5;
+  cpu::CcdPipeline<> cpu_pipeline(scene.step.mesh, scene.layout);
+  const auto whole = cpu_pipeline.step(scene.step.x0, scene.step.x1);
+  const auto half = cpu_pipeline.step(scene.step.x0, half_x1);
+  REQUIRE(whole.stats.hits_vf + whole.stats.hits_ee != half.stats.hits_vf + half.stats.hits_ee);
+  gpu::DeviceBuffer<Vec3d> d0, d1;
+  d0.upload(scene.step.x0);
+  d1.upload(scene.step.x1);
+  gpu::CcdPipeline<> pipeline(scene.step.mesh, scene.layout);
+  require_same_contacts(pipeline.step_from_device(d0.data(), d1.data()), whole);
+  // The caller's arrays change between steps (same addresses): each step reads what they hold then.
+  d1.upload(half_x1);
+  require_same_contacts(pipeline.step_from_device(d0.data(), d1.data()), half);
+  // A host step after steps read in place uses the pipeline's own arrays again, and so on.
+  require_same_contacts(pipeline.step(scene.step.x0, scene.step.x1), whole);
+  const DeviceStepResult<double> d = pipeline.step_on_device(d0.data(), d1.data());
+  CHECK(d.contacts.num_vf == half.contacts.vf.size());
+  CHECK(d.contacts.num_ee == half.contacts.ee.size());
+  CHECK(d.contacts.earliest_toi == half.contacts.earliest_toi);
+  require_same_contacts(pipeline.step(scene.step.x0, half_x1), half);
+
+  // gpu::DeviceStep: where its work reads the positions.
+  gpu::DeviceStep<double> step(*scene.step.mesh);
+  step.set_positions(scene.step.x0, scene.step.x1);
+  CHECK(step.x0_data() == step.x0.data());
+  step.use_device_positions(d0.data(), d1.data());
+  CHECK(step.x0_data() == d0.data());
+  CHECK(step.x1_data() == d1.data());
+  CHECK_THROWS_AS(step.use_device_positions(scene.step.x0.data(), d1.data()), InputError);
+  CHECK_THROWS_AS(step.use_device_positions(d0.data(), nullptr), InputError);
+  step.set_positions_from_device(d0.data(), d1.data());
+  CHECK(step.x0_data() == step.x0.data());
+  CHECK(step.x1_data() == step.x1.data());
 }
 
 TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pipeline on their exact double values",

@@ -51,8 +51,18 @@ struct DeviceStep {
   /// refit.
   template <class Q>
   void set_positions_from_device(const Vec3<Q>* d0, const Vec3<Q>* d1, cudaStream_t stream = nullptr);
+  /// Reads positions already in device memory where they are, without a copy (P points, as the
+  /// step holds them): the work enqueued from now on reads d0, d1 instead of x0, x1, so they must
+  /// stay valid and unchanged until that work has run. set_positions and set_positions_from_device
+  /// return to the step's own arrays. Throws InputError unless both point to device (or managed)
+  /// memory.
+  void use_device_positions(const Vec3<P>* d0, const Vec3<P>* d1);
+  /// Where the step's work reads the positions: x0 and x1, or the arrays of use_device_positions.
+  const Vec3<P>* x0_data() const { return in_place_[0] ? in_place_[0] : x0.data(); }
+  const Vec3<P>* x1_data() const { return in_place_[1] ? in_place_[1] : x1.data(); }
 
  private:
+  const Vec3<P>* in_place_[2] = {nullptr, nullptr};  ///< use_device_positions' arrays, or null: x0, x1
   std::vector<Vec3<P>> staging_;   // double input rounded to float on the host (half the bytes to copy)
   DeviceBuffer<Vec3<float>> wide_;  // float input for double positions, widened on the device
 };
@@ -86,6 +96,11 @@ class Bvh {
   /// next traversal): a refitted tree is as exact as a rebuilt one, only slower to traverse.
   template <class P>
   void refit_enqueue(const DeviceStep<P>& step, cudaStream_t stream = nullptr);
+  /// refit_enqueue's reads alone (the status flag, the cost's reduction and its copies into pinned
+  /// memory), for a refit() enqueued on another stream: `stream` must wait for that refit (an
+  /// event recorded after it), so that the reads leave the refit's stream free for the traversal,
+  /// which needs only the boxes. collect_refit() reports them once `stream` has been synchronized.
+  void enqueue_refit_reads(cudaStream_t stream = nullptr);
   /// After refit_enqueue() and a synchronisation of its stream: throws InputError if the
   /// positions were non-finite; otherwise returns whether `policy` says the tree decayed.
   bool collect_refit(const RebuildPolicy& policy = {}, cudaStream_t stream = nullptr);

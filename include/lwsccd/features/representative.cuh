@@ -397,15 +397,10 @@ class FeatureEmitter {
                   " orphans");
     const EmissionView m = view();
     const bool test_motion = face_motion_test();
-    if (test_motion) corners_.resize_discard(detail::PackedBoxes::kCornerWords * static_cast<std::size_t>(std::max<index_t>(num_faces_, 1)));
-    const detail::PackedBoxes packed{packed_faces_.data(), packed_features_.data(), test_motion ? corners_.data() : nullptr};
     if (test_motion && !corners_current_) boxes_current = false;  // (the test was off when the boxes were computed)
-    corners_current_ = test_motion;
-    if (!boxes_current && num_faces_ > 0) {
-      detail::packed_boxes_kernel<<<static_cast<unsigned>((num_faces_ + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
-                                    stream>>>(m, x0, x1, num_faces_, margin_, face_first_.data(), packed);
-      LWSCCD_CUDA_CHECK_LAUNCH();
-    }
+    if (!boxes_current) enqueue_boxes(x0, x1, stream);
+    else if (!test_motion) corners_current_ = false;
+    const detail::PackedBoxes packed = packed_boxes();
     candidates_ = candidates;
     candidate_count_ = count;
     // The range split at the boundary between the two orphan lists.
@@ -439,6 +434,21 @@ class FeatureEmitter {
     }
     host_total_.ensure(1);
     LWSCCD_CUDA_CHECK(cudaMemcpyAsync(host_total_.data(), total_.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream));
+  }
+
+  /// The feature boxes (and the faces' corners) of positions x0, x1, packed by face: what
+  /// enqueue computes first. Enqueued on its own (e.g. on a second stream while the traversal
+  /// runs: it reads the positions only), an enqueue on the same positions that passes
+  /// `boxes_current` true then skips it; that enqueue's stream must wait for this one's work.
+  template <class P>
+  void enqueue_boxes(const Vec3<P>* x0, const Vec3<P>* x1, cudaStream_t stream = nullptr) {
+    const bool test_motion = face_motion_test();
+    if (test_motion) corners_.resize_discard(detail::PackedBoxes::kCornerWords * static_cast<std::size_t>(std::max<index_t>(num_faces_, 1)));
+    corners_current_ = test_motion;
+    if (num_faces_ == 0) return;
+    detail::packed_boxes_kernel<<<static_cast<unsigned>((num_faces_ + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,
+                                  stream>>>(view(), x0, x1, num_faces_, margin_, face_first_.data(), packed_boxes());
+    LWSCCD_CUDA_CHECK_LAUNCH();
   }
 
   /// After `stream` (the last enqueue's) has been synchronized: reads the numbers of pairs. Returns
@@ -508,6 +518,10 @@ class FeatureEmitter {
   }
 
  private:
+  detail::PackedBoxes packed_boxes() {
+    return {packed_faces_.data(), packed_features_.data(), face_motion_test() ? corners_.data() : nullptr};
+  }
+
   // The writing pass of the last enqueue (the masks and the block totals are still there).
   void write(cudaStream_t stream) {
     const std::size_t items = candidate_count_.room + num_orphan_vf_ + num_orphan_ee_;

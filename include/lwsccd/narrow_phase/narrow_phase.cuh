@@ -247,6 +247,15 @@ class NarrowPhase {
   void enqueue(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, PairList vf, PairList ee,
                const CcdParams<T>& params, cudaStream_t stream = nullptr);
 
+  /// What enqueue does first from the positions alone (FP32 first: the vertices rounded to float
+  /// for the single-precision passes; nothing for other methods), enqueued ahead on `stream`, e.g.
+  /// a second stream while the traversal runs. The next enqueue on the same x0, x1 (unchanged)
+  /// skips it; its stream must wait for this one's work.
+  template <class P>
+  void enqueue_positions(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, cudaStream_t stream = nullptr);
+  /// Forgets an enqueue_positions that no enqueue has used (the positions may have changed since).
+  void drop_positions_ahead() { positions_ahead_[0] = positions_ahead_[1] = nullptr; }
+
   /// After `stream` (the last enqueue's) has been synchronized: reads the run's counters. Returns
   /// false when an output outgrew its buffer (now grown: enqueue the same run again); true when
   /// the run is complete, in which case the hits' sort by (first, second) is enqueued on `stream`.
@@ -408,6 +417,7 @@ class NarrowPhase {
   std::size_t id_limit_ = 0;       ///< the last enqueue's mesh: its feature count (ids are below it)
   DeviceBuffer<unsigned long long> control_;  ///< detail::NarrowControl words
   DeviceBuffer<SingleVertex> single_;         ///< FP32 first: the vertices rounded to float, for the single-precision passes
+  const void* positions_ahead_[2] = {nullptr, nullptr};  ///< the x0, x1 of enqueue_positions (until the next enqueue)
   std::size_t gave_up_ = 0, reruns_ = 0;
   T earliest_ = T(1);
   int sms_ = 1;

@@ -55,6 +55,8 @@ class CcdPipeline {
       self_collides_.upload(self_collides, stream);
     }
     for (auto& e : mark_) e = CudaEvent(cudaEventDefault);
+    side_ = CudaStream(cudaStreamNonBlocking);
+    for (CudaEvent* e : {&side_fork_, &side_refit_, &side_join_}) *e = CudaEvent(cudaEventDisableTiming);
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream));
   }
   CcdPipeline(const CcdPipeline&) = delete;
@@ -65,9 +67,9 @@ class CcdPipeline {
   CcdPipeline& operator=(CcdPipeline&&) = default;
 
   // Streams: every step takes the stream its work is ordered on (default: the default stream).
-  // The step's work runs on `stream` (the narrow phase's two lists on streams of their own, forked
-  // from it and joined back), so positions written on `stream` before the call are read in order,
-  // and nothing else of the program is waited for. Each step synchronizes `stream`, not the device,
+  // The step's work runs on `stream` (the narrow phase's two lists and the work beside the
+  // traversal on streams of their own, forked from it and joined back), so positions written on
+  // `stream` before the call are read in order, and nothing else of the program is waited for. Each step synchronizes `stream`, not the device,
   // once at its end (to read its counts), and more often on a first step (to size its buffers) and
   // in a step in parts (a part at a time); growing a buffer (cudaMalloc / cudaFree) may
   // synchronize the device, which a warm step does not do.
@@ -101,8 +103,9 @@ class CcdPipeline {
   }
 
   /// One step from positions already in device memory (mesh().num_vertices() points each, e.g.
-  /// a simulation's own arrays; double, or float widened on the device): no host round trip for
-  /// them. They are read in `stream`'s order: a kernel that wrote them on `stream` needs no host
+  /// a simulation's own arrays; double ones read in place, float ones widened on the device): no
+  /// host round trip for them, and no copy of double ones (free to change once the call returns).
+  /// They are read in `stream`'s order: a kernel that wrote them on `stream` needs no host
   /// synchronisation before the call. Throws InputError for host pointers.
   /// @note Synchronizes `stream`.
   StepResult<T> step_from_device(const Vec3d* device_x0, const Vec3d* device_x1, cudaStream_t stream = nullptr) {
@@ -224,8 +227,7 @@ class CcdPipeline {
     begin_step();
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
-    step_->set_positions_from_device(device_x0, device_x1, stream_);
+    set_device_positions(device_x0, device_x1);
     StepResult<T> r;
     run_step(r, start);
     return r;
@@ -235,8 +237,7 @@ class CcdPipeline {
     begin_step();
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
-    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
-    step_->set_positions_from_device(device_x0, device_x1, stream_);
+    set_device_positions(device_x0, device_x1);
     DeviceStepResult<T> r;
     run_stages(r.stats);
     const Outcome o = outcome();
@@ -252,6 +253,16 @@ class CcdPipeline {
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));  // the hits' sort is done
     finish_stats(r.stats, r.contacts.num_vf, r.contacts.num_ee, start);
     return r;
+  }
+
+  // Positions in device memory: double ones read where they are (the step ends before the call
+  // returns), float ones widened into the step's arrays. Why: the two copies and their launches
+  // came before the step's first kernel, ~20 us of a device-resident cloth-ball step.
+  template <class Q>
+  void set_device_positions(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
+    if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
+    if constexpr (std::is_same<Q, double>::value) step_->use_device_positions(device_x0, device_x1);
+    else step_->set_positions_from_device(device_x0, device_x1, stream_);
   }
 
   // What the last step's narrow phase (or its parts, gathered) found, on the device.
@@ -315,9 +326,9 @@ class CcdPipeline {
   CcdParams<T> ccd_params() const { return lwsccd::detail::ccd_params_of<T>(params_); }
 
   // Build on the first step, or where the last step's refit found the tree decayed; refit
-  // otherwise. `wait` false leaves the refit's reads (positions' status, the cost) on their way to
-  // the host, for collect_refit() with the step's other counters: the rebuild the cost calls for
-  // then comes a step later. Returns whether reads await collect_refit().
+  // otherwise. `wait` false enqueues the refit's kernel alone: its reads (positions' status, the
+  // cost) are then due (start_side_work enqueues them), for collect_refit() with the step's other
+  // counters; the rebuild the cost calls for comes a step later. Returns whether reads are due.
   bool refit_stage(StepStats& stats, bool wait);
 
   // The refit's reads, once the step's stream has been synchronized. Non-finite positions throw
@@ -367,8 +378,39 @@ class CcdPipeline {
       throw InputError("gpu::CcdPipeline", "device_memory_budget", "a share of a step split over devices does not stream");
     StepInProgress step(stats);
     step.in_parts = streamed_;
-    if (!streamed_) LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0], stream_));
+    if (side_open_) {  // a step that threw before its join: nothing may overtake its side work
+      join_side_work();
+      narrow_.drop_positions_ahead();
+    }
+    if (!streamed_) {
+      LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0], stream_));
+      LWSCCD_CUDA_CHECK(cudaEventRecord(side_fork_, stream_));  // the positions are in place
+    }
     lwsccd::detail::run_stage_sequence(*this, step);
+  }
+
+  // A whole step's work that reads only the positions (the feature boxes packed by face, the
+  // vertices rounded to float; from side_fork_ on) and the refit's reads (status, cost; after the
+  // refit's kernel), enqueued once the refit's kernel is (after a build: once the traversal is),
+  // on side_ beside the refit and the traversal; the feature pairs wait for them (join_side_work).
+  // Why: on the step's stream they ran between the refit and the traversal and between the
+  // traversal and the emission, ~60 us of cloth-ball's steady step with the gaps between those
+  // short launches (docs/PIPELINE.md, "GPU: the work beside the traversal").
+  void start_side_work(bool refit_reads) {
+    if (refit_reads) LWSCCD_CUDA_CHECK(cudaEventRecord(side_refit_, stream_));
+    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(side_, side_fork_, 0));
+    emitter_.enqueue_boxes(step_->x0_data(), step_->x1_data(), side_);
+    narrow_.enqueue_positions(features_, step_->x0_data(), step_->x1_data(), side_);
+    if (refit_reads) {
+      LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(side_, side_refit_, 0));
+      bvh_.enqueue_refit_reads(side_);
+    }
+    side_open_ = boxes_current_ = true;
+  }
+  void join_side_work() {
+    LWSCCD_CUDA_CHECK(cudaEventRecord(side_join_, side_));
+    LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(stream_, side_join_, 0));
+    side_open_ = false;
   }
 
   // The stages as the sequence asks for them. In a whole step each enqueues its work on the
@@ -378,6 +420,7 @@ class CcdPipeline {
   void stage_refit(StepInProgress& step) {
     if (step.in_parts) return refit_part(step);
     refit_pending_ = refit_stage(step.stats, false);
+    if (refit_pending_) start_side_work(true);
   }
   bool next_traversal_part(StepInProgress& step) {
     if (step.in_parts) return next_traversal_part_in_parts(step);
@@ -388,6 +431,9 @@ class CcdPipeline {
   void stage_traversal(StepInProgress& step) {
     if (step.in_parts) return traversal_part(step);
     restarted_ = traverse_step();
+    // After a build the side work waits until the traversal is enqueued: its first allocations
+    // then cost no idle time between the two.
+    if (!side_open_) start_side_work(false);
   }
   bool next_narrow_part(StepInProgress& step) {
     if (step.in_parts) return next_narrow_part_in_parts(step);
@@ -423,7 +469,7 @@ class CcdPipeline {
   friend void lwsccd::detail::run_stage_sequence<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
   friend void lwsccd::detail::run_narrow_parts<CcdPipeline, StepInProgress>(CcdPipeline&, StepInProgress&);
   void enqueue_narrow_phase() {
-    narrow_.enqueue(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), ccd_params(), stream_);
+    narrow_.enqueue(features_, step_->x0_data(), step_->x1_data(), emitter_.vf_list(), emitter_.ee_list(), ccd_params(), stream_);
   }
 
   // LeafFilter::node_body for the current tree (after a build: topology only).
@@ -526,6 +572,9 @@ class CcdPipeline {
   NarrowPhase<Method, T> narrow_;
   cudaStream_t stream_ = nullptr;  ///< the current (or last) step's stream, the caller's
   CudaEvent mark_[5];  ///< stage boundaries: refit, traversal, feature pairs, narrow phase
+  CudaStream side_;    ///< a whole step's work beside the refit and the traversal (start_side_work)
+  CudaEvent side_fork_, side_refit_, side_join_;
+  bool side_open_ = false;  ///< side_ holds work the step's stream has not waited for yet
   // Streaming under a budget:
   bool streamed_ = false;                        ///< the last step was streamed
   bool refit_pending_ = false;                   ///< this step's refit reads await collect_refit()

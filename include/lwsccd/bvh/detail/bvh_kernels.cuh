@@ -140,6 +140,17 @@ constexpr void require_position_type() {
                 "lwsccd: positions are given as float or double points (Vec3f, Vec3d)");
 }
 
+// Throws InputError (naming `where`) unless d0 and d1 point to device or managed memory.
+inline void require_device_pointers(const void* d0, const void* d1, const char* where) {
+  for (const void* d : {d0, d1}) {
+    const char* name = d == d0 ? "x0" : "x1";
+    cudaPointerAttributes attributes{};
+    LWSCCD_CUDA_CHECK(cudaPointerGetAttributes(&attributes, d));
+    if (d == nullptr || (attributes.type != cudaMemoryTypeDevice && attributes.type != cudaMemoryTypeManaged))
+      throw InputError(where, name, "is not a pointer to device memory");
+  }
+}
+
 }  // namespace detail
 
 template <class P>
@@ -159,16 +170,18 @@ DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, cudaStream_t stream) : num_v
 }
 
 template <class P>
+void DeviceStep<P>::use_device_positions(const Vec3<P>* d0, const Vec3<P>* d1) {
+  detail::require_device_pointers(d0, d1, "gpu::DeviceStep::use_device_positions");
+  in_place_[0] = d0;
+  in_place_[1] = d1;
+}
+
+template <class P>
 template <class Q>
 void DeviceStep<P>::set_positions_from_device(const Vec3<Q>* d0, const Vec3<Q>* d1, cudaStream_t stream) {
   detail::require_position_type<Q>();
-  for (const Vec3<Q>* d : {d0, d1}) {
-    const char* name = d == d0 ? "x0" : "x1";
-    cudaPointerAttributes attributes{};
-    LWSCCD_CUDA_CHECK(cudaPointerGetAttributes(&attributes, d));
-    if (d == nullptr || (attributes.type != cudaMemoryTypeDevice && attributes.type != cudaMemoryTypeManaged))
-      throw InputError("gpu::DeviceStep::set_positions_from_device", name, "is not a pointer to device memory");
-  }
+  detail::require_device_pointers(d0, d1, "gpu::DeviceStep::set_positions_from_device");
+  in_place_[0] = in_place_[1] = nullptr;
   const auto n = static_cast<std::size_t>(num_vertices);
   x0.resize_discard(n);
   x1.resize_discard(n);
@@ -191,6 +204,7 @@ void DeviceStep<P>::set_positions(Span<const Vec3<Q>> h0, Span<const Vec3<Q>> h1
       throw InputError("gpu::DeviceStep", name, "has " + std::to_string(h->size()) + " positions, the mesh has " +
                                                     std::to_string(num_vertices) + " vertices");
   }
+  in_place_[0] = in_place_[1] = nullptr;
   const auto n = static_cast<std::size_t>(num_vertices);
   if constexpr (std::is_same<P, Q>::value) {
     // Small arrays go as they are (the driver takes pageable memory at once); large ones through
@@ -263,7 +277,7 @@ void Bvh<BV>::build(const DeviceStep<P>& step, cudaStream_t stream) {
 
   LWSCCD_CUDA_CHECK(cudaMemsetAsync(status_.data(), 0, sizeof(int), stream));
   detail::swept_centers_kernel<<<detail::blocks_for(n), detail::kBvhBlock, 0, stream>>>(
-      step.faces.data(), n, step.x0.data(), step.x1.data(), centers, status_.data());
+      step.faces.data(), n, step.x0_data(), step.x1_data(), centers, status_.data());
   LWSCCD_CUDA_CHECK_LAUNCH();
   std::size_t bytes = temp_bytes;
   LWSCCD_CUDA_CHECK(cub::DeviceReduce::Reduce(temp, bytes, thrust::make_transform_iterator(
@@ -299,7 +313,7 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
                                                 " faces, the BVH was built over " + std::to_string(num_leaves_));
   const index_t n = num_leaves_;
   detail::bottom_up_kernel<BV, P><<<detail::blocks_for(n), detail::kBvhBlock, 0, stream>>>(
-      step.faces.data(), leaf_primitive_.data(), n, step.x0.data(), step.x1.data(), left_.data(), right_.data(),
+      step.faces.data(), leaf_primitive_.data(), n, step.x0_data(), step.x1_data(), left_.data(), right_.data(),
       parent_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
   LWSCCD_CUDA_CHECK_LAUNCH();
 }
@@ -319,6 +333,11 @@ template <class BV>
 template <class P>
 void Bvh<BV>::refit_enqueue(const DeviceStep<P>& step, cudaStream_t stream) {
   refit(step, stream);
+  enqueue_refit_reads(stream);
+}
+
+template <class BV>
+void Bvh<BV>::enqueue_refit_reads(cudaStream_t stream) {
   LWSCCD_CUDA_CHECK(cudaMemcpyAsync(&readback().status, status_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream));
   enqueue_cost(stream);
 }

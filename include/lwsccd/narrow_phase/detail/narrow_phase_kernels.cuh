@@ -46,6 +46,24 @@ unsigned NarrowPhase<Method, T, Policy>::grid_for(std::size_t room, int block, i
   return static_cast<unsigned>(std::min<std::size_t>(wanted, static_cast<std::size_t>(sms_) * static_cast<std::size_t>(per_sm)));
 }
 
+template <class Method, class T, class Policy>
+template <class P>
+void NarrowPhase<Method, T, Policy>::enqueue_positions(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
+                                                       cudaStream_t stream) {
+  ensure_streams();  // (sms_ for the grid)
+  if constexpr (kSingleFirst) {
+    const std::size_t vertices = static_cast<std::size_t>(mesh.num_vertices);
+    single_.resize_discard(std::max<std::size_t>(vertices, 1));
+    const unsigned blocks = grid_for(vertices, 256, 8);
+    if (blocks > 0) {
+      detail::single_vertices_kernel<P><<<blocks, 256, 0, stream>>>(x0, x1, vertices, single_.data());
+      LWSCCD_CUDA_CHECK_LAUNCH();
+    }
+  }
+  positions_ahead_[0] = x0;
+  positions_ahead_[1] = x1;
+}
+
 // `stream` waits for both lists' work so far; the lists then wait for `stream`.
 template <class Method, class T, class Policy>
 void NarrowPhase<Method, T, Policy>::join_lists(cudaStream_t stream) {
@@ -64,15 +82,11 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   id_limit_ = mesh.num_features();
   const MeshFeatures view = mesh.view();
   const PairList inputs[2] = {vf, ee};
-  if constexpr (kSingleFirst) {  // the single-precision passes' positions, once for every window and the count below
-    const std::size_t vertices = static_cast<std::size_t>(mesh.num_vertices);
-    single_.resize_discard(std::max<std::size_t>(vertices, 1));
-    const unsigned blocks = grid_for(vertices, 256, 8);
-    if (blocks > 0) {
-      detail::single_vertices_kernel<P><<<blocks, 256, 0, stream>>>(x0, x1, vertices, single_.data());
-      LWSCCD_CUDA_CHECK_LAUNCH();
-    }
-  }
+  // The single-precision passes' positions, once for every window and the count below (unless
+  // enqueue_positions made them).
+  const bool ahead = positions_ahead_[0] == static_cast<const void*>(x0) && positions_ahead_[1] == static_cast<const void*>(x1);
+  if (!ahead) enqueue_positions(mesh, x0, x1, stream);
+  drop_positions_ahead();
   // A first run has no rooms learned yet: it counts the screen's survivors first (one more
   // screen and one synchronisation of `stream`), so that its lists fit and it runs once.
   if constexpr (kTwoPass && Policy::kCountFirstRun) {

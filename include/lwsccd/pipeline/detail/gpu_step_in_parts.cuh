@@ -242,10 +242,10 @@ void CcdPipeline<BV, Scheduler, Method, T>::feature_pairs_part(StepInProgress& s
     const std::size_t first = step.next_candidate;
     const std::size_t count = std::min(step.part_size, step.num_candidates - first);
     if (orphans)
-      emitter_.enqueue(step_->x0.data(), step_->x1.data(), static_cast<const TrianglePair*>(nullptr), 0, stream_,
+      emitter_.enqueue(step_->x0_data(), step_->x1_data(), static_cast<const TrianglePair*>(nullptr), 0, stream_,
                        OrphanRange{first, count}, boxes_current_);
     else
-      emitter_.enqueue(step_->x0.data(), step_->x1.data(), step.candidates + first, count, stream_, OrphanRange{}, boxes_current_);
+      emitter_.enqueue(step_->x0_data(), step_->x1_data(), step.candidates + first, count, stream_, OrphanRange{}, boxes_current_);
     boxes_current_ = true;  // the feature boxes are this step's from the first part on
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
     const auto counted = emitter_.counted();
@@ -287,7 +287,7 @@ void CcdPipeline<BV, Scheduler, Method, T>::feature_pairs_part(StepInProgress& s
 template <class BV, class Scheduler, class Method, class T>
 void CcdPipeline<BV, Scheduler, Method, T>::narrow_phase_part(StepInProgress& step) {
   if (step.part_count == 0) return;
-  narrow_.run(features_, step_->x0.data(), step_->x1.data(), emitter_.vf_list(), emitter_.ee_list(), step.ccd, stream_);
+  narrow_.run(features_, step_->x0_data(), step_->x1_data(), emitter_.vf_list(), emitter_.ee_list(), step.ccd, stream_);
   gather_hits();
   ++step.stats.narrow_parts;
 }

@@ -43,7 +43,7 @@ bool CcdPipeline<BV, Scheduler, Method, T>::refit_stage(StepStats& stats, bool w
   } else if (wait) {
     stats.rebuilt = bvh_.refit_or_rebuild(*step_, RebuildPolicy{params_.rebuild_factor}, stream_);
   } else {
-    bvh_.refit_enqueue(*step_, stream_);
+    bvh_.refit(*step_, stream_);  // (its reads: start_side_work)
     pending = true;
   }
   if (face_body_.size() && bvh_.generation() != node_body_generation_) update_node_bodies();
@@ -66,8 +66,9 @@ void CcdPipeline<BV, Scheduler, Method, T>::enqueue_feature_pairs() {
   // A share of a split step tests its share of the orphans (all of them where there is one share).
   const std::size_t orphans = emitter_.num_orphans();
   const std::size_t first = orphans * share_index_ / share_count_, end = orphans * (share_index_ + 1) / share_count_;
-  emitter_.enqueue(step_->x0.data(), step_->x1.data(), traversal_.results(), traversal_.result_count(), stream_,
-                   OrphanRange{first, end - first}, false);
+  if (side_open_) join_side_work();  // (the feature boxes)
+  emitter_.enqueue(step_->x0_data(), step_->x1_data(), traversal_.results(), traversal_.result_count(), stream_,
+                   OrphanRange{first, end - first}, boxes_current_);
   if (!emitter_sized_) {
     LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
     if (!emitter_.collect(stream_)) LWSCCD_CUDA_CHECK(cudaStreamSynchronize(stream_));
