@@ -443,7 +443,8 @@ class FeatureEmitter {
   template <class P>
   void enqueue_boxes(const Vec3<P>* x0, const Vec3<P>* x1, cudaStream_t stream = nullptr) {
     const bool test_motion = face_motion_test();
-    if (test_motion) corners_.resize_discard(detail::PackedBoxes::kCornerWords * static_cast<std::size_t>(std::max<index_t>(num_faces_, 1)));
+    if (test_motion)
+      corners_.resize_discard(detail::PackedBoxes::kCornerWords * static_cast<std::size_t>(std::max<index_t>(num_faces_, 1)));
     corners_current_ = test_motion;
     if (num_faces_ == 0) return;
     detail::packed_boxes_kernel<<<static_cast<unsigned>((num_faces_ + Policy::kBlock - 1) / Policy::kBlock), Policy::kBlock, 0,

@@ -69,10 +69,11 @@ class CcdPipeline {
   // Streams: every step takes the stream its work is ordered on (default: the default stream).
   // The step's work runs on `stream` (the narrow phase's two lists and the work beside the
   // traversal on streams of their own, forked from it and joined back), so positions written on
-  // `stream` before the call are read in order, and nothing else of the program is waited for. Each step synchronizes `stream`, not the device,
-  // once at its end (to read its counts), and more often on a first step (to size its buffers) and
-  // in a step in parts (a part at a time); growing a buffer (cudaMalloc / cudaFree) may
-  // synchronize the device, which a warm step does not do.
+  // `stream` before the call are read in order, and nothing else of the program is waited for.
+  // Each step synchronizes `stream`, not the device, once at its end (to read its counts), and
+  // more often on a first step (to size its buffers) and in a step in parts (a part at a time);
+  // growing a buffer (cudaMalloc / cudaFree) may synchronize the device, which a warm step does
+  // not do.
 
   /// One step from host positions (validated, uploaded). Positions are double (Vec3d) or float
   /// (Vec3f): float input crosses as float and is widened on the device, exactly, so the answers
