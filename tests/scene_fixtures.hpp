@@ -73,6 +73,40 @@ inline MovingMesh coincident_triangles(int n) {
   return {TriangleMesh(3 * n, faces), x0, x1};
 }
 
+/// A cloth seam: two n x n/2 sheets side by side in one (tilted) plane, the second's first row a
+/// copy of the first's last row moved by ~1e-6 within the plane (duplicated vertices), everything
+/// sliding in the plane over the step, each vertex by its own ~1e-5 more. Pairs of edges along the
+/// seam stay coplanar within float's rounding over the whole step (cloth-funnel's seams).
+inline MovingMesh seam_sheets(int n, std::uint64_t seed) {
+  using namespace lwsccd;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const auto unit = [](const Vec3d& a) { return a * (1.0 / norm(a)); };
+  const Vec3d e1 = unit(Vec3d{0.8, 0.1, 0.3}), e2 = unit(cross(Vec3d{0.2, -0.3, 0.9}, e1));
+  const Vec3d origin{0.31, -0.17, 0.52};
+  std::vector<Face> faces;
+  std::vector<Vec3d> x0, x1;
+  const int rows = n / 2;
+  for (int sheet = 0; sheet < 2; ++sheet) {
+    const auto first = static_cast<index_t>(x0.size());
+    for (int j = 0; j < rows; ++j)
+      for (int i = 0; i < n; ++i) {
+        const index_t a = first + j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+        faces.push_back({{a, b, d}});
+        faces.push_back({{a, d, c}});
+      }
+    for (int j = 0; j <= rows; ++j)
+      for (int i = 0; i <= n; ++i) {
+        double s = double(i) / n, t = 0.5 * double(sheet * rows + j) / rows;
+        if (sheet == 1 && j == 0) s += 1e-6 * u(rng), t += 1e-6 * u(rng);
+        const Vec3d p = origin + e1 * s + e2 * t;
+        x0.push_back(p);
+        x1.push_back(p + e1 * (0.01 + 1e-5 * u(rng)) + e2 * (1e-5 * u(rng)));
+      }
+  }
+  return {TriangleMesh(static_cast<index_t>(x0.size()), faces), x0, x1};
+}
+
 /// A step's positions rounded to float (what a float32 caller passes) and those floats widened back
 /// to double, exactly (what the pipelines certify float input as).
 struct FloatRounded {

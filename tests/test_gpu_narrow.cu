@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 #include <initializer_list>
 #include <random>
@@ -231,12 +232,11 @@ TEST_CASE("GPU narrow phase: searches in double handed from a thread to a warp e
   }
 }
 
-// Runs CertifiedCcd twice on the same pairs, planned for `fp64_ratio`, each run's answers and
-// counts against the CPU's; returns {whole searches, those beside the double filter} of the
-// second run (the first has no last run to plan from: none beside it).
-template <class Policy, class T>
-std::pair<std::size_t, std::size_t> whole_beside_filter_runs(const lwsccd_test::MovingMesh& m, const FeaturePairs& fp, CcdMode mode,
-                                                             int fp64_ratio) {
+// Runs CertifiedCcd twice on the same pairs (the second run planned from the first), planned for
+// `fp64_ratio`, each run's answers and counts against the CPU's; calls after_run(narrow, run)
+// after each run and returns the CPU's result.
+template <class Policy, class T, class AfterRun>
+auto runs_against_cpu(const lwsccd_test::MovingMesh& m, const FeaturePairs& fp, CcdMode mode, int fp64_ratio, AfterRun after_run) {
   gpu::DeviceMeshFeatures features(m.mesh);
   gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
   gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
@@ -257,9 +257,22 @@ std::pair<std::size_t, std::size_t> whole_beside_filter_runs(const lwsccd_test::
     lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
     REQUIRE(gpu_result.ee_counts.float_pair_leaves == cpu_result.ee_counts.float_pair_leaves);
     REQUIRE(gpu_result.vf_counts.float_pair_leaves == cpu_result.vf_counts.float_pair_leaves);
-    if (run == 0) CHECK(narrow.whole_searches_beside_filter() == 0);
+    after_run(narrow, run);
   }
-  return {narrow.whole_searches(), narrow.whole_searches_beside_filter()};
+  return cpu_result;
+}
+
+// Returns {whole searches, those beside the double filter} of the second of two runs (the first
+// has no last run to plan from: none beside it).
+template <class Policy, class T>
+std::pair<std::size_t, std::size_t> whole_beside_filter_runs(const lwsccd_test::MovingMesh& m, const FeaturePairs& fp, CcdMode mode,
+                                                             int fp64_ratio) {
+  std::pair<std::size_t, std::size_t> searches;
+  runs_against_cpu<Policy, T>(m, fp, mode, fp64_ratio, [&](const auto& narrow, int run) {
+    if (run == 0) CHECK(narrow.whole_searches_beside_filter() == 0);
+    searches = {narrow.whole_searches(), narrow.whole_searches_beside_filter()};
+  });
+  return searches;
 }
 
 struct WholeAfterFilter : gpu::NarrowPhasePolicy {
@@ -291,6 +304,55 @@ TEST_CASE("GPU narrow phase: contacts sent whole, searched beside the double fil
   CHECK(whole_beside_filter_runs<gpu::NarrowPhasePolicy, float>(m, fp, CcdMode::contacts, 64).second > 0);
   CHECK(whole_beside_filter_runs<NoneHanded, double>(m, fp, CcdMode::contacts, 64).second > 0);
   CHECK(whole_beside_filter_runs<WholeAfterFilter, double>(m, fp, CcdMode::contacts, 64).second == 0);
+}
+
+// Returns the early searches of each of two runs (NarrowPhase::early_searches).
+template <class Policy, class T>
+std::array<std::size_t, 2> early_search_runs(const lwsccd_test::MovingMesh& m, const FeaturePairs& fp, CcdMode mode,
+                                             int fp64_ratio = 0) {
+  std::array<std::size_t, 2> early = {0, 0};
+  const auto cpu_result = runs_against_cpu<Policy, T>(m, fp, mode, fp64_ratio,
+                                                      [&](const auto& narrow, int run) { early[run] = narrow.early_searches(); });
+  std::printf("  %s/%s: %zu + %zu hits, %zu + %zu undecided for the fallback, %zu and %zu early searches\n",
+              sizeof(T) == 4 ? "float" : "double", mode == CcdMode::earliest ? "earliest" : "contacts", cpu_result.vf.size(),
+              cpu_result.ee.size(), cpu_result.vf_counts.fallbacks, cpu_result.ee_counts.fallbacks, early[0], early[1]);
+  return early;
+}
+
+struct NoEarlySearches : gpu::NarrowPhasePolicy {
+  static constexpr int kEarlyCoplanarSearches = 0;
+};
+struct ThreeEarlySearches : gpu::NarrowPhasePolicy {
+  static constexpr int kEarlyCoplanarSearches = 3;
+};
+
+TEST_CASE("GPU narrow phase: pairs coplanar over the whole step in float, searched early, give the same answers", "[gpu][narrow]") {
+  // A seam of duplicated vertices ~1e-6 apart, sliding in the sheets' plane: the pairs of edges
+  // and of vertices and faces along it keep their cubic within float's bound over the whole step
+  // and are not outside there in float (145 pairs), so the single-precision filter sends them to
+  // the early searches (a warp each, on a stream of their own).
+  const auto m = lwsccd_test::seam_sheets(8, 7);
+  const FeaturePairs fp = feature_pairs(m.mesh, brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1)));
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::earliest}) {
+    INFO("mode " << int(mode));
+    const auto early = early_search_runs<gpu::NarrowPhasePolicy, double>(m, fp, mode);
+    CHECK(early[0] > 6);
+    CHECK(early[1] == early[0]);  // (planned from the first run: as many)
+    // Without them: the same answers and counts.
+    CHECK(early_search_runs<NoEarlySearches, double>(m, fp, mode) == std::array<std::size_t, 2>{0, 0});
+    // Room for three a list: a first run takes three a list early and the rest through the double
+    // filter; a run after one with more than that plans none (the same answers and counts).
+    CHECK(early_search_runs<ThreeEarlySearches, double>(m, fp, mode) == std::array<std::size_t, 2>{6, 0});
+    // Planned for a GPU with little FP64 the searches in double run a thread each: none early.
+    CHECK(early_search_runs<gpu::NarrowPhasePolicy, double>(m, fp, mode, 64) == std::array<std::size_t, 2>{0, 0});
+    CHECK(early_search_runs<gpu::NarrowPhasePolicy, float>(m, fp, mode)[1] > 0);
+  }
+  // The folded cloth has no such pairs: nothing early, the same answers (its second run plans no
+  // early searches at all).
+  const auto cloth = lwsccd_test::folded_cloth(40, 4);
+  const FeaturePairs cloth_pairs =
+      feature_pairs(cloth.mesh, brute_force_pairs(cloth.mesh, swept_triangle_bvs<Aabbd>(cloth.mesh, cloth.x0, cloth.x1)));
+  CHECK(early_search_runs<gpu::NarrowPhasePolicy, double>(cloth, cloth_pairs, CcdMode::contacts) == std::array<std::size_t, 2>{0, 0});
 }
 
 TEST_CASE("GPU narrow phase: a short list planned for FP64 at 1/64 hands its searches in double on", "[gpu][narrow]") {

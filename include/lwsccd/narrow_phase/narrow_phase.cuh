@@ -67,6 +67,19 @@ struct NarrowPhasePolicy {
   /// than kRefineWarpBelow (the SMs' warp slots the two kernels left idle one after the other are
   /// shared; NVIDIA H200, cloth-ball narrow 0.83 -> 0.81 ms). The same answers; false: after it.
   static constexpr bool kWholeBesideFilter = true;
+  /// CertifiedCcd FP32 first: a pair whose cubic stays within float's bound over the whole step
+  /// (motion coplanar all along: cloth-funnel's seams sliding in the cloth's plane) and whose
+  /// inside test there is not outside in float is searched whole by a warp of its own, on a stream
+  /// of the list's own, as soon as the single-precision filter's first kernel has listed it. Those
+  /// searches were the longest of their list and ran last, after the double filter's kernels. The
+  /// same answers; 0: none. Planned from the list's last run: early searches only where it had
+  /// such pairs, at most this many (a few long searches; more would cost a warp's lanes each, as
+  /// kHandedWarpsPerSm says, and go through the double filter as before) and at least one in
+  /// kEarlyCoplanarPerSurvivors of the pairs its screen passed (a long list's chain outlasts them
+  /// anyway, and the stream's fork and join cost it ~0.01 ms), and only where the searches in
+  /// double run a warp each (kHandedWarpsMaxFp64Ratio).
+  static constexpr int kEarlyCoplanarSearches = 256;
+  static constexpr int kEarlyCoplanarPerSurvivors = 256;
   /// A list's first-pass kernels (the screen through settle_undecided_kernel; not the fallback's
   /// nor the hits' sort) are launched to overlap the end of the one before them (programmatic
   /// dependent launch, compute capability 9.0 and later; elsewhere plain launches): a kernel's
@@ -294,6 +307,9 @@ class NarrowPhase {
   /// filter sent whole that the double filter's kernel ran beside its own pairs, a thread each, in
   /// the last run (none where a list's whole searches all went to warps).
   std::size_t whole_searches_beside_filter() const { return lists_[0].whole_beside_filter + lists_[1].whole_beside_filter; }
+  /// CertifiedCcd FP32 first: pairs coplanar over the whole step in float searched early, a warp
+  /// each (NarrowPhasePolicy::kEarlyCoplanarSearches), in the last run (mode earliest: its last window).
+  std::size_t early_searches() const { return lists_[0].early_searches + lists_[1].early_searches; }
   /// Whether a list's first-pass kernels are launched to overlap the kernel before them
   /// (NarrowPhasePolicy::kOverlapLaunches on a device of compute capability 9.0 or later),
   /// decided on the device of the first run: false before it.
@@ -337,7 +353,8 @@ class NarrowPhase {
                l.counters.capacity_bytes() + l.deferred.capacity_bytes() + l.open.capacity_bytes() + l.intervals.capacity_bytes() +
                l.listed.capacity_bytes() + l.expanded.capacity_bytes() + l.deep.capacity_bytes() +
                l.double_kept.capacity_bytes() + l.single_intervals.capacity_bytes() + l.single_failed.capacity_bytes() +
-               l.single_expanded.capacity_bytes() + l.single_deep.capacity_bytes() + l.handed.capacity_bytes();
+               l.single_expanded.capacity_bytes() + l.single_deep.capacity_bytes() + l.handed.capacity_bytes() +
+               l.early.capacity_bytes();
     return bytes;
   }
 
@@ -359,6 +376,7 @@ class NarrowPhase {
     DeviceBuffer<unsigned> single_failed;        ///< a bit per pair, set once it goes to the double filter
     DeviceBuffer<unsigned long long> single_expanded;  ///< its second round: intervals to split further (room: single_interval_room)
     DeviceBuffer<unsigned long long> single_deep;      ///< the second round's intervals to test for inside
+    DeviceBuffer<Pair> early;                    ///< FP32 first: pairs coplanar over the whole step in float, searched early
     DeviceBuffer<unsigned long long> counters;   ///< detail::NarrowCounter words
     PinnedBuffer<unsigned long long> host_counters;
     std::size_t hit_room = 0, work_room = 0;     ///< room of hits; of survivors
@@ -369,9 +387,17 @@ class NarrowPhase {
     std::size_t count = 0, num_full = 0, warp_searches = 0, whole_searches = 0, handed_searches = 0, handed_in_warps = 0,
                 whole_beside_filter = 0;
     std::size_t sent_whole = 0;  ///< the last run's: contacts the single-precision filter sent whole (plans the next)
+    std::size_t early_room = 0;      ///< the last enqueue's room of `early` (0: no early searches)
+    std::size_t early_searches = 0;  ///< the last run's early searches
+    /// The last run's pairs coplanar over the whole step in float and not outside there (plans
+    /// the next run's early searches: none where it had none); unknown before a first run.
+    std::size_t early_candidates = static_cast<std::size_t>(-1);
+    std::size_t survivors_seen = 0;  ///< the last run's pairs its screen passed (plans the early searches)
     std::size_t sort_span = 0;                   ///< hits the next run sorts before its count reaches the host (0: none)
     CudaStream stream;
     CudaEvent done;
+    CudaStream early_stream;               ///< the early searches' (refine_early_kernel)
+    CudaEvent early_listed, early_done;    ///< its start after the single-precision filter's first kernel; its end
   };
 
   void ensure_streams();
@@ -381,6 +407,27 @@ class NarrowPhase {
   // Whether the refinement's lists (refine_room) hold only what single precision leaves, their
   // room learned from its count: FP32 first with the filter (any other path refines every survivor).
   static constexpr bool refine_room_learned(CcdMode mode) { return kSingleFirst && Policy::kRefineFilter && mode != CcdMode::set; }
+  // Room of a list's early searches: where the single-precision filter runs, the searches in
+  // double run a warp each, and the list's last run had pairs for them, at most
+  // kEarlyCoplanarSearches and a share of its survivors (kEarlyCoplanarPerSurvivors), or there
+  // was no run yet; 0: none this run (such pairs take the double filter's route, and are counted
+  // for the next run's plan).
+  std::size_t early_search_room(const List& l, CcdMode mode) const {
+    constexpr auto most = static_cast<std::size_t>(Policy::kEarlyCoplanarSearches);
+    const bool planned =
+        l.early_candidates == kUnknownCandidates ||
+        (l.early_candidates > 0 && l.early_candidates <= most &&
+         l.early_candidates * static_cast<std::size_t>(Policy::kEarlyCoplanarPerSurvivors) >= l.survivors_seen);
+    if constexpr (kSingleFirst)
+      if (Policy::kRefineFilter && mode != CcdMode::set && fp64_ratio() <= Policy::kHandedWarpsMaxFp64Ratio && planned) return most;
+    return 0;
+  }
+  // The warps of a list's early searches: one for each of the last run's pairs (a warp takes the
+  // next by a ticket), the room's worth before a first run.
+  std::size_t early_search_warps(const List& l) const {
+    return l.early_candidates == kUnknownCandidates ? l.early_room : std::max<std::size_t>(std::min(l.early_candidates, l.early_room), 1);
+  }
+  static constexpr std::size_t kUnknownCandidates = static_cast<std::size_t>(-1);
   // The single-precision filter's second round (CertifiedPolicy::kSingleSecondRound) runs wherever
   // its first does, as on the CPU (CertifiedFilter::decides_single).
   static constexpr bool single_second_round(CcdMode mode) {

@@ -37,6 +37,9 @@ template <class Policy>
 struct CertifiedFilter {
   static constexpr int kLevel = Policy::kInsideFrom;
   static constexpr int kMaxIntervals = 1 << kLevel;
+  /// The number of the interval [0, 1] (the whole step): a mask of only this interval's bit means
+  /// the cubic stays within its bound over the whole step (motion coplanar all along).
+  static constexpr unsigned kWholeStepNode = 1u;
   static_assert(kLevel >= 1 && kLevel <= 4, "lwsccd: the certified filter runs to levels 1 to 4 (kInsideFrom)");
   static_assert(Policy::kInsideEvery > 0, "lwsccd: the certified filter needs the inside tests at kInsideFrom");
 

@@ -282,15 +282,38 @@ __device__ inline bool sent_whole(unsigned at, std::size_t room, const unsigned 
   return whole > 0 && at >= room - whole;
 }
 
+// A pair single precision leaves whose search is expected to be long, listed for
+// refine_early_kernel (past `early_room`: appended to the double filter's list, as any other). It
+// takes a slot of the double filter's list all the same, so that the lists sized by those slots
+// (the undecided) have room for what its search appends.
+__device__ inline void send_early(unsigned long long* counters, std::pair<index_t, index_t>* early, std::size_t early_room,
+                                  std::pair<index_t, index_t>* double_kept, std::size_t kept_room,
+                                  const std::pair<index_t, index_t>& p) {
+  if (!take_kept_slot(counters, kept_room)) return;  // (the run is repeated with more room)
+  const unsigned long long k = append_index(counters + kEarlySearches);
+  if (k < early_room) {
+    early[k].first = p.first;  // (std::pair's assignment is host-only before C++20)
+    early[k].second = p.second;
+  } else {
+    append_pair(counters + kDoubleKept, double_kept, p);
+  }
+}
+
 // First kernel: a thread per screened pair lists its first round's intervals in `intervals` for
 // single_inside_kernel. A pair whose intervals do not fit is decided on its thread
 // (decides_single: the same answer), and the room grows for the next run.
+// With `early_room` > 0, a pair whose cubic is within float's bound over the whole step (its one
+// interval is the step: motion that stays coplanar in float) takes that interval's inside test
+// here; not certainly outside, it goes to the early searches (send_early): the double filter could
+// only defer it, and its search is the list's longest (cloth-funnel: seams sliding in the cloth's
+// plane), so it starts now, beside the rest of the list's chain.
 template <class Method, bool kVertexFace, class T>
 __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* single,
                                      const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
                                      const unsigned long long* control, unsigned long long* counters,
                                      unsigned long long* intervals, std::size_t interval_room,
-                                     std::pair<index_t, index_t>* double_kept, std::size_t kept_room) {
+                                     std::pair<index_t, index_t>* double_kept, std::size_t kept_room,
+                                     std::pair<index_t, index_t>* early, std::size_t early_room) {
   using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
   lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
@@ -300,6 +323,16 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
     const auto q = gather_single_query<kVertexFace>(mesh, single, kept[i]);
     std::uint32_t found = 0;
     const int count = Filter::intervals_single(q, single_params, found, true);  // (the screen tried the separating directions)
+    if (count == 1 && found == (1u << Filter::kWholeStepNode)) {
+      // (decides_single's verdict: the step outside in float, else the double path.)
+      const bool outside = Filter::inside_single(q, Filter::kWholeStepNode) == lwsccd::detail::InsideVerdict::outside;
+      if (!outside) append_index(counters + kEarlyCandidates);  // (whatever the route: the next run's plan)
+      if (early_room > 0) {
+        if (outside) append_index(counters + kSingleMisses);
+        else send_early(counters, early, early_room, double_kept, kept_room, kept[i]);
+        continue;
+      }
+    }
     bool decided = count == 0;
     if (count > 0) {
       bool fits = true;
@@ -628,6 +661,28 @@ __device__ void warp_refine(const Q& q, const CcdParams<T>& params, std::pair<in
   __syncwarp();
 }
 
+// The warp's next ticket from `counter` (lane 0 takes it, every lane gets it).
+__device__ inline unsigned long long warp_ticket(unsigned long long* counter, int lane) {
+  unsigned long long k = 0;
+  if (lane == 0) k = atomicAdd(counter, 1ull);
+  return __shfl_sync(0xffffffffu, k, 0);
+}
+
+// The whole search of pair p by the whole warp: with `after_single_filter` (a pair that skipped
+// the double filter) the search in single precision and the double screen first, as
+// refine_deferred_entry runs them, then the search in double (warp_refine).
+template <class Method, class Q, class T>
+__device__ void warp_search_whole(const Q& q, const CcdParams<T>& params, std::pair<index_t, index_t> p, bool after_single_filter,
+                                  int lane, unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room,
+                                  FeatureHit<T>* undecided) {
+  // (Every lane runs the same single-precision search and double screen on the same values, so
+  // all go on alike; lane 0 stores.)
+  if (after_single_filter && (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided, lane == 0) ||
+                              Method::screen_after_single(q, params)))
+    return;
+  warp_refine<Method>(q, params, p, lane, counters, hits, hit_room, undecided);
+}
+
 // Second part for a short list (at most `warp_below` deferred pairs): a warp per pair, the inside
 // tests by subtrees (WarpInsideSubtree); the same answers as refine_deferred_kernel. Its pairs are
 // the long searches (cloth-funnel's coplanar edge-edge ones: 96 halvings and ~190 inside tests one
@@ -647,14 +702,31 @@ __global__ void refine_deferred_warp_kernel(MeshFeatures mesh, const Vec3<P>* x0
   for (std::size_t w = (static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32; w < n; w += warps) {
     const unsigned at = deferred[w];
     const std::pair<index_t, index_t> p = kept[at];
-    const auto q = gather_query<kVertexFace, T>(mesh, x0, x1, p);
-    // (Every lane runs the same single-precision search and double screen on the same values, so
-    // all go on alike; lane 0 stores.)
-    if (sent_whole(at, room, counters) &&
-        (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided, lane == 0) ||
-         Method::screen_after_single(q, params)))
-      continue;
-    warp_refine<Method>(q, params, p, lane, counters, hits, hit_room, undecided);
+    warp_search_whole<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, sent_whole(at, room, counters), lane,
+                              counters, hits, hit_room, undecided);
+  }
+}
+
+// The early searches (single_filter_kernel's `early` list, its length in
+// counters[kEarlySearches], at most `early_room` kept): a warp per pair, each searched whole as a
+// pair sent whole is (warp_search_whole), on a stream of the list's own from the single-precision
+// filter's first kernel on, beside the rest of the list's chain; settle_undecided_kernel waits for
+// it. A warp takes the next pair by a ticket (counters[kEarlyTaken]) when its own search ends. The
+// same answers as the route through the double filter.
+template <class Method, bool kVertexFace, class T, class P>
+__global__ void refine_early_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const std::pair<index_t, index_t>* early,
+                                    std::size_t early_room, CcdParams<T> params, const unsigned long long* control,
+                                    unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room,
+                                    FeatureHit<T>* undecided) {
+  if (control[kSkip]) return;
+  const std::size_t n = counters[kEarlySearches] < early_room ? static_cast<std::size_t>(counters[kEarlySearches]) : early_room;
+  const int lane = static_cast<int>(threadIdx.x) % 32;
+  for (;;) {
+    const unsigned long long k = warp_ticket(counters + kEarlyTaken, lane);
+    if (k >= n) break;
+    const std::pair<index_t, index_t> p = early[k];
+    warp_search_whole<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, true, lane, counters, hits, hit_room,
+                              undecided);
   }
 }
 
@@ -679,9 +751,7 @@ __global__ void refine_handed_kernel(MeshFeatures mesh, const Vec3<P>* x0, const
   if constexpr (kWarpEach) {
     const int lane = static_cast<int>(threadIdx.x) % 32;
     for (;;) {
-      unsigned long long k = 0;
-      if (lane == 0) k = atomicAdd(counters + kHandedTaken, 1ull);
-      k = __shfl_sync(0xffffffffu, k, 0);
+      const unsigned long long k = warp_ticket(counters + kHandedTaken, lane);
       if (k >= count) break;
       const std::pair<index_t, index_t> p = kept[deferred[handed[k]]];
       warp_refine<Method>(gather_query<kVertexFace, T>(mesh, x0, x1, p), params, p, lane, counters, hits, hit_room, undecided);

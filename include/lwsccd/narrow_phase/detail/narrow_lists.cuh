@@ -90,6 +90,9 @@ enum NarrowCounter : int {
   kKeptSlotsPeak,   // the most asked for by an earlier window of mode earliest
   kSeparated,       // FP32 first: pairs the screen passed and the filter's separating directions decided there
   kHitSortOverflow, // the hits' sort ahead by buckets: buckets past detail::kBucketRankMax hits (then sorted by radix)
+  kEarlyCandidates, // FP32 first: pairs coplanar over the whole step in float and not outside there, whatever their route (plans the next run's early searches)
+  kEarlySearches,   // of those, pairs listed for the early searches (past the room: the double filter's)
+  kEarlyTaken,      // of those, the ones a warp took (refine_early_kernel's tickets)
   kNarrowCounters
 };
 // Words of a run's control block, shared by both lists.

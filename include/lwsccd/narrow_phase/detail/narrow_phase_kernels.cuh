@@ -36,6 +36,9 @@ void NarrowPhase<Method, T, Policy>::ensure_streams() {
     l.counters.resize_discard(detail::kNarrowCounters);
     l.stream = CudaStream(cudaStreamNonBlocking);
     l.done = CudaEvent(cudaEventDisableTiming);
+    l.early_stream = CudaStream(cudaStreamNonBlocking);
+    l.early_listed = CudaEvent(cudaEventDisableTiming);
+    l.early_done = CudaEvent(cudaEventDisableTiming);
   }
 }
 
@@ -111,6 +114,8 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
     // precision leaves reaches them, so their room is learned from that count (kKeptSlots);
     // otherwise they may get every survivor.
     l.refine_room = refine_room_learned(params.mode) ? std::max(l.refine_room, least) : l.work_room;
+    l.early_room = early_search_room(l, params.mode);
+    if (l.early_room > 0) l.early.resize_discard(l.early_room);
     if (kCertified) {
       l.undecided.resize_discard(l.refine_room);
       l.deferred.resize_discard(l.refine_room);
@@ -245,8 +250,8 @@ void NarrowPhase<Method, T, Policy>::count_survivors(const MeshFeatures& mesh, c
 
 // Pass 1 on the list's stream: two-pass methods' cheap first step on every pair (survivors
 // appended); CertifiedCcd's refinement of the survivors (hits and undecided queries appended).
-// Its launches are recorded in `out` in their order, a kernel (with the memset before it) each,
-// for enqueue() to issue in turn with the other list's.
+// Its launches are recorded in `out` in their order, a kernel (with the memset before it) or the
+// early searches' fork each, for enqueue() to issue in turn with the other list's.
 template <class Method, class T, class Policy>
 template <class P, bool kVertexFace>
 void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1,
@@ -287,6 +292,8 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // costs only time. A list whose whole searches go to warps keeps the filter's kernel alone.
     bool whole_in_filter = false;
     whole_beside_filter_above_ = static_cast<std::size_t>(-1);
+    // FP32 first: the pairs coplanar over the whole step in float searched early (refine_early_kernel).
+    const bool early = kSingleFirst && Policy::kRefineFilter && params.mode != CcdMode::set && l.early_room > 0;
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       if constexpr (kSingleFirst) {
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
@@ -295,8 +302,23 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
           chain(detail::single_filter_kernel<Method, kVertexFace, T>,
                 grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
                   mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
-                  l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room);
+                  l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room, l.early.data(),
+                  l.early_room);
         });
+        if (early) {  // the early searches, beside the rest of the chain (joined before the undecided are settled)
+          record(out, lp, [=](List& l) {
+            LWSCCD_CUDA_CHECK(cudaEventRecord(l.early_listed, l.stream));
+            LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.early_stream, l.early_listed, 0));
+            // (A warp for each of the last run's searches: a block more than needed holds SM room
+            // the chain's kernels wait for. More searches this run wait for a warp's ticket.)
+            detail::refine_early_kernel<Method, kVertexFace, T, P><<<grid_for(early_search_warps(l) * 32, Policy::kBlock, 1), Policy::kBlock,
+                                                                     0, l.early_stream>>>(
+                    mesh, x0, x1, l.early.data(), l.early_room, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room,
+                    l.undecided.data());
+            LWSCCD_CUDA_CHECK_LAUNCH();
+            LWSCCD_CUDA_CHECK(cudaEventRecord(l.early_done, l.early_stream));
+          });
+        }
         record(out, lp, [=](List& l) {
           LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
           chain(detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>, single_blocks, Policy::kBlock, l.stream,
@@ -392,6 +414,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     }
     // Before mode earliest's fallback limit: a settled hit lowers it as the CPU's certified hits do.
     record(out, lp, [=](List& l) {
+      if (early) LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(l.stream, l.early_done, 0));
       chain(detail::settle_undecided_kernel<Method, kVertexFace, T, P>, grid_for(room, Policy::kBlock, 1), Policy::kBlock, l.stream,
           mesh, x0, x1, params, control_.data(), l.counters.data(), l.hits.data(), l.hit_room, l.undecided.data(), l.refine_room);
     });
@@ -439,7 +462,8 @@ void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh,
   else launch(in.pairs, in.count);
 }
 
-// Records `launch` (a kernel of `list`, with the memset before it) in `out`: run later, then checked.
+// Records `launch` (a kernel of `list` with the memset before it, or the early searches' fork) in
+// `out`: run later, then checked.
 template <class Method, class T, class Policy>
 template <class Launch>
 void NarrowPhase<Method, T, Policy>::record(Launches& out, List* list, Launch launch) {
@@ -514,6 +538,11 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     // (As filter_kernel decides on the device: whole_searched_early.)
     l.sent_whole = kCertified ? static_cast<std::size_t>(c[detail::kSingleWhole]) : 0;
     l.whole_beside_filter = l.sent_whole > whole_beside_filter_above_ ? l.sent_whole : 0;
+    l.early_searches = kCertified ? static_cast<std::size_t>(std::min<unsigned long long>(c[detail::kEarlySearches], l.early_room)) : 0;
+    if (kCertified) {
+      l.early_candidates = static_cast<std::size_t>(c[detail::kEarlyCandidates]);
+      l.survivors_seen = static_cast<std::size_t>(c[detail::kSurvivors]);
+    }
     l.counts = {};
     l.counts.pairs = pairs;
     l.counts.screened = kCertified ? static_cast<std::size_t>(c[detail::kSurvivors] + c[detail::kSeparated]) : 0;
