@@ -391,7 +391,7 @@ class NarrowPhase {
     std::size_t early_searches = 0;  ///< the last run's early searches
     /// The last run's pairs coplanar over the whole step in float and not outside there (plans
     /// the next run's early searches: none where it had none); unknown before a first run.
-    std::size_t early_candidates = static_cast<std::size_t>(-1);
+    std::size_t early_candidates = kUnknownCandidates;
     std::size_t survivors_seen = 0;  ///< the last run's pairs its screen passed (plans the early searches)
     std::size_t sort_span = 0;                   ///< hits the next run sorts before its count reaches the host (0: none)
     CudaStream stream;

@@ -292,8 +292,9 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     // costs only time. A list whose whole searches go to warps keeps the filter's kernel alone.
     bool whole_in_filter = false;
     whole_beside_filter_above_ = static_cast<std::size_t>(-1);
-    // FP32 first: the pairs coplanar over the whole step in float searched early (refine_early_kernel).
-    const bool early = kSingleFirst && Policy::kRefineFilter && params.mode != CcdMode::set && l.early_room > 0;
+    // FP32 first: the pairs coplanar over the whole step in float searched early (refine_early_kernel;
+    // early_search_room says where).
+    const bool early = l.early_room > 0;
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       if constexpr (kSingleFirst) {
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
