@@ -8,7 +8,8 @@ Steps are cut where the positions go to the device (a host-to-device copy of at 
 its last kernel. For step K (default the one before the last; negative counts from the end) it
 prints each kernel's start relative to the step's first activity, its duration and stream (us;
 --all adds copies and memsets), then the time no activity ran (the GPU waiting for the host) and
-per stream the time busy and the span from its first start to its last end.
+per stream the time busy and the span from its first start to its last end. With --api it lists
+the host's runtime calls among them (a trace taken with LWSCCD_TRACE_API=1).
 """
 import argparse
 import re
@@ -30,13 +31,19 @@ def short_name(name):
     return re.sub(r"<.*", "", name.split("(")[0]).split("::")[-1].replace("void ", "").strip()
 
 
-def load(path):
+def load(path, api=False):
+    """The trace's GPU activities (kernels, copies, memsets) sorted by start; with api, the host's
+    runtime calls too (kind "A", their thread id in "stream")."""
     records = []
     with open(path) as f:
         for line in f:
             fields = line.rstrip("\n").split("\t")
             kind, start, end, stream = fields[0], int(fields[1]), int(fields[2]), int(fields[3])
-            if kind == "K":
+            if kind == "A":
+                if not api:
+                    continue
+                label = fields[4]
+            elif kind == "K":
                 label = short_name(fields[6])
             elif kind == "C":
                 label = "memcpy " + {"1": "HtoD", "2": "DtoH", "8": "DtoD"}.get(fields[5], fields[5]) + " " + fields[4] + " B"
@@ -59,8 +66,9 @@ def main():
     p.add_argument("--step", type=int, default=-2)
     p.add_argument("--min-bytes", type=int, default=4096)
     p.add_argument("--all", action="store_true", help="list memsets and copies too")
+    p.add_argument("--api", action="store_true", help="list the host's CUDA runtime calls too (traced with LWSCCD_TRACE_API=1)")
     a = p.parse_args()
-    all_steps = steps(load(a.trace), a.min_bytes)
+    all_steps = steps(load(a.trace, a.api), a.min_bytes)
     if not all_steps:
         raise SystemExit("kernel_timeline.py: no step found (no host-to-device copies of positions)")
     print("steps (us):", " ".join(f"{(s[-1]['end'] - s[0]['start']) / 1e3:.1f}" for s in all_steps))
@@ -72,6 +80,9 @@ def main():
     t0 = step[0]["start"]
     idle, reach, streams = 0, t0, {}
     for r in step:
+        if r["kind"] == "A":
+            print(f"{(r['start'] - t0) / 1e3:9.1f} {(r['end'] - r['start']) / 1e3:8.1f}  host  {r['label']}")
+            continue
         idle += max(0, r["start"] - reach)
         reach = max(reach, r["end"])
         s = streams.setdefault(r["stream"], [0, r["start"], r["end"], 0])

@@ -9,8 +9,9 @@
 // Lines: K start end stream grid block name (a kernel), C start end stream bytes copy-kind
 // (a memcpy), S start end stream bytes (a memset). Unlike Nsight Compute it leaves the
 // kernels running concurrently, so it shows where streams overlap and where the GPU waits for
-// the host (gaps). The driver loads it and calls InitializeInjection before the program's first
-// CUDA call.
+// the host (gaps). With LWSCCD_TRACE_API=1 it also records the host's CUDA runtime calls, A start
+// end thread name (the same clock), which show what the host was doing in such a gap. The
+// driver loads it and calls InitializeInjection before the program's first CUDA call.
 #include <cupti.h>
 
 #include <cstdio>
@@ -60,6 +61,14 @@ void CUPTIAPI buffer_completed(CUcontext, uint32_t, uint8_t* buffer, size_t, siz
                      static_cast<unsigned long long>(m->end), m->streamId, static_cast<unsigned long long>(m->bytes));
         break;
       }
+      case CUPTI_ACTIVITY_KIND_RUNTIME: {
+        const auto* a = reinterpret_cast<const CUpti_ActivityAPI*>(record);
+        const char* name = nullptr;
+        if (cuptiGetCallbackName(CUPTI_CB_DOMAIN_RUNTIME_API, a->cbid, &name) != CUPTI_SUCCESS || !name) name = "?";
+        std::fprintf(trace_file, "A\t%llu\t%llu\t%u\t%s\n", static_cast<unsigned long long>(a->start),
+                     static_cast<unsigned long long>(a->end), a->threadId, name);
+        break;
+      }
       default:
         break;
     }
@@ -87,6 +96,8 @@ extern "C" int InitializeInjection() {
   check(cuptiActivityEnable(CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL), "cuptiActivityEnable(kernels)");
   check(cuptiActivityEnable(CUPTI_ACTIVITY_KIND_MEMCPY), "cuptiActivityEnable(memcpy)");
   check(cuptiActivityEnable(CUPTI_ACTIVITY_KIND_MEMSET), "cuptiActivityEnable(memset)");
+  const char* api = std::getenv("LWSCCD_TRACE_API");
+  if (api && api[0] == '1') check(cuptiActivityEnable(CUPTI_ACTIVITY_KIND_RUNTIME), "cuptiActivityEnable(runtime)");
   std::atexit(flush_at_exit);
   return 1;
 }

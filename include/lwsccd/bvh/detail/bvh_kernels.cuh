@@ -77,15 +77,26 @@ __global__ void radix_tree_kernel(const std::uint64_t* codes, Index n, Index* le
 }
 
 // One thread per leaf: fits the leaf, then climbs; the second child to arrive at a node fits it.
-// The acq_rel arrival counter orders the first child's BV store before the second's loads. The
-// second arriver also resets the counter, so the counters are all zero again when the kernel
-// ends and a refit needs no memset. It keeps its own child's BV in registers and loads only the
-// sibling's.
-template <class BV, class P>
-__global__ void bottom_up_kernel(const Face* faces, const index_t* leaf_primitive, index_t n, const Vec3<P>* x0,
-                                 const Vec3<P>* x1, const index_t* left, const index_t* right, const index_t* parent,
-                                 BV* bvs, int* arrivals, int* status, typename bv_traits<BV>::scalar_type margin) {
-  const index_t k = static_cast<index_t>(blockIdx.x * blockDim.x + threadIdx.x);
+// The acq_rel arrival counter orders the first child's BV store before the second's loads. A node
+// whose leaves are all the block's (its leaf range within the block's; a radix tree's internal node
+// i has i at one end of its range, so i lies in the block's range too) counts its arrivals in
+// shared memory at block scope; the others count in `arrivals` at device scope, where the second
+// arriver resets the counter, so the counters are all zero again when the kernel ends and a refit
+// needs no memset. The climb keeps its own child's BV in registers and loads only the sibling's,
+// and each level's links and range (never written by a refit) are loaded before its arrival.
+// Why: the climb is a chain of dependent memory round trips, ~30-40 levels deep on cloth-ball, and
+// a device-scope arrival with its release costs several of them; in shared memory, about one.
+template <class BV, class P, int kBlock>
+__global__ void __launch_bounds__(kBlock)
+    bottom_up_kernel(const Face* faces, const index_t* leaf_primitive, index_t n, const Vec3<P>* x0, const Vec3<P>* x1,
+                     const index_t* left, const index_t* right, const index_t* parent, const LeafRange* ranges, BV* bvs,
+                     int* arrivals, int* status, typename bv_traits<BV>::scalar_type margin) {
+  __shared__ int block_arrivals[kBlock];
+  block_arrivals[threadIdx.x] = 0;
+  __syncthreads();
+  const index_t block_first = static_cast<index_t>(blockIdx.x) * kBlock;
+  const index_t block_last = block_first + kBlock - 1;
+  const index_t k = block_first + static_cast<index_t>(threadIdx.x);
   if (k >= n) return;
   const Face f = faces[leaf_primitive[k]];
   BV bv;
@@ -97,14 +108,22 @@ __global__ void bottom_up_kernel(const Face* faces, const index_t* leaf_primitiv
   if (!finite) status[0] = 1;  // benign race: every writer writes 1
   index_t node = n - 1 + k;
   bvs[node] = bv;
-  for (index_t p = parent[node]; p != -1; node = p, p = parent[p]) {
-    cuda::atomic_ref<int, cuda::thread_scope_device> arrived(arrivals[p]);
-    if (arrived.fetch_add(1, cuda::memory_order_acq_rel) == 0) return;
-    arrived.store(0, cuda::memory_order_relaxed);  // both children are done with this node
-    const index_t l = left[p];
+  for (index_t p = parent[node]; p != -1;) {
+    const index_t l = left[p], r = right[p], next = parent[p];
+    const LeafRange range = ranges[p];
+    if (range.first >= block_first && range.last <= block_last) {
+      cuda::atomic_ref<int, cuda::thread_scope_block> arrived(block_arrivals[p - block_first]);
+      if (arrived.fetch_add(1, cuda::memory_order_acq_rel) == 0) return;
+    } else {
+      cuda::atomic_ref<int, cuda::thread_scope_device> arrived(arrivals[p]);
+      if (arrived.fetch_add(1, cuda::memory_order_acq_rel) == 0) return;
+      arrived.store(0, cuda::memory_order_relaxed);  // both children are done with this node
+    }
     // Always merge(left, right): the same operation order as the CPU backend.
-    bv = l == node ? bv_traits<BV>::merge(bv, bvs[right[p]]) : bv_traits<BV>::merge(bvs[l], bv);
+    bv = l == node ? bv_traits<BV>::merge(bv, bvs[r]) : bv_traits<BV>::merge(bvs[l], bv);
     bvs[p] = bv;
+    node = p;
+    p = next;
   }
 }
 
@@ -312,9 +331,10 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
     throw InputError("gpu::Bvh::refit", "", "the step has " + std::to_string(step.faces.size()) +
                                                 " faces, the BVH was built over " + std::to_string(num_leaves_));
   const index_t n = num_leaves_;
-  detail::bottom_up_kernel<BV, P><<<detail::blocks_for(n), detail::kBvhBlock, 0, stream>>>(
+  constexpr int kRefitBlock = 512;  // (more of the climb's levels within a block than at 256)
+  detail::bottom_up_kernel<BV, P, kRefitBlock><<<static_cast<unsigned>((n + kRefitBlock - 1) / kRefitBlock), kRefitBlock, 0, stream>>>(
       step.faces.data(), leaf_primitive_.data(), n, step.x0_data(), step.x1_data(), left_.data(), right_.data(),
-      parent_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
+      parent_.data(), ranges_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
   LWSCCD_CUDA_CHECK_LAUNCH();
 }
 
