@@ -8,6 +8,7 @@
 #include <thrust/iterator/transform_iterator.h>
 
 #include <algorithm>
+#include <cassert>
 
 #include "lwsccd/bvh/bvh.cuh"
 #include "lwsccd/bvh/detail/lbvh.hpp"
@@ -112,6 +113,7 @@ __global__ void __launch_bounds__(kBlock)
     const index_t l = left[p], r = right[p], next = parent[p];
     const LeafRange range = ranges[p];
     if (range.first >= block_first && range.last <= block_last) {
+      assert((p == range.first || p == range.last) && "bottom_up_kernel: an internal node at neither end of its leaf range");
       cuda::atomic_ref<int, cuda::thread_scope_block> arrived(block_arrivals[p - block_first]);
       if (arrived.fetch_add(1, cuda::memory_order_acq_rel) == 0) return;
     } else {
