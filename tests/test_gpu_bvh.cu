@@ -73,8 +73,9 @@ TEMPLATE_TEST_CASE("GPU LBVH equals the CPU LBVH on procedural meshes", "[gpu][b
   const MovingMesh cloth_a = lwsccd_test::folded_cloth(60, 1), cloth_b = lwsccd_test::folded_cloth(60, 2);
   build_and_refit_match<BV, double>(cloth_a.mesh, cloth_a.x0, cloth_a.x1, cloth_b.x0, cloth_b.x1);
   build_and_refit_match<BV, float>(cloth_a.mesh, cloth_a.x0, cloth_a.x1, cloth_b.x0, cloth_b.x1);
-  // (The refit counts arrivals at nodes within a block of 512 leaves in shared memory: sizes about
-  // one and two blocks.)
+  // (The refit counts arrivals at nodes within a block of gpu::detail::kRefitBlock (512) leaves in
+  // shared memory: sizes about one and two blocks.)
+  static_assert(gpu::detail::kRefitBlock == 512, "the sizes below straddle one and two refit blocks");
   for (const MovingMesh& m : {lwsccd_test::random_soup(5000, 3), lwsccd_test::coincident_triangles(37),
                               lwsccd_test::random_soup(1, 4), lwsccd_test::random_soup(2, 5), lwsccd_test::random_soup(511, 6),
                               lwsccd_test::random_soup(512, 7), lwsccd_test::random_soup(513, 8), lwsccd_test::random_soup(1025, 9)}) {

@@ -20,6 +20,9 @@ namespace lwsccd::gpu {
 namespace detail {
 
 constexpr int kBvhBlock = 256;
+// The refit's block: 512 leaves, whose nodes within count their arrivals in shared memory (more of
+// the climb's levels than at 256; bottom_up_kernel).
+constexpr int kRefitBlock = 512;
 
 inline unsigned blocks_for(index_t n) { return static_cast<unsigned>((n + kBvhBlock - 1) / kBvhBlock); }
 
@@ -333,8 +336,8 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
     throw InputError("gpu::Bvh::refit", "", "the step has " + std::to_string(step.faces.size()) +
                                                 " faces, the BVH was built over " + std::to_string(num_leaves_));
   const index_t n = num_leaves_;
-  constexpr int kRefitBlock = 512;  // (more of the climb's levels within a block than at 256)
-  detail::bottom_up_kernel<BV, P, kRefitBlock><<<static_cast<unsigned>((n + kRefitBlock - 1) / kRefitBlock), kRefitBlock, 0, stream>>>(
+  constexpr int kBlock = detail::kRefitBlock;
+  detail::bottom_up_kernel<BV, P, kBlock><<<static_cast<unsigned>((n + kBlock - 1) / kBlock), kBlock, 0, stream>>>(
       step.faces.data(), leaf_primitive_.data(), n, step.x0_data(), step.x1_data(), left_.data(), right_.data(),
       parent_.data(), ranges_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
   LWSCCD_CUDA_CHECK_LAUNCH();
