@@ -113,6 +113,57 @@ TEMPLATE_TEST_CASE("GPU LBVH equals the CPU LBVH on the real scenes and horse-ga
   }
 }
 
+TEMPLATE_TEST_CASE("GPU LBVH refit from float positions read in place equals the refit from them widened, bit for bit",
+                   "[gpu][bvh][float_input]", Aabbf, Aabbd, Obbf) {
+  using BV = TestType;
+  MovingMesh m = lwsccd_test::random_soup(1025, 5, 0.02);
+  const std::vector<Vec3f> f0 = as<float>(m.x0), f1 = as<float>(m.x1);
+  gpu::DeviceBuffer<Vec3f> d0, d1;
+  d0.upload(f0);
+  d1.upload(f1);
+  // The reference: both arrays widened first, then the refit over the step's double arrays.
+  gpu::DeviceStep<double> widened(m.mesh);
+  widened.set_positions_from_device(d0.data(), d1.data());
+  gpu::Bvh<BV> reference;
+  reference.set_leaf_margin(typename bv_traits<BV>::scalar_type(1e-3));  // (an inflated leaf too)
+  reference.build(widened);
+  gpu::DeviceStep<double> later(m.mesh);
+  later.widen_later(d0.data(), d1.data());
+  REQUIRE(later.widening_due());
+  CHECK_THROWS_WITH(later.x0_data(), Catch::Contains("widen"));
+  gpu::Bvh<BV> bvh;
+  bvh.set_leaf_margin(typename bv_traits<BV>::scalar_type(1e-3));
+  CHECK_THROWS_WITH(bvh.build(later), Catch::Contains("widen"));  // a build reads the widened arrays
+  later.enqueue_widening(nullptr);
+  CHECK_FALSE(later.widening_due());
+  bvh.build(later);
+  // Refits to the swapped positions: one from the floats in place, one from the widened arrays.
+  d0.upload(f1);
+  d1.upload(f0);
+  widened.set_positions_from_device(d0.data(), d1.data());
+  reference.refit(widened);
+  later.widen_later(d0.data(), d1.data());
+  bvh.refit(later);
+  bvh.check_status();
+  CHECK(later.widening_due());  // the refit leaves the widening to the caller
+  const BvhNodes<BV> a = bvh.download(), b = reference.download();
+  REQUIRE(a.bvs.size() == b.bvs.size());
+  std::size_t differing = 0;
+  for (std::size_t i = 0; i < a.bvs.size(); ++i) differing += !same_value(a.bvs[i], b.bvs[i]);
+  CHECK(differing == 0);
+  later.enqueue_widening(nullptr);
+  CHECK(later.x0.download() == widened.x0.download());
+  CHECK(later.x1.download() == widened.x1.download());
+  // A NaN among the floats read in place is reported, as from the widened arrays.
+  std::vector<Vec3f> bad = f0;
+  bad[17].y = std::numeric_limits<float>::quiet_NaN();
+  d1.upload(bad);
+  later.widen_later(d0.data(), d1.data());
+  bvh.refit(later);
+  CHECK_THROWS_WITH(bvh.check_status(), Catch::Contains("NaN"));
+  CHECK_THROWS_AS(later.widen_later(f0.data(), d1.data()), InputError);
+}
+
 TEST_CASE("GPU LBVH: bad input and the rebuild policy", "[gpu][bvh]") {
   MovingMesh m = lwsccd_test::random_soup(3000, 7, 0.01);
   gpu::Bvh<Aabbf> bvh;

@@ -519,6 +519,46 @@ TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pi
   // Host float input after double input in the same pipeline: the positions are replaced whole.
   require_same_contacts(host_input.step(scene.step.x0, scene.step.x1), cpu_pipeline.step(scene.step.x0, scene.step.x1));
   require_same_contacts(host_input.step(f0, f1), c);
+
+  // Float arrays in device memory that change between steps (the same addresses): the refit reads
+  // them where they are, the later stages their copies widened beside it. Every step from the
+  // front, every step rebuilt (rebuild_factor 1: the step after a costlier refit builds anew), and
+  // in parts; a NaN among them is an InputError and the next step starts afresh.
+  std::vector<Vec3f> half_f1(f1.size());
+  std::vector<Vec3d> half_w1(f1.size());
+  for (std::size_t v = 0; v < f1.size(); ++v) {
+    half_f1[v] = (f0[v].cast<double>() + (f1[v].cast<double>() - f0[v].cast<double>()) * 0.5).cast<float>();
+    half_w1[v] = half_f1[v].cast<double>();
+  }
+  const auto half = cpu_pipeline.step(w0, half_w1);
+  REQUIRE(half.stats.hits_vf + half.stats.hits_ee != c.stats.hits_vf + c.stats.hits_ee);
+  PipelineParams rebuilding, in_parts;
+  rebuilding.rebuild_factor = 1;
+  in_parts.part_pairs = 4000;
+  for (const PipelineParams& params : {PipelineParams{}, rebuilding, in_parts}) {
+    INFO("rebuild_factor " << params.rebuild_factor << ", part_pairs " << params.part_pairs);
+    gpu::CcdPipeline<> pipeline(scene.step.mesh, scene.layout, params);
+    cpu::CcdPipeline<> reference(scene.step.mesh, scene.layout, params);
+    std::size_t rebuilt = 0;
+    for (int s = 0; s < 4; ++s) {
+      INFO("step " << s);
+      d1.upload(s % 2 ? f1 : half_f1);
+      const auto d = pipeline.step_from_device(d0.data(), d1.data());
+      const auto expected = reference.step(w0, s % 2 ? w1 : half_w1);
+      require_same_contacts(d, expected);
+      require_same_contacts(d, s % 2 ? c : half);
+      rebuilt += d.stats.rebuilt;
+    }
+    std::printf("float device positions (rebuild_factor %.1f, part_pairs %zu): %zu of 4 steps built the BVH\n",
+                params.rebuild_factor, params.part_pairs, rebuilt);
+    if (params.rebuild_factor == 1) CHECK(rebuilt >= 2);  // (the first step's build and one after a costlier refit)
+    std::vector<Vec3f> nan = f1;
+    nan[23].z = std::numeric_limits<float>::quiet_NaN();
+    d1.upload(nan);
+    CHECK_THROWS_AS(pipeline.step_from_device(d0.data(), d1.data()), InputError);
+    d1.upload(f1);
+    require_same_contacts(pipeline.step_from_device(d0.data(), d1.data()), c);
+  }
 }
 
 namespace {

@@ -13,6 +13,7 @@
 
 #include "lwsccd/bvh/bvh.hpp"
 #include "lwsccd/core/device_buffer.cuh"
+#include "lwsccd/core/error.hpp"
 #include "lwsccd/core/host_staging.cuh"
 #include "lwsccd/core/span.hpp"
 
@@ -57,12 +58,29 @@ struct DeviceStep {
   /// return to the step's own arrays. Throws InputError unless both point to device (or managed)
   /// memory.
   void use_device_positions(const Vec3<P>* d0, const Vec3<P>* d1);
+  /// Float positions in device memory for a double step, widened later: Bvh::refit reads d0, d1
+  /// where they are (each point widened as it is loaded, exactly), and enqueue_widening fills x0,
+  /// x1 from them on the stream the caller chooses, e.g. beside the refit; until then widening_due()
+  /// and x0_data() must not be read. d0, d1 must stay valid and unchanged until the widening has run.
+  /// Why: widening both arrays before the refit delayed a float step's first kernel. Throws
+  /// InputError unless both point to device (or managed) memory.
+  void widen_later(const Vec3<float>* d0, const Vec3<float>* d1);
+  /// Enqueues the widening widen_later left due (nothing otherwise) on `stream`.
+  void enqueue_widening(cudaStream_t stream);
+  bool widening_due() const { return float_source_[0] != nullptr; }
+  /// widen_later's arrays (k = 0: x0, 1: x1) while their widening is due, else null.
+  const Vec3<float>* float_source(int k) const { return float_source_[k]; }
   /// Where the step's work reads the positions: x0 and x1, or the arrays of use_device_positions.
-  const Vec3<P>* x0_data() const { return in_place_[0] ? in_place_[0] : x0.data(); }
-  const Vec3<P>* x1_data() const { return in_place_[1] ? in_place_[1] : x1.data(); }
+  const Vec3<P>* x0_data() const { return assume_widened(in_place_[0] ? in_place_[0] : x0.data()); }
+  const Vec3<P>* x1_data() const { return assume_widened(in_place_[1] ? in_place_[1] : x1.data()); }
 
  private:
+  const Vec3<P>* assume_widened(const Vec3<P>* p) const {
+    if (widening_due()) throw Error("gpu::DeviceStep: positions read before the widening widen_later left due was enqueued");
+    return p;
+  }
   const Vec3<P>* in_place_[2] = {nullptr, nullptr};  ///< use_device_positions' arrays, or null: x0, x1
+  const Vec3<float>* float_source_[2] = {nullptr, nullptr};  ///< widen_later's arrays while due
   std::vector<Vec3<P>> staging_;   // double input rounded to float on the host (half the bytes to copy)
   DeviceBuffer<Vec3<float>> wide_;  // float input for double positions, widened on the device
 };

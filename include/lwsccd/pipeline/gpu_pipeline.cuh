@@ -104,7 +104,8 @@ class CcdPipeline {
   }
 
   /// One step from positions already in device memory (mesh().num_vertices() points each, e.g.
-  /// a simulation's own arrays; double ones read in place, float ones widened on the device): no
+  /// a simulation's own arrays; double ones read in place, float ones read in place by the refit
+  /// and widened on the device beside it for the later stages): no
   /// host round trip for them, and no copy of double ones (free to change once the call returns).
   /// They are read in `stream`'s order: a kernel that wrote them on `stream` needs no host
   /// synchronisation before the call. Throws InputError for host pointers.
@@ -256,14 +257,16 @@ class CcdPipeline {
     return r;
   }
 
-  // Positions in device memory: double ones read where they are (the step ends before the call
-  // returns), float ones widened into the step's arrays. Why: the two copies and their launches
-  // came before the step's first kernel, ~20 us of a device-resident cloth-ball step.
+  // Positions in device memory, read where they are (the step ends before the call returns):
+  // double ones throughout; float ones by the refit, and widened into the step's arrays for the
+  // later stages beside it (start_side_work; before a build, or a step in parts, on the step's
+  // stream). Why: the copies or conversions and their launches came before the step's first
+  // kernel, ~20 us of a device-resident cloth-ball step.
   template <class Q>
   void set_device_positions(const Vec3<Q>* device_x0, const Vec3<Q>* device_x1) {
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
     if constexpr (std::is_same<Q, double>::value) step_->use_device_positions(device_x0, device_x1);
-    else step_->set_positions_from_device(device_x0, device_x1, stream_);
+    else step_->widen_later(device_x0, device_x1);
   }
 
   // What the last step's narrow phase (or its parts, gathered) found, on the device.
@@ -383,6 +386,7 @@ class CcdPipeline {
       join_side_work();
       narrow_.drop_positions_ahead();
     }
+    if (streamed_) step_->enqueue_widening(stream_);  // (parts read the positions on the step's stream)
     if (!streamed_) {
       LWSCCD_CUDA_CHECK(cudaEventRecord(mark_[0], stream_));
       LWSCCD_CUDA_CHECK(cudaEventRecord(side_fork_, stream_));  // the positions are in place
@@ -390,8 +394,8 @@ class CcdPipeline {
     lwsccd::detail::run_stage_sequence(*this, step);
   }
 
-  // A whole step's work that reads only the positions (the feature boxes packed by face, the
-  // vertices rounded to float; from side_fork_ on) and the refit's reads (status, cost; after the
+  // A whole step's work that reads only the positions (float ones widened, the feature boxes
+  // packed by face, the vertices rounded to float; from side_fork_ on) and the refit's reads (status, cost; after the
   // refit's kernel), enqueued once the refit's kernel is (after a build: once the traversal is),
   // on side_ beside the refit and the traversal; the feature pairs wait for them (join_side_work).
   // Why: on the step's stream they ran between the refit and the traversal and between the
@@ -400,6 +404,7 @@ class CcdPipeline {
   void start_side_work(bool refit_reads) {
     if (refit_reads) LWSCCD_CUDA_CHECK(cudaEventRecord(side_refit_, stream_));
     LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(side_, side_fork_, 0));
+    step_->enqueue_widening(side_);
     emitter_.enqueue_boxes(step_->x0_data(), step_->x1_data(), side_);
     narrow_.enqueue_positions(features_, step_->x0_data(), step_->x1_data(), side_);
     if (refit_reads) {

@@ -90,9 +90,11 @@ __global__ void radix_tree_kernel(const std::uint64_t* codes, Index n, Index* le
 // and each level's links and range (never written by a refit) are loaded before its arrival.
 // Why: the climb is a chain of dependent memory round trips, ~30-40 levels deep on cloth-ball, and
 // a device-scope arrival with its release costs several of them; in shared memory, about one.
-template <class BV, class P, int kBlock>
+// Positions stored as Q are converted to P as they are loaded (float to double exactly: the same
+// leaves as from widened arrays).
+template <class BV, class P, class Q, int kBlock>
 __global__ void __launch_bounds__(kBlock)
-    bottom_up_kernel(const Face* faces, const index_t* leaf_primitive, index_t n, const Vec3<P>* x0, const Vec3<P>* x1,
+    bottom_up_kernel(const Face* faces, const index_t* leaf_primitive, index_t n, const Vec3<Q>* x0, const Vec3<Q>* x1,
                      const index_t* left, const index_t* right, const index_t* parent, const LeafRange* ranges, BV* bvs,
                      int* arrivals, int* status, typename bv_traits<BV>::scalar_type margin) {
   __shared__ int block_arrivals[kBlock];
@@ -103,12 +105,14 @@ __global__ void __launch_bounds__(kBlock)
   const index_t k = block_first + static_cast<index_t>(threadIdx.x);
   if (k >= n) return;
   const Face f = faces[leaf_primitive[k]];
+  const Vec3<P> pts[6] = {x0[f.v[0]].template cast<P>(), x0[f.v[1]].template cast<P>(), x0[f.v[2]].template cast<P>(),
+                          x1[f.v[0]].template cast<P>(), x1[f.v[1]].template cast<P>(), x1[f.v[2]].template cast<P>()};
   BV bv;
   Vec3<P> center;
-  lwsccd::detail::leaf_volume(f, x0, x1, bv, center, margin);
+  lwsccd::detail::leaf_volume_of_points(pts, bv, center, margin);
   // Each vertex checked, not the box: the box's min and max pass over a NaN coordinate.
   bool finite = is_finite(center);
-  for (int v = 0; v < 3; ++v) finite = finite && is_finite(x0[f.v[v]]) && is_finite(x1[f.v[v]]);
+  for (int v = 0; v < 6; ++v) finite = finite && is_finite(pts[v]);
   if (!finite) status[0] = 1;  // benign race: every writer writes 1
   index_t node = n - 1 + k;
   bvs[node] = bv;
@@ -196,8 +200,30 @@ DeviceStep<P>::DeviceStep(const TriangleMesh& mesh, cudaStream_t stream) : num_v
 template <class P>
 void DeviceStep<P>::use_device_positions(const Vec3<P>* d0, const Vec3<P>* d1) {
   detail::require_device_pointers(d0, d1, "gpu::DeviceStep::use_device_positions");
+  float_source_[0] = float_source_[1] = nullptr;
   in_place_[0] = d0;
   in_place_[1] = d1;
+}
+
+template <class P>
+void DeviceStep<P>::widen_later(const Vec3<float>* d0, const Vec3<float>* d1) {
+  static_assert(std::is_same<P, double>::value, "lwsccd: gpu::DeviceStep::widen_later widens float positions to double");
+  detail::require_device_pointers(d0, d1, "gpu::DeviceStep::widen_later");
+  in_place_[0] = in_place_[1] = nullptr;
+  const auto n = static_cast<std::size_t>(num_vertices);
+  x0.resize_discard(n);
+  x1.resize_discard(n);
+  float_source_[0] = d0;
+  float_source_[1] = d1;
+}
+
+template <class P>
+void DeviceStep<P>::enqueue_widening(cudaStream_t stream) {
+  if (!widening_due()) return;
+  const auto n = static_cast<std::size_t>(num_vertices);
+  detail::convert_points(float_source_[0], x0.data(), n, stream);
+  detail::convert_points(float_source_[1], x1.data(), n, stream);
+  float_source_[0] = float_source_[1] = nullptr;
 }
 
 template <class P>
@@ -206,6 +232,7 @@ void DeviceStep<P>::set_positions_from_device(const Vec3<Q>* d0, const Vec3<Q>* 
   detail::require_position_type<Q>();
   detail::require_device_pointers(d0, d1, "gpu::DeviceStep::set_positions_from_device");
   in_place_[0] = in_place_[1] = nullptr;
+  float_source_[0] = float_source_[1] = nullptr;
   const auto n = static_cast<std::size_t>(num_vertices);
   x0.resize_discard(n);
   x1.resize_discard(n);
@@ -229,6 +256,7 @@ void DeviceStep<P>::set_positions(Span<const Vec3<Q>> h0, Span<const Vec3<Q>> h1
                                                     std::to_string(num_vertices) + " vertices");
   }
   in_place_[0] = in_place_[1] = nullptr;
+  float_source_[0] = float_source_[1] = nullptr;
   const auto n = static_cast<std::size_t>(num_vertices);
   if constexpr (std::is_same<P, Q>::value) {
     // Small arrays go as they are (the driver takes pageable memory at once); large ones through
@@ -337,7 +365,17 @@ void Bvh<BV>::refit(const DeviceStep<P>& step, cudaStream_t stream) {
                                                 " faces, the BVH was built over " + std::to_string(num_leaves_));
   const index_t n = num_leaves_;
   constexpr int kBlock = detail::kRefitBlock;
-  detail::bottom_up_kernel<BV, P, kBlock><<<static_cast<unsigned>((n + kBlock - 1) / kBlock), kBlock, 0, stream>>>(
+  const auto blocks = static_cast<unsigned>((n + kBlock - 1) / kBlock);
+  if constexpr (std::is_same<P, double>::value) {
+    if (step.widening_due()) {  // float positions read where they are (DeviceStep::widen_later)
+      detail::bottom_up_kernel<BV, P, float, kBlock><<<blocks, kBlock, 0, stream>>>(
+          step.faces.data(), leaf_primitive_.data(), n, step.float_source(0), step.float_source(1), left_.data(),
+          right_.data(), parent_.data(), ranges_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
+      LWSCCD_CUDA_CHECK_LAUNCH();
+      return;
+    }
+  }
+  detail::bottom_up_kernel<BV, P, P, kBlock><<<blocks, kBlock, 0, stream>>>(
       step.faces.data(), leaf_primitive_.data(), n, step.x0_data(), step.x1_data(), left_.data(), right_.data(),
       parent_.data(), ranges_.data(), bvs_.data(), arrivals_.data(), status_.data(), leaf_margin_);
   LWSCCD_CUDA_CHECK_LAUNCH();

@@ -86,14 +86,28 @@ LWSCCD_HD Vec3<P> leaf_center(const Face& f, const Vec3<P>* x0, const Vec3<P>* x
   return box.center();
 }
 
+/// Leaf BV of a triangle over the step from its corners at t = 0 (`pts[0..2]`) and t = 1
+/// (`pts[3..5]`), and the centre of its swept AABB (for Morton codes), expanded in leaf_center's
+/// order.
+template <class BV, class P>
+LWSCCD_HD void leaf_volume_of_points(const Vec3<P> (&pts)[6], BV& bv, Vec3<P>& center,
+                                     typename bv_traits<BV>::scalar_type margin = 0) {
+  bv = bv_traits<BV>::fit(pts, 6);
+  if (margin > 0) bv = bv_traits<BV>::inflate(bv, margin);  // proximity queries: see Bvh::set_leaf_margin
+  Aabb<P> box = Aabb<P>::empty();
+  for (int k = 0; k < 3; ++k) {
+    box.expand(pts[k]);
+    box.expand(pts[3 + k]);
+  }
+  center = box.center();
+}
+
 /// Leaf BV of a triangle over the step, and the centre of its swept AABB (for Morton codes).
 template <class BV, class P>
 LWSCCD_HD void leaf_volume(const Face& f, const Vec3<P>* x0, const Vec3<P>* x1, BV& bv, Vec3<P>& center,
                            typename bv_traits<BV>::scalar_type margin = 0) {
   const Vec3<P> pts[6] = {x0[f.v[0]], x0[f.v[1]], x0[f.v[2]], x1[f.v[0]], x1[f.v[1]], x1[f.v[2]]};
-  bv = bv_traits<BV>::fit(pts, 6);
-  if (margin > 0) bv = bv_traits<BV>::inflate(bv, margin);  // proximity queries: see Bvh::set_leaf_margin
-  center = leaf_center(f, x0, x1);
+  leaf_volume_of_points(pts, bv, center, margin);
 }
 
 }  // namespace lwsccd::detail

@@ -37,6 +37,7 @@ template <class BV, class Scheduler, class Method, class T>
 bool CcdPipeline<BV, Scheduler, Method, T>::refit_stage(StepStats& stats, bool wait) {
   bool pending = false;
   if (!built_ || rebuild_due_) {
+    step_->enqueue_widening(stream_);  // (the build reads the positions more than once)
     bvh_.build(*step_, stream_);
     built_ = stats.rebuilt = true;
     rebuild_due_ = false;
