@@ -162,6 +162,13 @@ TEMPLATE_TEST_CASE("GPU LBVH refit from float positions read in place equals the
   bvh.refit(later);
   CHECK_THROWS_WITH(bvh.check_status(), Catch::Contains("NaN"));
   CHECK_THROWS_AS(later.widen_later(f0.data(), d1.data()), InputError);
+  // The widening handed to the caller (the pipeline widens in the kernel that rounds the vertices).
+  later.widen_later(d0.data(), d1.data());
+  const auto sources = later.take_widening();
+  CHECK(sources.first == d0.data());
+  CHECK(sources.second == d1.data());
+  CHECK_FALSE(later.widening_due());
+  CHECK(later.x0_data() == later.x0.data());
 }
 
 TEST_CASE("GPU LBVH: bad input and the rebuild policy", "[gpu][bvh]") {

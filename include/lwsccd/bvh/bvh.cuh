@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "lwsccd/bvh/bvh.hpp"
@@ -67,6 +68,13 @@ struct DeviceStep {
   void widen_later(const Vec3<float>* d0, const Vec3<float>* d1);
   /// Enqueues the widening widen_later left due (nothing otherwise) on `stream`.
   void enqueue_widening(cudaStream_t stream);
+  /// Hands the widening widen_later left due to the caller, who fills x0, x1 from the returned
+  /// arrays itself (e.g. in a kernel that reads them for more); nothing is due afterwards.
+  std::pair<const Vec3<float>*, const Vec3<float>*> take_widening() {
+    const std::pair<const Vec3<float>*, const Vec3<float>*> sources{float_source_[0], float_source_[1]};
+    float_source_[0] = float_source_[1] = nullptr;
+    return sources;
+  }
   bool widening_due() const { return float_source_[0] != nullptr; }
   /// widen_later's arrays (k = 0: x0, 1: x1) while their widening is due, else null.
   const Vec3<float>* float_source(int k) const { return float_source_[k]; }

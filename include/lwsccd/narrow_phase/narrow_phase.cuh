@@ -266,6 +266,13 @@ class NarrowPhase {
   /// skips it; its stream must wait for this one's work.
   template <class P>
   void enqueue_positions(const DeviceMeshFeatures& mesh, const Vec3<P>* x0, const Vec3<P>* x1, cudaStream_t stream = nullptr);
+  /// enqueue_positions of float positions f0, f1 widened to P, with the widening itself: x0, x1
+  /// (num_vertices points each) filled with f0, f1 widened (exactly) by the same kernel. Why:
+  /// float input then costs no launch more than double input (a launch a step's side work holds
+  /// back the traversal's where the refit is short: docs/PIPELINE.md).
+  template <class P>
+  void enqueue_positions_widened(const DeviceMeshFeatures& mesh, const Vec3<float>* f0, const Vec3<float>* f1, Vec3<P>* x0,
+                                 Vec3<P>* x1, cudaStream_t stream = nullptr);
   /// Forgets an enqueue_positions that no enqueue has used (the positions may have changed since).
   void drop_positions_ahead() { positions_ahead_[0] = positions_ahead_[1] = nullptr; }
 

@@ -404,9 +404,14 @@ class CcdPipeline {
   void start_side_work(bool refit_reads) {
     if (refit_reads) LWSCCD_CUDA_CHECK(cudaEventRecord(side_refit_, stream_));
     LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(side_, side_fork_, 0));
-    step_->enqueue_widening(side_);
-    emitter_.enqueue_boxes(step_->x0_data(), step_->x1_data(), side_);
-    narrow_.enqueue_positions(features_, step_->x0_data(), step_->x1_data(), side_);
+    if (step_->widening_due()) {  // float positions: widened by the kernel that rounds the vertices
+      const auto [f0, f1] = step_->take_widening();
+      narrow_.enqueue_positions_widened(features_, f0, f1, step_->x0.data(), step_->x1.data(), side_);
+      emitter_.enqueue_boxes(step_->x0_data(), step_->x1_data(), side_);
+    } else {
+      emitter_.enqueue_boxes(step_->x0_data(), step_->x1_data(), side_);
+      narrow_.enqueue_positions(features_, step_->x0_data(), step_->x1_data(), side_);
+    }
     if (refit_reads) {
       LWSCCD_CUDA_CHECK(cudaStreamWaitEvent(side_, side_refit_, 0));
       bvh_.enqueue_refit_reads(side_);

@@ -155,6 +155,19 @@ __global__ void single_vertices_kernel(const Vec3<P>* x0, const Vec3<P>* x1, std
   LWSCCD_GRID_STRIDE(i, n) out[i] = single_vertex(x0[i], x1[i]);
 }
 
+// Float positions widened to P into x0, x1, and (out not null) each vertex's SingleVertex record
+// of the widened values, in one pass.
+template <class P>
+__global__ void widened_vertices_kernel(const Vec3<float>* f0, const Vec3<float>* f1, std::size_t n, Vec3<P>* x0, Vec3<P>* x1,
+                                        SingleVertex* out) {
+  LWSCCD_GRID_STRIDE(i, n) {
+    const Vec3<P> a = f0[i].template cast<P>(), b = f1[i].template cast<P>();
+    x0[i] = a;
+    x1[i] = b;
+    if (out) out[i] = single_vertex(a, b);
+  }
+}
+
 // Starts a window of a run (one thread). The first: clears the counters and records the inputs'
 // lengths. A later one (mode earliest): skipped when an earlier window holds a hit, else the
 // counters start over (the survivors' peak kept: an overflow there must still be seen).

@@ -67,6 +67,27 @@ void NarrowPhase<Method, T, Policy>::enqueue_positions(const DeviceMeshFeatures&
   positions_ahead_[1] = x1;
 }
 
+template <class Method, class T, class Policy>
+template <class P>
+void NarrowPhase<Method, T, Policy>::enqueue_positions_widened(const DeviceMeshFeatures& mesh, const Vec3<float>* f0,
+                                                               const Vec3<float>* f1, Vec3<P>* x0, Vec3<P>* x1,
+                                                               cudaStream_t stream) {
+  ensure_streams();  // (sms_ for the grid)
+  const std::size_t vertices = static_cast<std::size_t>(mesh.num_vertices);
+  SingleVertex* out = nullptr;
+  if constexpr (kSingleFirst) {
+    single_.resize_discard(std::max<std::size_t>(vertices, 1));
+    out = single_.data();
+  }
+  const unsigned blocks = grid_for(vertices, 256, 8);
+  if (blocks > 0) {
+    detail::widened_vertices_kernel<P><<<blocks, 256, 0, stream>>>(f0, f1, vertices, x0, x1, out);
+    LWSCCD_CUDA_CHECK_LAUNCH();
+  }
+  positions_ahead_[0] = x0;
+  positions_ahead_[1] = x1;
+}
+
 // `stream` waits for both lists' work so far; the lists then wait for `stream`.
 template <class Method, class T, class Policy>
 void NarrowPhase<Method, T, Policy>::join_lists(cudaStream_t stream) {
