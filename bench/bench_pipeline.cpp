@@ -5,8 +5,8 @@
 // The default sweep adds, on the GPU: a second pipeline's first step on new memory (first2, the
 // median of five), device-resident steady steps (device), host-to-host steady steps into one kept
 // result (kept), both again from the positions rounded to float (device-f32, kept-f32: float32
-// input; device-f32-as-f64: the same rounded positions as double, step for step beside
-// device-f32), and fresh steps, device-resident, each after a step of another configuration of
+// input; device-f32-as-f64, kept-f32-as-f64: the same rounded positions as double, step for step
+// beside them), and fresh steps, device-resident, each after a step of another configuration of
 // the mesh, from that stale front (fresh) or from the root (fresh-root), and a pipeline's first
 // step made after the scene's others are gone (first-warm: their device blocks in the process's
 // cache).
@@ -227,6 +227,11 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       for (std::size_t v = 0; v < x.size(); ++v) out[v] = x[v].cast<float>();
       return out;
     };
+    const auto widened = [](const std::vector<lwsccd::Vec3f>& x) {
+      std::vector<lwsccd::Vec3d> out(x.size());
+      for (std::size_t v = 0; v < x.size(); ++v) out[v] = x[v].cast<double>();
+      return out;
+    };
     const std::vector<ccd_app::StepOutcome> kept_outcomes = std::move(outcomes);
     {
       // Beside it, in a pipeline of its own, step for step (each step's two in turn, the first
@@ -234,11 +239,6 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       // the two rows differ by the input's type alone, the work being the same.
       auto p = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
       auto p64 = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
-      const auto widened = [](const std::vector<lwsccd::Vec3f>& x) {
-        std::vector<lwsccd::Vec3d> out(x.size());
-        for (std::size_t v = 0; v < x.size(); ++v) out[v] = x[v].cast<double>();
-        return out;
-      };
       outcomes.clear();
       std::vector<ccd_app::StepOutcome> as_f64;
       for (std::size_t i = 0; i < steps; ++i) {
@@ -263,20 +263,34 @@ void measure(const Scenario& sc, const std::string& sweep, const ccd_app::Policy
       rows.push_back(r64);
     }
     {
+      // Host to host, paired the same way (kept-f32-as-f64: the rounded positions as double).
       auto p = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
+      auto p64 = ccd_app::make_gpu_pipeline(sc.mesh, sc.layout, params, policies);
       outcomes.clear();
-      lwsccd::StepOutcome kept;
+      std::vector<ccd_app::StepOutcome> as_f64;
+      lwsccd::StepOutcome kept, kept64;
       for (std::size_t i = 0; i < steps; ++i) {
         const lwsccd::Step step = sc.step(i);
         const std::vector<lwsccd::Vec3f> f0 = rounded(step.x0), f1 = rounded(step.x1);
-        p->step_into(lwsccd::Span<const lwsccd::Vec3f>(f0), lwsccd::Span<const lwsccd::Vec3f>(f1), kept);
-        ccd_app::StepOutcome o;
-        o.stats = kept.stats;
-        outcomes.push_back(std::move(o));
+        const std::vector<lwsccd::Vec3d> d0 = widened(f0), d1 = widened(f1);
+        for (int k = 0; k < 2; ++k) {
+          const bool as_float = (k == 0) == (i % 2 == 0);
+          if (as_float)
+            p->step_into(lwsccd::Span<const lwsccd::Vec3f>(f0), lwsccd::Span<const lwsccd::Vec3f>(f1), kept);
+          else
+            p64->step_into(lwsccd::Span<const lwsccd::Vec3d>(d0), lwsccd::Span<const lwsccd::Vec3d>(d1), kept64);
+          ccd_app::StepOutcome o;
+          o.stats = as_float ? kept.stats : kept64.stats;
+          (as_float ? outcomes : as_f64).push_back(std::move(o));
+        }
       }
       Row r = make_row("kept-f32", 1, outcomes.size());
       r.has_truth = false;
       rows.push_back(r);
+      std::swap(outcomes, as_f64);
+      Row r64 = make_row("kept-f32-as-f64", 1, outcomes.size());
+      r64.has_truth = false;
+      rows.push_back(r64);
     }
     outcomes = kept_outcomes;
   }

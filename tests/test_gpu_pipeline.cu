@@ -538,8 +538,10 @@ TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pi
   for (const PipelineParams& params : {PipelineParams{}, rebuilding, in_parts}) {
     INFO("rebuild_factor " << params.rebuild_factor << ", part_pairs " << params.part_pairs);
     gpu::CcdPipeline<> pipeline(scene.step.mesh, scene.layout, params);
+    // Host float arrays take the same route (uploaded as float, the refit reading them in place).
+    gpu::CcdPipeline<> host_pipeline(scene.step.mesh, scene.layout, params);
     cpu::CcdPipeline<> reference(scene.step.mesh, scene.layout, params);
-    std::size_t rebuilt = 0;
+    std::size_t rebuilt = 0, host_rebuilt = 0;
     for (int s = 0; s < 4; ++s) {
       INFO("step " << s);
       d1.upload(s % 2 ? f1 : half_f1);
@@ -548,7 +550,14 @@ TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pi
       require_same_contacts(d, expected);
       require_same_contacts(d, s % 2 ? c : half);
       rebuilt += d.stats.rebuilt;
+      const auto h = host_pipeline.step(f0, s % 2 ? f1 : half_f1);
+      require_same_contacts(h, expected);
+      lwsccd_test::require_same_counts(h.contacts.ee_counts, expected.contacts.ee_counts);
+      host_rebuilt += h.stats.rebuilt;
     }
+    CHECK(host_rebuilt == rebuilt);
+    // The float array the host input crossed into is counted with the mesh's positions.
+    CHECK(host_pipeline.memory_use().mesh >= pipeline.memory_use().mesh + 2 * f0.size() * sizeof(Vec3f));
     std::printf("float device positions (rebuild_factor %.1f, part_pairs %zu): %zu of 4 steps built the BVH\n",
                 params.rebuild_factor, params.part_pairs, rebuilt);
     if (params.rebuild_factor == 1) CHECK(rebuilt >= 2);  // (the first step's build and one after a costlier refit)
@@ -556,8 +565,12 @@ TEST_CASE("GPU pipeline from float positions, host and device, equals the CPU pi
     nan[23].z = std::numeric_limits<float>::quiet_NaN();
     d1.upload(nan);
     CHECK_THROWS_AS(pipeline.step_from_device(d0.data(), d1.data()), InputError);
+    CHECK_THROWS_AS(host_pipeline.step(f0, nan), InputError);
     d1.upload(f1);
     require_same_contacts(pipeline.step_from_device(d0.data(), d1.data()), c);
+    require_same_contacts(host_pipeline.step(f0, f1), c);
+    CHECK_THROWS_AS(host_pipeline.step(f0, std::vector<Vec3f>(f1.begin(), f1.end() - 1)), InputError);
+    require_same_contacts(host_pipeline.step(f0, half_f1), half);
   }
 }
 

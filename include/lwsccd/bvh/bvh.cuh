@@ -66,6 +66,13 @@ struct DeviceStep {
   /// Why: widening both arrays before the refit delayed a float step's first kernel. Throws
   /// InputError unless both point to device (or managed) memory.
   void widen_later(const Vec3<float>* d0, const Vec3<float>* d1);
+  /// Float host positions for a double step: uploaded as float (half the bytes) into the step's
+  /// own device array and left to widen later, as widen_later leaves device ones (the refit reads
+  /// them in place; enqueue_widening or take_widening fills x0, x1). Validated as set_positions;
+  /// the host arrays may change once it returns. The array stays in use until the widening has run.
+  void upload_to_widen_later(Span<const Vec3<float>> h0, Span<const Vec3<float>> h1, cudaStream_t stream = nullptr);
+  /// Device bytes of the float input's array (set_positions' and upload_to_widen_later's).
+  std::size_t float_input_bytes() const { return wide_.capacity_bytes(); }
   /// Enqueues the widening widen_later left due (nothing otherwise) on `stream`.
   void enqueue_widening(cudaStream_t stream);
   /// Hands the widening widen_later left due to the caller, who fills x0, x1 from the returned
@@ -91,6 +98,7 @@ struct DeviceStep {
   const Vec3<float>* float_source_[2] = {nullptr, nullptr};  ///< widen_later's arrays while due
   std::vector<Vec3<P>> staging_;   // double input rounded to float on the host (half the bytes to copy)
   DeviceBuffer<Vec3<float>> wide_;  // float input for double positions, widened on the device
+  void require_sizes(std::size_t n0, std::size_t n1) const;
 };
 
 template <class BV>

@@ -194,7 +194,8 @@ class CcdPipeline {
   /// The same bytes by what they are held for (StepStats::device_memory reports it after a step).
   DeviceMemoryUse memory_use() const {
     DeviceMemoryUse m;
-    if (step_) m.mesh = step_->faces.capacity_bytes() + step_->x0.capacity_bytes() + step_->x1.capacity_bytes();
+    if (step_)
+      m.mesh = step_->faces.capacity_bytes() + step_->x0.capacity_bytes() + step_->x1.capacity_bytes() + step_->float_input_bytes();
     m.mesh += face_body_.capacity_bytes() + node_body_.capacity_bytes() + body_changes_.capacity_bytes() +
               self_collides_.capacity_bytes();
     m.bvh = bvh_.device_bytes();
@@ -221,7 +222,11 @@ class CcdPipeline {
     const auto start = std::chrono::steady_clock::now();
     stream_ = stream;
     if (!step_) step_ = std::make_unique<DeviceStep<double>>(*mesh_, stream_);
-    step_->set_positions(x0, x1, stream_);
+    // Float input crosses as float and is then handled as float device positions are (the refit
+    // reads it in place, the vertices' rounding for the narrow phase widens it): no kernel more
+    // than a double step.
+    if constexpr (std::is_same<Q, float>::value) step_->upload_to_widen_later(x0, x1, stream_);
+    else step_->set_positions(x0, x1, stream_);
     run_step(result, start);
   }
   template <class Q>

@@ -218,6 +218,28 @@ void DeviceStep<P>::widen_later(const Vec3<float>* d0, const Vec3<float>* d1) {
 }
 
 template <class P>
+void DeviceStep<P>::require_sizes(std::size_t n0, std::size_t n1) const {
+  for (int k = 0; k < 2; ++k) {
+    const std::size_t n = k == 0 ? n0 : n1;
+    if (n != static_cast<std::size_t>(num_vertices))
+      throw InputError("gpu::DeviceStep", k == 0 ? "x0" : "x1",
+                       "has " + std::to_string(n) + " positions, the mesh has " + std::to_string(num_vertices) + " vertices");
+  }
+}
+
+template <class P>
+void DeviceStep<P>::upload_to_widen_later(Span<const Vec3<float>> h0, Span<const Vec3<float>> h1, cudaStream_t stream) {
+  static_assert(std::is_same<P, double>::value, "lwsccd: gpu::DeviceStep::upload_to_widen_later widens float positions to double");
+  require_sizes(h0.size(), h1.size());
+  // Both arrays in one buffer: the second upload need not wait for a conversion of the first.
+  const auto n = static_cast<std::size_t>(num_vertices);
+  wide_.resize_discard(2 * n);
+  HostStaging<>::to_device(wide_.data(), h0.data(), n * sizeof(Vec3<float>), stream);
+  HostStaging<>::to_device(wide_.data() + n, h1.data(), n * sizeof(Vec3<float>), stream);
+  widen_later(wide_.data(), wide_.data() + n);
+}
+
+template <class P>
 void DeviceStep<P>::enqueue_widening(cudaStream_t stream) {
   if (!widening_due()) return;
   const auto n = static_cast<std::size_t>(num_vertices);
@@ -249,12 +271,7 @@ template <class P>
 template <class Q>
 void DeviceStep<P>::set_positions(Span<const Vec3<Q>> h0, Span<const Vec3<Q>> h1, cudaStream_t stream) {
   detail::require_position_type<Q>();
-  for (const auto* h : {&h0, &h1}) {
-    const char* name = h == &h0 ? "x0" : "x1";
-    if (h->size() != static_cast<std::size_t>(num_vertices))
-      throw InputError("gpu::DeviceStep", name, "has " + std::to_string(h->size()) + " positions, the mesh has " +
-                                                    std::to_string(num_vertices) + " vertices");
-  }
+  require_sizes(h0.size(), h1.size());
   in_place_[0] = in_place_[1] = nullptr;
   float_source_[0] = float_source_[1] = nullptr;
   const auto n = static_cast<std::size_t>(num_vertices);
