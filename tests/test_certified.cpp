@@ -509,6 +509,40 @@ TEST_CASE("single precision: FP32 first never contradicts the double path", "[na
   CHECK(differ == 0);
 }
 
+TEST_CASE("single precision: the filter on one thread (route_single) decides exactly what decides_single decides",
+          "[narrow][certified][single]") {
+  // The GPU's one-thread form of the float filter: a miss where decides_single is true, else a
+  // route; the whole search only for a pair with an interval inside in float (and only where asked).
+  std::mt19937_64 rng(11);
+  std::size_t pairs = 0, differ = 0, misses = 0, whole = 0, whole_unasked = 0, deeper_differ = 0;
+  const CcdParams<float> params = detail::single_params(CcdParams<double>{});
+  auto check = [&](const auto& q) {
+    using Filter = detail::CertifiedFilter<CertifiedPolicy>;
+    const bool decided = Filter::decides_single(q, CcdParams<double>{});
+    const detail::SingleRoute route = Filter::route_single(q, params, false, true);
+    differ += decided != (route == detail::SingleRoute::miss);
+    misses += decided;
+    whole += route == detail::SingleRoute::whole_search;
+    whole_unasked += Filter::route_single(q, params, false, false) == detail::SingleRoute::whole_search;
+    // The first round alone (no second round), likewise.
+    using FirstOnly = detail::CertifiedFilter<SingleFirstRoundPolicy>;
+    deeper_differ += FirstOnly::decides_single(q, CcdParams<double>{}) !=
+                     (FirstOnly::route_single(q, params, false, true) == detail::SingleRoute::miss);
+    ++pairs;
+  };
+  for (int n = 0; n < 20000; ++n) {
+    const auto [vf, ee] = near_contact_pairs(rng, 30);
+    check(vf);
+    check(ee);
+  }
+  std::printf("  near-contact pairs: %zu, the float filter's misses %zu, sent to the whole search %zu\n", pairs, misses, whole);
+  CHECK(misses > pairs / 20);
+  CHECK(whole > 0);
+  CHECK(whole_unasked == 0);
+  CHECK(differ == 0);
+  CHECK(deeper_differ == 0);
+}
+
 TEST_CASE("certified path: the certain descent agrees with the halving search and contains the TOI", "[narrow][certified]") {
   // Vertices through a moving triangle and edges through moving edges at random (dyadic) times
   // and places, inside and just beside: the descent decides most contacts, and must give the

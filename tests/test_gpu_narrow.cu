@@ -22,13 +22,25 @@ namespace {
 
 // The certified filters' interval lists with almost no room (single precision's, and one entry
 // for the double filter's): their pairs go to the whole search.
+// (The single-precision filter in its four kernels, whose lists these are.)
 struct TinyFilterRoom : gpu::NarrowPhasePolicy {
   static constexpr int kFilterRoomPercent = 1;
   static constexpr int kDoubleAfterSingleRoomPercent = 0;
+  static constexpr int kSingleFilterOneThreadPerSm = 0;
 };
 struct TinyDeepRoom : gpu::NarrowPhasePolicy {
   static constexpr int kDeepRoomPercent = 1;
   static constexpr int kDoubleAfterSingleRoomPercent = 0;
+  static constexpr int kSingleFilterOneThreadPerSm = 0;
+};
+// The single-precision filter as a thread a pair listing its intervals and a thread an interval
+// testing them, and on one thread a pair, whatever the lists' lengths (the default plans one of
+// the two from them).
+struct SingleFilterInFourKernels : gpu::NarrowPhasePolicy {
+  static constexpr int kSingleFilterOneThreadPerSm = 0;
+};
+struct SingleFilterOnOneThread : gpu::NarrowPhasePolicy {
+  static constexpr int kSingleFilterOneThreadPerSm = 1 << 20;
 };
 // The certified path in double alone (no single-precision pass).
 struct DoubleOnlyCertified : CertifiedPolicy {
@@ -137,6 +149,11 @@ TEST_CASE("GPU narrow phase equals the CPU backend on a folded cloth, with a gro
     std::size_t reruns = 1;
     compare_backends<CertifiedCcd, double>(m.mesh, m.x0, m.x1, fp, 1, mode, &reruns);
     CHECK(reruns == 0);
+    // The single-precision filter in either form: the same answers and counts.
+    compare_backends<CertifiedCcd, double, SingleFilterInFourKernels>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, float, SingleFilterInFourKernels>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, double, SingleFilterOnOneThread>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, float, SingleFilterOnOneThread>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
   }
   // Intervals that do not fit the filter's list: those pairs are searched whole, same answers.
   compare_backends<CertifiedCcd, double, TinyFilterRoom>(m.mesh, m.x0, m.x1, fp, 1 << 16);

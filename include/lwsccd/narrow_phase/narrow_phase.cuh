@@ -138,6 +138,17 @@ struct NarrowPhasePolicy {
   /// alike; the double screen still runs first). Only pairs the float filter fails take the
   /// double filter's kernels.
   static constexpr bool kSingleInsideWhole = true;
+  /// FP32 first: a list whose last run's screen passed fewer pairs than this many per SM runs the
+  /// single-precision filter's two rounds on one thread a pair (single_route_kernel, the pair's
+  /// float query gathered once), instead of a thread a pair listing its intervals and a thread an
+  /// interval testing them (four kernels). Its pairs have about one interval each (cloth-ball:
+  /// 1.04 in the first round, half of them tested again below), so one thread keeps most lanes
+  /// busy; but in a long edge-edge list the four kernels' denser inside tests win (NVIDIA H200,
+  /// the float filter's kernels in a trace of the steady step: cloth-ball's edge-edge list 207 us
+  /// in four kernels against 230 on one thread, armadillo-rollers' 94 against 116; cloth-ball's
+  /// vertex-face list 97 against 69, cloth-funnel's two lists 23 and 25 against 8 and 11). The
+  /// same answers and counts either way; 0: always the four kernels.
+  static constexpr int kSingleFilterOneThreadPerSm = 1024;
   /// Kernels whose input length is read on the device loop over it (grid-stride) in a grid of
   /// this many blocks per SM (or fewer, where the input's room is smaller).
   static constexpr int kGridBlocksPerSm = 16;
@@ -435,6 +446,12 @@ class NarrowPhase {
     return l.early_candidates == kUnknownCandidates ? l.early_room : std::max<std::size_t>(std::min(l.early_candidates, l.early_room), 1);
   }
   static constexpr std::size_t kUnknownCandidates = static_cast<std::size_t>(-1);
+  // Whether this run's single-precision filter runs on one thread a pair (kSingleFilterOneThreadPerSm):
+  // planned from the last run's survivors, before a first run from their room (its count).
+  bool single_filter_on_one_thread(const List& l) const {
+    const std::size_t survivors = l.survivors_seen > 0 ? l.survivors_seen : l.work_room;
+    return survivors < static_cast<std::size_t>(sms_) * static_cast<std::size_t>(Policy::kSingleFilterOneThreadPerSm);
+  }
   // The single-precision filter's second round (CertifiedPolicy::kSingleSecondRound) runs wherever
   // its first does, as on the CPU (CertifiedFilter::decides_single).
   static constexpr bool single_second_round(CcdMode mode) {

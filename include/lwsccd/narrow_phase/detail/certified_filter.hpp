@@ -33,6 +33,26 @@ struct Noted {
   T lower = T(0);
 };
 
+/// The index of x's lowest set bit (x != 0).
+LWSCCD_HD inline unsigned lowest_bit(std::uint32_t x) {
+#if defined(__CUDA_ARCH__)
+  return static_cast<unsigned>(__ffs(static_cast<int>(x)) - 1);
+#elif defined(__GNUC__)
+  return static_cast<unsigned>(__builtin_ctz(x));
+#else
+  unsigned k = 0;
+  while (!((x >> k) & 1u)) ++k;
+  return k;
+#endif
+}
+
+/// Where the single-precision filter sends a pair it does not decide (CertifiedFilter::route_single).
+enum class SingleRoute : unsigned char {
+  miss,           ///< every interval certainly outside in float: a miss of the input as given
+  double_filter,  ///< to the double filter
+  whole_search,   ///< an interval inside in float (a contact, nearly always): to the whole search
+};
+
 template <class Policy>
 struct CertifiedFilter {
   static constexpr int kLevel = Policy::kInsideFrom;
@@ -245,6 +265,44 @@ struct CertifiedFilter {
         if (((deep >> local) & 1u) && verdict_of(s, deep_node(node, local)) != InsideVerdict::outside) return false;
     }
     return true;
+  }
+  /// decides_single's tests on one thread, in the same order, with where a pair it does not
+  /// decide goes: SingleRoute::miss exactly where decides_single is true; otherwise the first
+  /// interval (by its number) not certainly outside in float, or not outside below it in the
+  /// second round, sends the pair to the whole search where it is inside in float and
+  /// `inside_whole`, else to the double filter. (Any route gives the same answer: the double
+  /// filter decides only what the search decides alike.) `separation_tried` as intervals_single's.
+  /// `whole_step`, when given, is set where the one interval left is the whole step and is not
+  /// certainly outside (motion coplanar in float over the step).
+  template <class Q>
+  LWSCCD_HD static SingleRoute route_single(const Q& q, const CcdParams<float>& params, bool separation_tried, bool inside_whole,
+                                            bool* whole_step = nullptr) {
+    if (whole_step) *whole_step = false;
+    if (!single_passes_apply(params)) return SingleRoute::double_filter;
+    const auto s = relative_single(q);
+    BernsteinPiece<float> root;
+    std::uint32_t mask = 0;
+    const int count = intervals_of(s, params, mask, &root, !separation_tried);
+    if (count < 0) return SingleRoute::double_filter;
+    const bool deeper = Policy::kSingleSecondRound && expandable(count) && params.mode != CcdMode::set &&
+                        !(params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1));
+    const auto route = [inside_whole](InsideVerdict v) {
+      return inside_whole && v == InsideVerdict::inside ? SingleRoute::whole_search : SingleRoute::double_filter;
+    };
+    for (std::uint32_t left = mask; left != 0u; left &= left - 1u) {
+      const unsigned node = lowest_bit(left);
+      const InsideVerdict v = verdict_of(s, node);
+      if (v == InsideVerdict::outside) continue;
+      if (whole_step && count == 1 && node == kWholeStepNode) *whole_step = true;
+      if (v != InsideVerdict::unknown || !deeper || node < (1u << kLevel) || node >= (2u << kLevel)) return route(v);
+      std::uint32_t deep = 0;
+      if (expand_piece(root, params, node, deep) < 0) return SingleRoute::double_filter;
+      for (; deep != 0u; deep &= deep - 1u) {
+        const InsideVerdict d = verdict_of(s, deep_node(node, lowest_bit(deep)));
+        if (d != InsideVerdict::outside) return route(d);
+      }
+    }
+    return SingleRoute::miss;
   }
 
  private:

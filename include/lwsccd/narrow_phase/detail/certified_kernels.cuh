@@ -260,21 +260,26 @@ __device__ inline void keep_for_double(unsigned long long* counters, std::pair<i
 // straight to the whole search instead: listed from the top of `double_kept` (both ends take
 // their slots from the list's `room`, so they never meet) and deferred; refine_deferred_kernel
 // runs the double screen on it first, as the double filter would have.
+__device__ inline void send_on_from_single(const std::pair<index_t, index_t>& p, unsigned long long* counters,
+                                           std::pair<index_t, index_t>* double_kept, std::size_t room, unsigned* deferred,
+                                           bool whole) {
+  if (!take_kept_slot(counters, room)) return;  // (the run is repeated with more room)
+  if (!whole) {
+    append_pair(counters + kDoubleKept, double_kept, p);
+    return;
+  }
+  const auto at = static_cast<unsigned>(room - 1 - append_index(counters + kSingleWhole));
+  double_kept[at].first = p.first;  // (std::pair's assignment is host-only before C++20)
+  double_kept[at].second = p.second;
+  deferred[append_index(counters + kDeferred)] = at;
+}
 __device__ inline void fail_single(unsigned i, unsigned* failed, unsigned long long* counters,
                                    const std::pair<index_t, index_t>* kept, std::pair<index_t, index_t>* double_kept,
                                    std::size_t room, unsigned* deferred = nullptr, bool whole = false) {
   const unsigned bit = 1u << (i & 31u);
   if (atomicOr(failed + (i >> 5), bit) & bit) return;
   append_index(counters + kSingleFailed);
-  if (!take_kept_slot(counters, room)) return;  // (the run is repeated with more room)
-  if (!whole) {
-    append_pair(counters + kDoubleKept, double_kept, kept[i]);
-    return;
-  }
-  const auto at = static_cast<unsigned>(room - 1 - append_index(counters + kSingleWhole));
-  double_kept[at].first = kept[i].first;  // (std::pair's assignment is host-only before C++20)
-  double_kept[at].second = kept[i].second;
-  deferred[append_index(counters + kDeferred)] = at;
+  send_on_from_single(kept[i], counters, double_kept, room, deferred, whole);
 }
 // Whether entry `at` of the double filter's list came straight from the single-precision filter.
 __device__ inline bool sent_whole(unsigned at, std::size_t room, const unsigned long long* counters) {
@@ -349,6 +354,40 @@ __global__ void single_filter_kernel(MeshFeatures mesh, const SingleVertex* sing
     }
     if (decided) append_index(counters + kSingleMisses);
     else keep_for_double(counters, double_kept, kept_room, kept[i]);
+  }
+}
+
+// The single-precision filter on one thread a pair (NarrowPhasePolicy::kSingleFilterOneThreadPerSm):
+// CertifiedFilter::route_single, both rounds' inside tests on the pair's float query as the thread
+// holds it. A miss is counted (kSingleMisses); any other pair goes to the double filter, or with
+// kInsideWhole, one inside in float straight to the whole search. A pair coplanar over the whole
+// step in float and not outside there goes to the early searches where they have room, as in
+// single_filter_kernel.
+template <class Method, bool kVertexFace, class T, bool kInsideWhole>
+__global__ void single_route_kernel(MeshFeatures mesh, const SingleVertex* single, const std::pair<index_t, index_t>* kept,
+                                    std::size_t room, CcdParams<T> params, const unsigned long long* control,
+                                    unsigned long long* counters, std::pair<index_t, index_t>* double_kept, std::size_t kept_room,
+                                    unsigned* deferred, std::pair<index_t, index_t>* early, std::size_t early_room) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  using lwsccd::detail::SingleRoute;
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
+  if (control[kSkip]) return;
+  const CcdParams<float> single_params = lwsccd::detail::single_params(params);
+  const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
+  LWSCCD_GRID_STRIDE(i, n) {
+    bool whole_step = false;
+    // (The screen tried the separating directions.)
+    const SingleRoute route =
+        Filter::route_single(gather_single_query<kVertexFace>(mesh, single, kept[i]), single_params, true, kInsideWhole, &whole_step);
+    if (whole_step) {
+      append_index(counters + kEarlyCandidates);  // (whatever the route: the next run's plan)
+      if (early_room > 0) {
+        send_early(counters, early, early_room, double_kept, kept_room, kept[i]);
+        continue;
+      }
+    }
+    if (route == SingleRoute::miss) append_index(counters + kSingleMisses);
+    else send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, route == SingleRoute::whole_search);
   }
 }
 

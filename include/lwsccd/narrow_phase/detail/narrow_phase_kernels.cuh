@@ -151,11 +151,12 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
         l.intervals.resize_discard(l.interval_room);
         l.listed.resize_discard((l.refine_room + 31) / 32);
         if (kSingleFirst) {
+          l.double_kept.resize_discard(l.refine_room);
+          // (The lists of the four kernels, whichever form this run takes.)
           l.single_interval_room =
               std::max(l.single_interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
           l.single_intervals.resize_discard(l.single_interval_room);
           l.single_failed.resize_discard((l.work_room + 31) / 32);
-          l.double_kept.resize_discard(l.refine_room);
           if (single_second_round(params.mode)) {
             l.single_expanded.resize_discard(l.single_interval_room);
             l.single_deep_room = std::max(l.single_deep_room, std::max<std::size_t>(l.work_room / 100 * Policy::kDeepRoomPercent, 1));
@@ -319,13 +320,20 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
     if (Policy::kRefineFilter && params.mode != CcdMode::set) {
       if constexpr (kSingleFirst) {
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
-        const bool single_deeper = single_second_round(params.mode);
+        const bool one_thread = single_filter_on_one_thread(l);
+        const bool single_deeper = !one_thread && single_second_round(params.mode);
         record(out, lp, [=](List& l) {
-          chain(detail::single_filter_kernel<Method, kVertexFace, T>,
-                grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
-                  mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
-                  l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room, l.early.data(),
-                  l.early_room);
+          if (one_thread)
+            chain(detail::single_route_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>,
+                  grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
+                    mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
+                    l.double_kept.data(), l.refine_room, l.deferred.data(), l.early.data(), l.early_room);
+          else
+            chain(detail::single_filter_kernel<Method, kVertexFace, T>,
+                  grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
+                    mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
+                    l.single_intervals.data(), l.single_interval_room, l.double_kept.data(), l.refine_room, l.early.data(),
+                    l.early_room);
         });
         if (early) {  // the early searches, beside the rest of the chain (joined before the undecided are settled)
           record(out, lp, [=](List& l) {
@@ -341,13 +349,15 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
             LWSCCD_CUDA_CHECK(cudaEventRecord(l.early_done, l.early_stream));
           });
         }
-        record(out, lp, [=](List& l) {
-          LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
-          chain(detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>, single_blocks, Policy::kBlock, l.stream,
-              mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
-              l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
-              single_deeper ? l.single_expanded.data() : nullptr);
-        });
+        if (!one_thread) {
+          record(out, lp, [=](List& l) {
+            LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
+            chain(detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>, single_blocks, Policy::kBlock, l.stream,
+                mesh, single_.data(), l.survivors.data(), l.refine_room, control_.data(), l.counters.data(), detail::kSingleIntervals,
+                l.single_intervals.data(), l.single_interval_room, l.single_failed.data(), l.double_kept.data(), l.deferred.data(),
+                single_deeper ? l.single_expanded.data() : nullptr);
+          });
+        }
         if (single_deeper) {
           record(out, lp, [=](List& l) {
             chain(detail::single_expand_kernel<Method, kVertexFace, T>, single_blocks, Policy::kBlock, l.stream,
