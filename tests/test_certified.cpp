@@ -509,25 +509,63 @@ TEST_CASE("single precision: FP32 first never contradicts the double path", "[na
   CHECK(differ == 0);
 }
 
-TEST_CASE("single precision: the filter on one thread (route_single) decides exactly what decides_single decides",
+// The listed form of the single-precision filter, as the GPU's kernels run it apart (a thread a
+// pair lists the intervals, a thread an interval tests them, a thread an unknown one lists its
+// pieces): true where every interval left is certainly outside in float; `inside` is set where an
+// interval (of either round) is certainly inside.
+template <class Policy, class Q>
+bool listed_filter_decides(const Q& q, const CcdParams<float>& params, bool& inside) {
+  using Filter = detail::CertifiedFilter<Policy>;
+  inside = false;
+  std::uint32_t mask = 0;
+  const int count = Filter::intervals_single(q, params, mask);
+  if (count < 0) return false;
+  bool decided = true;
+  for (unsigned node = 0; node < 32; ++node) {
+    if (!((mask >> node) & 1u)) continue;
+    const detail::InsideVerdict v = Filter::inside_single(q, node);
+    inside = inside || v == detail::InsideVerdict::inside;
+    if (v == detail::InsideVerdict::outside) continue;
+    std::uint32_t deep = 0;
+    if (v != detail::InsideVerdict::unknown || !Filter::expandable(count) || (node >> Filter::kLevel) != 1u ||
+        Filter::expand_single(q, params, node, deep) < 0) {
+      decided = false;
+      continue;
+    }
+    for (unsigned local = 0; local < 32; ++local) {
+      if (!((deep >> local) & 1u)) continue;
+      const detail::InsideVerdict d = Filter::inside_single(q, Filter::deep_node(node, local));
+      inside = inside || d == detail::InsideVerdict::inside;
+      decided = decided && d == detail::InsideVerdict::outside;
+    }
+  }
+  return decided;
+}
+
+TEST_CASE("single precision: the filter on one thread (route_single) decides what its listed form decides",
           "[narrow][certified][single]") {
-  // The GPU's one-thread form of the float filter: a miss where decides_single is true, else a
-  // route; the whole search only for a pair with an interval inside in float (and only where asked).
+  // The GPU runs the float filter either way: on one thread a pair (route_single, which
+  // decides_single also is) or listed (intervals_single, inside_single, expand_single, a thread
+  // each). A miss exactly where the listed form finds every interval outside; the whole search
+  // only for a pair with an interval inside in float, and only where asked.
   std::mt19937_64 rng(11);
-  std::size_t pairs = 0, differ = 0, misses = 0, whole = 0, whole_unasked = 0, deeper_differ = 0;
+  std::size_t pairs = 0, differ = 0, misses = 0, whole = 0, whole_unasked = 0, whole_not_inside = 0, first_only_differ = 0;
   const CcdParams<float> params = detail::single_params(CcdParams<double>{});
   auto check = [&](const auto& q) {
     using Filter = detail::CertifiedFilter<CertifiedPolicy>;
-    const bool decided = Filter::decides_single(q, CcdParams<double>{});
+    bool inside = false;
+    const bool decided = listed_filter_decides<CertifiedPolicy>(q, params, inside);
     const detail::SingleRoute route = Filter::route_single(q, params, false, true);
     differ += decided != (route == detail::SingleRoute::miss);
+    differ += decided != Filter::decides_single(q, CcdParams<double>{});
     misses += decided;
     whole += route == detail::SingleRoute::whole_search;
+    whole_not_inside += route == detail::SingleRoute::whole_search && !inside;
     whole_unasked += Filter::route_single(q, params, false, false) == detail::SingleRoute::whole_search;
     // The first round alone (no second round), likewise.
     using FirstOnly = detail::CertifiedFilter<SingleFirstRoundPolicy>;
-    deeper_differ += FirstOnly::decides_single(q, CcdParams<double>{}) !=
-                     (FirstOnly::route_single(q, params, false, true) == detail::SingleRoute::miss);
+    first_only_differ += listed_filter_decides<SingleFirstRoundPolicy>(q, params, inside) !=
+                         (FirstOnly::route_single(q, params, false, true) == detail::SingleRoute::miss);
     ++pairs;
   };
   for (int n = 0; n < 20000; ++n) {
@@ -539,8 +577,9 @@ TEST_CASE("single precision: the filter on one thread (route_single) decides exa
   CHECK(misses > pairs / 20);
   CHECK(whole > 0);
   CHECK(whole_unasked == 0);
+  CHECK(whole_not_inside == 0);
   CHECK(differ == 0);
-  CHECK(deeper_differ == 0);
+  CHECK(first_only_differ == 0);
 }
 
 TEST_CASE("certified path: the certain descent agrees with the halving search and contains the TOI", "[narrow][certified]") {

@@ -169,6 +169,21 @@ TEMPLATE_TEST_CASE("GPU LBVH refit from float positions read in place equals the
   CHECK(sources.second == d1.data());
   CHECK_FALSE(later.widening_due());
   CHECK(later.x0_data() == later.x0.data());
+  // Host floats: set_positions widens them at once, upload_to_widen_later leaves them due; both
+  // give the widened arrays. A wrong size is an InputError naming the array.
+  gpu::DeviceStep<double> host(m.mesh);
+  host.set_positions(f1, f0);
+  CHECK_FALSE(host.widening_due());
+  CHECK(host.x0.download() == widened.x0.download());
+  CHECK(host.x1.download() == widened.x1.download());
+  host.upload_to_widen_later(Span<const Vec3f>(f1), Span<const Vec3f>(f0));
+  REQUIRE(host.widening_due());
+  host.enqueue_widening(nullptr);
+  CHECK(host.x0.download() == widened.x0.download());
+  CHECK(host.x1.download() == widened.x1.download());
+  const std::vector<Vec3f> short_f0(f0.begin(), f0.end() - 1);
+  CHECK_THROWS_WITH(host.upload_to_widen_later(Span<const Vec3f>(f1), Span<const Vec3f>(short_f0)), Catch::Contains("x1"));
+  CHECK_THROWS_WITH(host.set_positions(short_f0, f0), Catch::Contains("x0"));
 }
 
 TEST_CASE("GPU LBVH: bad input and the rebuild policy", "[gpu][bvh]") {

@@ -283,15 +283,9 @@ void DeviceStep<P>::set_positions(Span<const Vec3<Q>> h0, Span<const Vec3<Q>> h1
     HostStaging<>::to_device(x0.data(), h0.data(), n * sizeof(Vec3<P>), stream);
     HostStaging<>::to_device(x1.data(), h1.data(), n * sizeof(Vec3<P>), stream);
   } else if constexpr (std::is_same<P, double>::value) {
-    // Float input: half the bytes cross, widened on the device (exact). The second upload waits
-    // for the first conversion (stream order), so one buffer serves both.
-    x0.resize_discard(n);
-    x1.resize_discard(n);
-    wide_.resize_discard(n);
-    HostStaging<>::to_device(wide_.data(), h0.data(), n * sizeof(Vec3<Q>), stream);
-    detail::convert_points(wide_.data(), x0.data(), n, stream);
-    HostStaging<>::to_device(wide_.data(), h1.data(), n * sizeof(Vec3<Q>), stream);
-    detail::convert_points(wide_.data(), x1.data(), n, stream);
+    // Float input: half the bytes cross, widened on the device (exact), here and now.
+    upload_to_widen_later(h0, h1, stream);
+    enqueue_widening(stream);
   } else {
     // Staged through a host array of P; the copy must finish before the staging is reused.
     for (int which = 0; which < 2; ++which) {

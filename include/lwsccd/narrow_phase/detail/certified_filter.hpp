@@ -242,32 +242,13 @@ struct CertifiedFilter {
   }
   template <class Q, class T>
   LWSCCD_HD static bool decides_single(const Q& q, const CcdParams<T>& params_in) {
-    const CcdParams<float> params = single_params(params_in);
-    // intervals_single, inside_single and expand_single on one thread: the relative query and the
-    // cubic's piece on the step are computed once for all of them (the same values).
-    if (!single_passes_apply(params)) return false;
-    const auto s = relative_single(q);
-    BernsteinPiece<float> root;
-    std::uint32_t mask = 0;
-    const int count = intervals_of(s, params, mask, &root);
-    if (count < 0) return false;
-    if (mask == 0) return true;
-    for (unsigned node = 0; node < 32; ++node) {
-      if (!((mask >> node) & 1u)) continue;
-      const InsideVerdict v = verdict_of(s, node);
-      if (v == InsideVerdict::outside) continue;
-      std::uint32_t deep = 0;
-      if (v != InsideVerdict::unknown || !expandable(count) || !Policy::kSingleSecondRound ||
-          params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1) || params.mode == CcdMode::set || node < (1u << kLevel) ||
-          node >= (2u << kLevel) || expand_piece(root, params, node, deep) < 0)
-        return false;
-      for (unsigned local = 0; local < 32; ++local)
-        if (((deep >> local) & 1u) && verdict_of(s, deep_node(node, local)) != InsideVerdict::outside) return false;
-    }
-    return true;
+    // (intervals_single, inside_single and expand_single on one thread: the relative query and the
+    // cubic's piece on the step are computed once for all of them, the same values.)
+    return route_single(q, single_params(params_in), false, false) == SingleRoute::miss;
   }
-  /// decides_single's tests on one thread, in the same order, with where a pair it does not
-  /// decide goes: SingleRoute::miss exactly where decides_single is true; otherwise the first
+  /// decides_single with where a pair it does not decide goes (the GPU's one-thread form):
+  /// SingleRoute::miss exactly where every interval is certainly outside in float, as the listed
+  /// form's tests find (intervals_single, inside_single, expand_single); otherwise the first
   /// interval (by its number) not certainly outside in float, or not outside below it in the
   /// second round, sends the pair to the whole search where it is inside in float and
   /// `inside_whole`, else to the double filter. (Any route gives the same answer: the double
