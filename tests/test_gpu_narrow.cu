@@ -27,17 +27,29 @@ struct TinyFilterRoom : gpu::NarrowPhasePolicy {
   static constexpr int kFilterRoomPercent = 1;
   static constexpr int kDoubleAfterSingleRoomPercent = 0;
   static constexpr int kSingleFilterOneThreadPerSm = 0;
+  static constexpr bool kSingleFilterInBlocks = false;
 };
 struct TinyDeepRoom : gpu::NarrowPhasePolicy {
   static constexpr int kDeepRoomPercent = 1;
   static constexpr int kDoubleAfterSingleRoomPercent = 0;
   static constexpr int kSingleFilterOneThreadPerSm = 0;
+  static constexpr bool kSingleFilterInBlocks = false;
 };
 // The single-precision filter as a thread a pair listing its intervals and a thread an interval
-// testing them, and on one thread a pair, whatever the lists' lengths (the default plans one of
-// the two from them).
+// testing them (four kernels), in one kernel with a block's pairs in shared memory, and on one
+// thread a pair, whatever the lists' lengths (the default plans the last two from them).
 struct SingleFilterInFourKernels : gpu::NarrowPhasePolicy {
   static constexpr int kSingleFilterOneThreadPerSm = 0;
+  static constexpr bool kSingleFilterInBlocks = false;
+};
+struct SingleFilterInBlocks : gpu::NarrowPhasePolicy {
+  static constexpr int kSingleFilterOneThreadPerSm = 0;
+  static constexpr bool kSingleFilterInBlocks = true;
+};
+// The block form with no room for the second round's pieces: every pair that has some is routed
+// on its thread.
+struct SingleFilterInBlocksNoPieceRoom : SingleFilterInBlocks {
+  static constexpr int kSingleBlockPiecesPerPair = 0;
 };
 struct SingleFilterOnOneThread : gpu::NarrowPhasePolicy {
   static constexpr int kSingleFilterOneThreadPerSm = 1 << 20;
@@ -154,6 +166,9 @@ TEST_CASE("GPU narrow phase equals the CPU backend on a folded cloth, with a gro
     compare_backends<CertifiedCcd, float, SingleFilterInFourKernels>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, double, SingleFilterOnOneThread>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, float, SingleFilterOnOneThread>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, double, SingleFilterInBlocks>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, float, SingleFilterInBlocks>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, double, SingleFilterInBlocksNoPieceRoom>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
   }
   // Intervals that do not fit the filter's list: those pairs are searched whole, same answers.
   compare_backends<CertifiedCcd, double, TinyFilterRoom>(m.mesh, m.x0, m.x1, fp, 1 << 16);

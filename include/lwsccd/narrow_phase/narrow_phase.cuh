@@ -147,8 +147,25 @@ struct NarrowPhasePolicy {
   /// the float filter's kernels in a trace of the steady step: cloth-ball's edge-edge list 207 us
   /// in four kernels against 230 on one thread, armadillo-rollers' 94 against 116; cloth-ball's
   /// vertex-face list 97 against 69, cloth-funnel's two lists 23 and 25 against 8 and 11). The
-  /// same answers and counts either way; 0: always the four kernels.
+  /// block form (kSingleFilterInBlocks) on the short lists too was slower on them (cloth-funnel,
+  /// horse-gallop and the built-in 100 K scene, NVIDIA H100). The same answers and counts either
+  /// way; 0: never on one thread.
   static constexpr int kSingleFilterOneThreadPerSm = 1024;
+  /// FP32 first: a list that does not run the single-precision filter on one thread a pair runs
+  /// it in one kernel whose blocks keep their pairs' float queries and intervals in shared memory
+  /// (single_block_filter_kernel: a thread a pair lists, a thread an interval tests, a thread an
+  /// unknown interval lists its pieces, a thread a piece tests, between the block's barriers),
+  /// instead of four kernels that gather each pair's query from global memory again in each
+  /// (cloth-ball's narrow phase 0.68 -> 0.63 ms on an NVIDIA H100, the others unchanged).
+  /// The same answers and counts; false: the four kernels.
+  static constexpr bool kSingleFilterInBlocks = true;
+  /// The block form's room for the second round's pieces, per pair of the block (cloth-ball: 0.5
+  /// a pair); a pair whose pieces do not fit is routed on its thread (route_single), the same answer.
+  static constexpr int kSingleBlockPiecesPerPair = 4;
+  /// The block form's blocks per SM (__launch_bounds__): 5 caps it at 96 registers (153 without),
+  /// so that 5 of its blocks of 128 fit an SM beside their shared memory (23 KB a block) and hide
+  /// each other's barriers and loads.
+  static constexpr int kSingleBlockMinBlocksPerSm = 5;
   /// Kernels whose input length is read on the device loop over it (grid-stride) in a grid of
   /// this many blocks per SM (or fewer, where the input's room is smaller).
   static constexpr int kGridBlocksPerSm = 16;
@@ -238,6 +255,11 @@ template <class Method, class T, class Policy = NarrowPhasePolicy>
 class NarrowPhase {
  public:
   static_assert(require_ccd_method<Method>::value, "");
+  static_assert(!Policy::kSingleFilterInBlocks || (Policy::kBlock >= 32 && Policy::kBlock < 256),
+                "lwsccd: NarrowPhasePolicy::kSingleFilterInBlocks numbers a block's pairs in a byte: kBlock must be "
+                "32..255 (or set kSingleFilterInBlocks = false)");
+  static_assert(Policy::kSingleBlockPiecesPerPair >= 0, "lwsccd: NarrowPhasePolicy::kSingleBlockPiecesPerPair must be >= 0");
+  static_assert(Policy::kSingleBlockMinBlocksPerSm >= 1, "lwsccd: NarrowPhasePolicy::kSingleBlockMinBlocksPerSm must be >= 1");
   using Pair = std::pair<index_t, index_t>;
 
   /// Output buffers start with room for `initial_capacity` pairs, or for the input's room where

@@ -265,8 +265,7 @@ struct CertifiedFilter {
     std::uint32_t mask = 0;
     const int count = intervals_of(s, params, mask, &root, !separation_tried);
     if (count < 0) return SingleRoute::double_filter;
-    const bool deeper = Policy::kSingleSecondRound && expandable(count) && params.mode != CcdMode::set &&
-                        !(params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1));
+    const bool deeper = single_deeper(count, params);
     const auto route = [inside_whole](InsideVerdict v) {
       return inside_whole && v == InsideVerdict::inside ? SingleRoute::whole_search : SingleRoute::double_filter;
     };
@@ -284,6 +283,41 @@ struct CertifiedFilter {
       }
     }
     return SingleRoute::miss;
+  }
+
+  // The same steps on a relative query made once (relative_single) and the cubic's piece on the
+  // step kept beside it, for a batch that runs them apart on other threads (the GPU's block form:
+  // a block's pairs and their intervals in shared memory). The answers are route_single's: every
+  // interval intervals_of_single lists certainly outside (inside_of_single), or, where
+  // single_deeper holds and an interval of level kLevel is unknown, every interval that
+  // expand_of_single lists below it.
+  /// The first round's intervals of `s` as intervals_single lists them (-1: the double path
+  /// decides; 0: a miss), and the cubic's piece on the step in `root` (where the count is >= 0).
+  template <class QF>
+  LWSCCD_HD static int intervals_of_single(const SingleQuery<QF>& s, const CcdParams<float>& params, std::uint32_t& mask,
+                                           BernsteinPiece<float>& root, bool separation_tried) {
+    mask = 0;
+    if (!single_passes_apply(params)) return -1;
+    return intervals_of(s, params, mask, &root, !separation_tried);
+  }
+  template <class QF>
+  LWSCCD_HD static InsideVerdict inside_of_single(const SingleQuery<QF>& s, unsigned node) {
+    return verdict_of(s, node);
+  }
+  /// Whether an unknown interval of the first round (of level kLevel) of a pair with `count`
+  /// intervals takes the second round (else the pair goes to the double path).
+  LWSCCD_HD static bool single_deeper(int count, const CcdParams<float>& params) {
+    return Policy::kSingleSecondRound && expandable(count) && params.mode != CcdMode::set &&
+           !(params.tolerance >= exact_pow2_neg<float>(kDeepLevel - 1));
+  }
+  /// The second round's intervals below `node` (of level kLevel) from the piece on the step, as
+  /// expand_single lists them (-1: the double path decides).
+  template <class T>
+  LWSCCD_HD static int expand_of_single(const BernsteinPiece<float>& root, const CcdParams<T>& params, unsigned node,
+                                        std::uint32_t& mask) {
+    mask = 0;
+    if (node < (1u << kLevel) || node >= (2u << kLevel)) return -1;
+    return expand_piece(root, params, node, mask);
   }
 
  private:

@@ -391,6 +391,157 @@ __global__ void single_route_kernel(MeshFeatures mesh, const SingleVertex* singl
   }
 }
 
+// The single-precision filter's two rounds in one kernel, a block's pairs and their intervals in
+// shared memory (NarrowPhasePolicy::kSingleFilterInBlocks): a thread per pair gathers its float
+// query once, lists its first round's intervals and keeps the query and the cubic's piece on the
+// step in shared memory; then the block's threads take the intervals one each (the inside tests),
+// the unknown ones one each (the second round's pieces, from the kept piece), and those pieces one
+// each, and last a thread per pair sends it on. The same tests on the same values as route_single
+// (the CPU's decides_single), each phase with its lanes full, one gather and one launch instead
+// of four. A pair goes to the whole search where an interval of it is inside in float (with
+// kInsideWhole), else to the double filter; a pair whose pieces overflow the block's room is
+// routed on its thread (route_single). The early searches as in single_filter_kernel.
+template <int kBlock, int kDeepPerPair>
+struct SingleBlockRoom {
+  static constexpr int kFirst = kBlock * 8;  // first-round intervals: at most 8 a pair (levels <= 3, heap bits < 16)
+  static constexpr int kDeep = kBlock * kDeepPerPair;  // second-round pieces (a pair past it is routed on its thread)
+  static constexpr int kDeepArray = kDeep > 0 ? kDeep : 1;
+};
+// A block's task: its pair's number in the block (high byte) and the interval's heap number.
+constexpr std::uint16_t kNoBlockItem = 0xffffu;
+enum SingleBlockFlag : unsigned {
+  kBlockToDouble = 1u,  // an interval not certainly outside: to the double filter
+  kBlockInside = 2u,    // an interval inside in float: to the whole search (kInsideWhole)
+  kBlockOnThread = 4u,  // its pieces did not fit: routed on its thread
+  kBlockListed = 8u,    // its intervals were listed (a miss unless flagged otherwise)
+  kBlockDeeper = 16u,   // an unknown interval of level kLevel takes the second round
+};
+template <class Method, bool kVertexFace, int kBlock, int kMinBlocks, int kDeepPerPair, class T, bool kInsideWhole>
+__global__ void __launch_bounds__(kBlock, kMinBlocks) single_block_filter_kernel(
+    MeshFeatures mesh, const SingleVertex* single, const std::pair<index_t, index_t>* kept, std::size_t room, CcdParams<T> params,
+    const unsigned long long* control, unsigned long long* counters, std::pair<index_t, index_t>* double_kept, std::size_t kept_room,
+    unsigned* deferred, std::pair<index_t, index_t>* early, std::size_t early_room) {
+  using Filter = lwsccd::detail::CertifiedFilter<typename Method::policy_type>;
+  using lwsccd::detail::InsideVerdict;
+  using lwsccd::detail::SingleRoute;
+  using Query = decltype(lwsccd::detail::relative_single(gather_single_query<kVertexFace>(mesh, single, kept[0])));
+  using Piece = lwsccd::detail::BernsteinPiece<float>;
+  using Room = SingleBlockRoom<kBlock, kDeepPerPair>;
+  static_assert(kBlock < 256, "lwsccd: single_block_filter_kernel numbers a block's pairs in a byte (255: no pair)");
+  // (Raw storage: __shared__ variables take no constructors.)
+  __shared__ alignas(16) unsigned char query_words[kBlock * sizeof(Query)];
+  __shared__ alignas(16) unsigned char piece_words[kBlock * sizeof(Piece)];
+  __shared__ unsigned flags[kBlock];
+  __shared__ std::uint16_t first[Room::kFirst], deep[Room::kDeepArray], expand[Room::kFirst];
+  __shared__ unsigned first_count, expand_count, deep_count, misses;
+  Query* queries = reinterpret_cast<Query*>(query_words);
+  Piece* pieces = reinterpret_cast<Piece*>(piece_words);
+  lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
+  if (control[kSkip]) return;
+  const CcdParams<float> single_params = lwsccd::detail::single_params(params);
+  const std::size_t n = counters[kSurvivors] < room ? static_cast<std::size_t>(counters[kSurvivors]) : room;
+  const unsigned t = threadIdx.x;
+  const auto fail = [&](unsigned local, InsideVerdict v) {
+    atomicOr(flags + local, kInsideWhole && v == InsideVerdict::inside ? kBlockInside : kBlockToDouble);
+  };
+  for (std::size_t base = static_cast<std::size_t>(blockIdx.x) * kBlock; base < n; base += static_cast<std::size_t>(gridDim.x) * kBlock) {
+    if (t == 0) first_count = expand_count = deep_count = misses = 0;
+    __syncthreads();
+    // A thread per pair: its intervals listed, its query and piece kept.
+    const std::size_t i = base + t;
+    unsigned flag = 0;
+    if (i < n) {
+      const Query s = lwsccd::detail::relative_single(gather_single_query<kVertexFace>(mesh, single, kept[i]));
+      Piece root;
+      std::uint32_t found = 0;
+      // (The screen tried the separating directions.)
+      const int count = Filter::intervals_of_single(s, single_params, found, root, true);
+      if (count == 1 && found == (1u << Filter::kWholeStepNode)) {
+        // (route_single's verdict: the step outside in float, else the double path; early_room > 0:
+        // the early searches, as single_filter_kernel sends it.)
+        const InsideVerdict v = Filter::inside_of_single(s, Filter::kWholeStepNode);
+        if (v != InsideVerdict::outside) append_index(counters + kEarlyCandidates);  // (the next run's plan)
+        if (v == InsideVerdict::outside) atomicAdd(&misses, 1u);
+        else if (early_room > 0) send_early(counters, early, early_room, double_kept, kept_room, kept[i]);
+        else send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, kInsideWhole && v == InsideVerdict::inside);
+      } else if (count == 0) {
+        atomicAdd(&misses, 1u);
+      } else if (count < 0) {
+        send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, false);
+      } else {
+        queries[t] = s;
+        pieces[t] = root;
+        flag = kBlockListed | (Filter::single_deeper(count, single_params) ? kBlockDeeper : 0u);
+        const unsigned at = atomicAdd(&first_count, static_cast<unsigned>(count));  // (count <= 8: always fits)
+        for (int k = 0; k < count; ++k, found &= found - 1u)
+          first[at + k] = static_cast<std::uint16_t>((t << 8) | lwsccd::detail::lowest_bit(found));
+      }
+    }
+    flags[t] = flag;
+    __syncthreads();
+    // A thread per first-round interval: the inside test.
+    for (unsigned k = t; k < first_count; k += kBlock) {
+      const unsigned local = first[k] >> 8, node = first[k] & 255u;
+      const InsideVerdict v = Filter::inside_of_single(queries[local], node);
+      if (v == InsideVerdict::outside) continue;
+      if (v == InsideVerdict::unknown && (flags[local] & kBlockDeeper) && (node >> Filter::kLevel) == 1u)
+        expand[atomicAdd(&expand_count, 1u)] = first[k];
+      else
+        fail(local, v);
+    }
+    __syncthreads();
+    // A thread per unknown interval: the second round's pieces below it.
+    for (unsigned k = t; k < expand_count; k += kBlock) {
+      const unsigned local = expand[k] >> 8, node = expand[k] & 255u;
+      if (flags[local] & (kBlockToDouble | kBlockInside | kBlockOnThread)) continue;  // decided already (a racing read only costs time)
+      std::uint32_t below = 0;
+      const int count = Filter::expand_of_single(pieces[local], single_params, node, below);
+      if (count < 0) {
+        atomicOr(flags + local, kBlockToDouble);
+        continue;
+      }
+      if (count == 0) continue;
+      const unsigned at = atomicAdd(&deep_count, static_cast<unsigned>(count));
+      if (at + static_cast<unsigned>(count) > static_cast<unsigned>(Room::kDeep)) {
+        atomicOr(flags + local, kBlockOnThread);
+        if constexpr (Room::kDeep > 0)
+          for (unsigned d = at; d < static_cast<unsigned>(Room::kDeep); ++d) deep[d] = kNoBlockItem;  // (slots it took, empty)
+        continue;
+      }
+      for (int d = 0; d < count; ++d, below &= below - 1u)
+        deep[at + d] = static_cast<std::uint16_t>((local << 8) | Filter::deep_node(node, lwsccd::detail::lowest_bit(below)));
+    }
+    __syncthreads();
+    // A thread per second-round piece: the inside test (pieces past the room were not written).
+    const unsigned deep_n = ::min(deep_count, static_cast<unsigned>(Room::kDeep));
+    for (unsigned k = t; k < deep_n; k += kBlock) {
+      if (deep[k] == kNoBlockItem) continue;
+      const unsigned local = deep[k] >> 8, node = deep[k] & 255u;
+      if (flags[local] & (kBlockToDouble | kBlockInside | kBlockOnThread)) continue;
+      const InsideVerdict v = Filter::inside_of_single(queries[local], node);
+      if (v != InsideVerdict::outside) fail(local, v);
+    }
+    __syncthreads();
+    // A thread per pair: sent on.
+    if (i < n && (flags[t] & kBlockListed)) {
+      const unsigned f = flags[t];
+      if (f & kBlockOnThread) {
+        // (From the pair's query as gathered: relative_single's bound is the input's.)
+        const SingleRoute route =
+            Filter::route_single(gather_single_query<kVertexFace>(mesh, single, kept[i]), single_params, true, kInsideWhole);
+        if (route == SingleRoute::miss) atomicAdd(&misses, 1u);
+        else send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, route == SingleRoute::whole_search);
+      } else if (f & (kBlockToDouble | kBlockInside)) {
+        send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, (f & kBlockInside) != 0u);
+      } else {
+        atomicAdd(&misses, 1u);
+      }
+    }
+    __syncthreads();
+    if (t == 0 && misses > 0) atomicAdd(counters + kSingleMisses, static_cast<unsigned long long>(misses));
+  }
+}
+
 // A thread per listed interval (the first round's, counter kSingleIntervals, or the second's,
 // kSingleDeepIntervals): the inside test in float. In the first round (`expanded` not null) an
 // interval whose test is unknown is listed in `expanded` for the second round when its pair may

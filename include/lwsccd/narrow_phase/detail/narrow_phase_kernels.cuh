@@ -321,9 +321,18 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
       if constexpr (kSingleFirst) {
         const unsigned single_blocks = grid_for(l.single_interval_room, Policy::kBlock, Policy::kGridBlocksPerSm);
         const bool one_thread = single_filter_on_one_thread(l);
-        const bool single_deeper = !one_thread && single_second_round(params.mode);
+        const bool in_blocks = !one_thread && Policy::kSingleFilterInBlocks;
+        const bool listed = !one_thread && !in_blocks;  // the four kernels
+        const bool single_deeper = listed && single_second_round(params.mode);
         record(out, lp, [=](List& l) {
-          if (one_thread)
+          if (in_blocks) {
+            if constexpr (Policy::kSingleFilterInBlocks)  // (not instantiated otherwise: any kBlock then)
+              chain(detail::single_block_filter_kernel<Method, kVertexFace, Policy::kBlock, Policy::kSingleBlockMinBlocksPerSm,
+                                                         Policy::kSingleBlockPiecesPerPair, T, Policy::kSingleInsideWhole>,
+                    grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
+                      mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
+                      l.double_kept.data(), l.refine_room, l.deferred.data(), l.early.data(), l.early_room);
+          } else if (one_thread)
             chain(detail::single_route_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>,
                   grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
                     mesh, single_.data(), l.survivors.data(), l.work_room, params, control_.data(), l.counters.data(),
@@ -349,7 +358,7 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
             LWSCCD_CUDA_CHECK(cudaEventRecord(l.early_done, l.early_stream));
           });
         }
-        if (!one_thread) {
+        if (listed) {
           record(out, lp, [=](List& l) {
             LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.single_failed.data(), 0, l.single_failed.size() * sizeof(unsigned), l.stream));
             chain(detail::single_inside_kernel<Method, kVertexFace, T, Policy::kSingleInsideWhole>, single_blocks, Policy::kBlock, l.stream,
