@@ -96,7 +96,7 @@ template <class Method, class T, class Policy = gpu::NarrowPhasePolicy>
 std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>& x0, const std::vector<Vec3d>& x1,
                              const FeaturePairs& pairs, std::size_t capacity, CcdMode mode = CcdMode::contacts,
                              std::size_t* reruns = nullptr, std::size_t* handed = nullptr, int fp64_ratio = 0,
-                             std::size_t* handed_in_warps = nullptr) {
+                             std::size_t* handed_in_warps = nullptr, std::size_t* device_bytes = nullptr) {
   gpu::DeviceMeshFeatures features(mesh);
   gpu::DeviceStep<double> step(mesh, x0, x1);
   gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
@@ -122,6 +122,7 @@ std::size_t compare_backends(const TriangleMesh& mesh, const std::vector<Vec3d>&
   if (reruns) *reruns = narrow.reruns();
   if (handed) *handed = narrow.handed_searches();
   if (handed_in_warps) *handed_in_warps = narrow.handed_searches_in_warps();
+  if (device_bytes) *device_bytes = narrow.device_bytes();
   if (lwsccd::detail::certified_of<Method>::value) {
     lwsccd_test::require_same_counts(gpu_result.vf_counts, cpu_result.vf_counts);
     lwsccd_test::require_same_counts(gpu_result.ee_counts, cpu_result.ee_counts);
@@ -162,11 +163,18 @@ TEST_CASE("GPU narrow phase equals the CPU backend on a folded cloth, with a gro
     compare_backends<CertifiedCcd, double>(m.mesh, m.x0, m.x1, fp, 1, mode, &reruns);
     CHECK(reruns == 0);
     // The single-precision filter in either form: the same answers and counts.
-    compare_backends<CertifiedCcd, double, SingleFilterInFourKernels>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    std::size_t four_kernels_bytes = 0, in_blocks_bytes = 0;
+    compare_backends<CertifiedCcd, double, SingleFilterInFourKernels>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, nullptr, 0,
+                                                                      nullptr, &four_kernels_bytes);
     compare_backends<CertifiedCcd, float, SingleFilterInFourKernels>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, double, SingleFilterOnOneThread>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, float, SingleFilterOnOneThread>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
-    compare_backends<CertifiedCcd, double, SingleFilterInBlocks>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
+    compare_backends<CertifiedCcd, double, SingleFilterInBlocks>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode, nullptr, nullptr, 0, nullptr,
+                                                                 &in_blocks_bytes);
+    // The block form's lists stay in shared memory: it holds none of the four kernels' (mode set
+    // runs no filter, so holds none either way).
+    if (mode == CcdMode::set) CHECK(in_blocks_bytes == four_kernels_bytes);
+    else CHECK(in_blocks_bytes < four_kernels_bytes);
     compare_backends<CertifiedCcd, float, SingleFilterInBlocks>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
     compare_backends<CertifiedCcd, double, SingleFilterInBlocksNoPieceRoom>(m.mesh, m.x0, m.x1, fp, 1 << 16, mode);
   }

@@ -150,9 +150,10 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
         l.interval_room = std::max(l.interval_room, std::max<std::size_t>(l.work_room / 100 * filter_percent, 1));
         l.intervals.resize_discard(l.interval_room);
         l.listed.resize_discard((l.refine_room + 31) / 32);
-        if (kSingleFirst) {
-          l.double_kept.resize_discard(l.refine_room);
-          // (The lists of the four kernels, whichever form this run takes.)
+        if (kSingleFirst) l.double_kept.resize_discard(l.refine_room);
+        // (The four kernels' lists, whether this run takes them or one thread a pair; none for the
+        // block form, whose lists stay in shared memory.)
+        if (kSingleFirst && !Policy::kSingleFilterInBlocks) {
           l.single_interval_room =
               std::max(l.single_interval_room, std::max<std::size_t>(l.work_room / 100 * Policy::kFilterRoomPercent, 1));
           l.single_intervals.resize_discard(l.single_interval_room);
