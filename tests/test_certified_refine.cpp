@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -214,6 +215,114 @@ TEST_CASE("certified path: inside tests evaluated ahead by subtrees give the one
   CHECK(pieced > 0);                // intervals were tested in pieces
   CHECK(differ_when_wrong > 0);     // the comparison sees a misread verdict
   CHECK(differ_any_piece > 0);      // and pieces combined wrongly
+}
+
+namespace {
+
+// One lane of a simulated GPU warp: a search set up as certified_refine sets it up, run in parts.
+template <class Q, class T>
+struct SearchLane {
+  using W = typename detail::certified_compute<T>::type;
+  using QW = std::decay_t<decltype(std::declval<Q>().template cast<W>())>;
+  using Search = detail::CertifiedSearch<CertifiedPolicy, detail::kRefineStackMax, false, false, QW, W, T>;
+  QW q;
+  Vec3<W> m;
+  CcdParams<T> params;
+  typename Search::Entry stack[detail::kRefineStackMax];
+  std::optional<Search> search;
+  CertifiedAnswer<T> settled;  // where no search runs (as certified_refine answers there)
+  bool running = false;
+
+  SearchLane(const Q& q_in, const CcdParams<T>& p) : q(q_in.template cast<W>()), m(detail::coordinate_magnitude(q)), params(p) {
+    const W mag = detail::fmul(W(4), max_component(m));
+    detail::BernsteinPiece<W> root;
+    if (!detail::cubic_on_step<CertifiedPolicy>(q, mag, W(detail::unit_roundoff<T>()), root)) return;
+    if (detail::same_sign_beyond(root.c, root.bound)) {
+      settled = {Certainty::miss, T(0), T(1)};
+      return;
+    }
+    const W slack = detail::underflow_slack(mag, 4);
+    if (!detail::finite_value(slack)) return;
+    search.emplace(stack, q, m, W(detail::unit_roundoff<T>()), root, slack, params, detail::kNeverDefer, nullptr, nullptr);
+    running = true;
+  }
+  CertifiedAnswer<T> answer() const { return search ? search->answer() : settled; }
+};
+
+// Runs the lanes' searches in rounds, as certified_search's loop does on a GPU warp: every running
+// lane advances to its next inside test, then the round's tests are answered, last lane first.
+// `misroute`: each lane is given the verdict of the next asking lane's interval (a control).
+// Returns the rounds; `shared` counts the rounds in which two or more lanes asked at once.
+template <class Lanes>
+int run_in_rounds(Lanes& lanes, bool misroute, int& shared) {
+  int rounds = 0;
+  detail::InsideOneByOne one_by_one;
+  for (;;) {
+    std::vector<std::size_t> asking;
+    for (std::size_t k = 0; k < lanes.size(); ++k) {
+      if (!lanes[k].running) continue;
+      lanes[k].running = lanes[k].search->advance();
+      if (lanes[k].running) asking.push_back(k);
+    }
+    if (asking.empty()) return rounds;
+    ++rounds;
+    shared += asking.size() >= 2;
+    for (std::size_t j = asking.size(); j-- > 0;) {
+      auto& lane = *lanes[asking[j]].search;
+      const auto& from = *lanes[asking[misroute ? (j + 1) % asking.size() : j]].search;
+      const auto compute = [&](int level, std::uint32_t index) { return lane.inside(level, index); };
+      lane.resume(lane.inside(from.level(), from.index()), one_by_one, compute);
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("certified path: searches run side by side, their tests answered in rounds, give each one's own answer",
+          "[narrow][certified]") {
+  // The GPU's lanes meet before each round of inside tests (certified_search): a search's two parts
+  // must carry nothing from one lane's search to another's, whatever order the tests come in.
+  std::mt19937 rng(23);
+  std::vector<Case> cases = hard_cases(rng, 6);
+  for (const Case& c : coplanar_sliding_cases(rng, 12)) cases.push_back(c);
+  int rounds = 0, shared = 0, differ = 0, differ_misrouted = 0, searches = 0;
+  auto run = [&](auto tag) {
+    using T = decltype(tag);
+    for (const bool vf : {true, false}) {
+      CcdParams<T> params;
+      auto check = [&](auto make) {
+        using Q = std::decay_t<decltype(make(cases[0]))>;
+        for (std::size_t first = 0; first < cases.size(); first += 32) {
+          for (const bool misroute : {false, true}) {
+            std::vector<SearchLane<Q, T>> lanes;
+            lanes.reserve(32);
+            for (std::size_t k = first; k < std::min(cases.size(), first + 32); ++k)
+              if (cases[k].vertex_face == vf) lanes.emplace_back(make(cases[k]), params);
+            int lane_shared = 0;
+            const int lane_rounds = run_in_rounds(lanes, misroute, lane_shared);
+            for (std::size_t k = 0, lane = 0; k < std::min(cases.size(), first + 32) - first; ++k) {
+              if (cases[first + k].vertex_face != vf) continue;
+              const CertifiedAnswer<T> whole = CertifiedCcd::refine<false>(make(cases[first + k]), params);
+              const CertifiedAnswer<T> side = lanes[lane++].answer();
+              const bool same = side.certainty == whole.certainty && side.lo == whole.lo && side.hi == whole.hi;
+              if (misroute) differ_misrouted += !same;
+              else differ += !same, ++searches;
+            }
+            if (!misroute) rounds += lane_rounds, shared += lane_shared;
+          }
+        }
+      };
+      if (vf) check([](const Case& c) { return as_query<T, VertexFaceQuery<T>>(c); });
+      else check([](const Case& c) { return as_query<T, EdgeEdgeQuery<T>>(c); });
+    }
+  };
+  run(double{});
+  run(float{});
+  INFO(searches << " searches in " << rounds << " rounds, " << shared << " with two or more tests");
+  CHECK(searches > 100);
+  CHECK(differ == 0);
+  CHECK(shared > 0);            // lanes asked for tests in the same round
+  CHECK(differ_misrouted > 0);  // the comparison sees a verdict given to the wrong search
 }
 
 TEST_CASE("certified screen with a time limit: rejects only pairs whose cubic keeps its sign before it", "[narrow][certified]") {

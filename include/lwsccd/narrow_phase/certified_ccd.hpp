@@ -213,11 +213,12 @@ struct CertifiedCcdT {
   /// leaves, screen_after_single then refine (detail::certified_refine_after_single: the order
   /// classify runs them in).
   /// `in_float_pairs`, where given, tells whether a contact's leaf was proved in pairs of floats
-  /// (CcdParams::leaves_in_float_pairs: no FP64 in its tail).
-  template <bool kSettle = true, class Q, class T>
+  /// (CcdParams::leaves_in_float_pairs: no FP64 in its tail). kLanesAlike: every lane of a GPU
+  /// warp runs it on the same values (a warp per pair).
+  template <bool kSettle = true, bool kLanesAlike = false, class Q, class T>
   LWSCCD_HD static CertifiedAnswer<T> refine_single_first(const Q& q, const CcdParams<T>& params, bool& done,
                                                           bool* in_float_pairs = nullptr) {
-    return detail::certified_refine_single_first<Policy, kSettle>(q, params, done, in_float_pairs);
+    return detail::certified_refine_single_first<Policy, kSettle, kLanesAlike>(q, params, done, in_float_pairs);
   }
   /// kSettle false: undecided answers are left for undecided_from (a batch's separate pass).
   template <bool kSettle = true, class Q, class T>

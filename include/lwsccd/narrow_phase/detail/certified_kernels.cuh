@@ -153,12 +153,12 @@ __device__ void settle_refined(const CertifiedAnswer<T>& a, index_t first, index
 // FP32 first's search in single precision on a pair the single passes left
 // (Method::refine_single_first): where it decides the pair, its answer is settled and counted
 // (a miss in single precision, or a contact with a double tail) and true returned; `store` false
-// only computes (a warp's other lanes).
-template <class Method, class Q, class T>
+// only computes (a warp's other lanes). kLanesAlike: every lane of the warp runs it on the same pair.
+template <class Method, bool kLanesAlike = false, class Q, class T>
 __device__ bool settled_in_single(const Q& q, const CcdParams<T>& params, std::pair<index_t, index_t> p, unsigned long long* counters,
                                   FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, bool store = true) {
   bool done = false, in_float_pairs = false;
-  const CertifiedAnswer<T> a = Method::template refine_single_first<false>(q, params, done, &in_float_pairs);
+  const CertifiedAnswer<T> a = Method::template refine_single_first<false, kLanesAlike>(q, params, done, &in_float_pairs);
   if (!done || !store) return done;
   if (a.certainty == Certainty::miss) atomicAdd(counters + kSingleSearchMisses, 1ull);
   if (a.certainty == Certainty::hit) atomicAdd(counters + kSingleDescents, 1ull);
@@ -867,7 +867,7 @@ __device__ void warp_search_whole(const Q& q, const CcdParams<T>& params, std::p
                                   FeatureHit<T>* undecided) {
   // (Every lane runs the same single-precision search and double screen on the same values, so
   // all go on alike; lane 0 stores.)
-  if (after_single_filter && (settled_in_single<Method>(q, params, p, counters, hits, hit_room, undecided, lane == 0) ||
+  if (after_single_filter && (settled_in_single<Method, true>(q, params, p, counters, hits, hit_room, undecided, lane == 0) ||
                               Method::screen_after_single(q, params)))
     return;
   warp_refine<Method>(q, params, p, lane, counters, hits, hit_room, undecided);

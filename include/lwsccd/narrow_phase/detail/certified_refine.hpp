@@ -187,6 +187,17 @@ struct InsideOneByOne {
     return compute(level, index);
   }
 };
+/// InsideOneByOne for a search that every lane of a GPU warp runs alike, on the same values (a
+/// warp per search): its lanes need not meet before their tests (certified_search).
+struct InsideOneByOneLanesAlike : InsideOneByOne {
+  static constexpr bool kLanesAlike = true;
+};
+/// Whether a warp's lanes run an `inside_at`'s search alike: a member `kLanesAlike`, or an
+/// evaluator of pieces (a warp's lanes evaluate them at once).
+template <class InsideAt, class = void>
+struct lanes_alike : evaluates_pieces<InsideAt> {};
+template <class InsideAt>
+struct lanes_alike<InsideAt, std::void_t<decltype(InsideAt::kLanesAlike)>> : std::bool_constant<InsideAt::kLanesAlike> {};
 
 /// certified_refine's most pending intervals (its stack: one right half per level): enough for
 /// the deepest search, whose levels stop at 30 (dyadic indices in 32 bits; certified_max_level),
@@ -294,173 +305,283 @@ LWSCCD_HD SingleHandoff handoff_at(const BernsteinPiece<W>& piece, int level, st
 /// starts (Policy::kHandOffAtDescent) or where float can no longer halve it or it is within the
 /// tolerance, sets *handoff (the answer is then undecided, for certified_descend_from); any other
 /// end that is not a miss is undecided without it.
-template <class Policy, int kStack, bool kSettle, bool kSingle, class QW, class W, class T, class InsideAt>
-LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W perturbation, const BernsteinPiece<W>& root,
-                                              W inside_slack, const CcdParams<T>& params, int defer_level, bool* deferred,
-                                              InsideAt&& inside_at, SingleHandoff* handoff) {
-  const CertifiedAnswer<T> undecided{Certainty::undecided, T(0), T(1)};
-  const int max_level = certified_max_level(params.tolerance);
-  const bool set_mode = params.mode == CcdMode::set;
-  const W given = kSingle ? perturbation : W(0);
-
-  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
-  // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
-  // the query as given does (only that proves a contact). Between them lies rounding's share of
-  // the inputs: in double about u of the geometry; in float it can move a contact by more than
-  // the tolerance, and the reported lower bound is then that much earlier.
+template <class Policy, int kStack, bool kSettle, bool kSingle, class QW, class W, class T>
+class CertifiedSearch {
+ public:
+  /// A pending interval (the stack holds one right half per level).
   struct Entry {
     BernsteinPiece<W> piece;
     std::uint32_t index;
     int level;
   };
-  static_assert(kStack >= 3 && kStack <= kRefineStackMax, "lwsccd: certified_refine holds 3 to kRefineStackMax pending intervals");
-  Entry stack[kStack];  // one pending right half per level
-  int top = 0, splits = 0, leaves = 0;
-  T lower = T(0), open_from = T(0);  // earliest time not excluded for a perturbed query / as given
-  bool has_lower = false, has_open = false, open_inside = true;
-  bool descent = Policy::kCertainDescent && !set_mode && (Policy::kDescentBeforeDefer || defer_level >= max_level);
-  int open_sign = 0;  // sign of f (as given) at open_from, 0 when uncertain
-  auto note_lower = [&](T t) {
-    if (!has_lower) lower = t, has_lower = true;  // intervals come in time order
-  };
-  // Undecided from `from` (every earlier time excluded), unless contact within the tolerance
-  // right after it settles the query. (Single precision: undecided, the double search's to answer.)
-  auto settle = [&](T from) {
-    if constexpr (kSingle) return undecided;
-    else if constexpr (kSettle) return certified_undecided<Policy>(q, params, from);
-    else return CertifiedAnswer<T>{Certainty::undecided, from, T(1)};
-  };
-  stack[top++] = {root, 0u, 0};
-  while (top > 0) {
-    const Entry e = stack[--top];
-    // Dyadic with at most certified_max_level(T) bits: exact in T and W.
-    const T scale = exact_pow2_neg<T>(e.level);
-    const T lo = static_cast<T>(e.index) * scale, hi = static_cast<T>(e.index + 1u) * scale;
-    if (lo >= params.time_limit) continue;  // later than what the caller still wants
-    const W* c = e.piece.c;
-    const W bound = e.piece.bound, exact = e.piece.exact;
-    if (same_sign_beyond(c, bound)) continue;  // no root here, even perturbed
-    if (same_sign_beyond(c, exact)) {          // none as given; a perturbed query's may be here
-      note_lower(lo);
-      continue;
-    }
-    // f(lo) = c[0], f(hi) = c[3]: a certain sign change proves a root of the query as given.
-    const bool crossing = (c[0] < -exact && c[3] > exact) || (c[0] > exact && c[3] < -exact);
-    const bool leaf = e.level >= max_level;
-    // Set mode needs no tight time: a crossing interval is tried every fourth level on the way.
-    const bool try_hit = leaf || (set_mode && crossing && (e.level & 3) == 0);
-    const bool coarse = Policy::kInsideEvery > 0 && e.level >= Policy::kInsideFrom &&
-                        (e.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
-    const bool coplanar = all_within(c, exact);
-    // Single precision leaves coplanar motion (no sign of f to follow, and long searches) and
-    // searches that need many halvings before a descent to double.
-    if constexpr (kSingle) {
-      if (coplanar || splits >= Policy::kSingleSearchSplits) return undecided;
-    }
-    // Both halves of one sign (a root of the control polygon, not of the cubic): no root here even
-    // perturbed, so the costly inside test is skipped (before it, the interval was only split).
-    if (Policy::kLookAhead && coarse && !leaf && !coplanar && halves_keep_sign<Policy>(e.piece)) continue;
-    InsideVerdict inside = InsideVerdict::unknown;
-    if (try_hit || coarse || coplanar) {
-      // The test over interval `index` of `level` (this one, or another that inside_at evaluates
-      // ahead): the same operations on the same values, so the same verdict.
-      const auto compute = [&](int level, std::uint32_t index) {
-        const W half_width = exact_pow2_neg<W>(level + 1);
-        const T from = static_cast<T>(index) * exact_pow2_neg<T>(level);
-        return inside_over<Policy>(q, fadd(W(from), half_width), half_width, m, perturbation, inside_slack, given);
-      };
-      inside = inside_at(e.level, e.index, compute);
-      if (inside == InsideVerdict::unknown && (leaf || (coplanar && e.level >= Policy::kCoplanarPiecesFrom)))
-        inside = verdict_in_pieces<Policy, T, W>(e.level, e.index, inside_at, compute);
-      if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
-        if (inside == InsideVerdict::outside_as_given) note_lower(lo);
-        if (leaf && ++leaves > Policy::kMaxLeaves) return settle(has_lower ? lower : lo);
+  /// `stack`: room for kStack entries, the caller's (a member array indexed at run time would
+  /// keep the whole object, every scalar of the search with it, in a GPU thread's local memory).
+  LWSCCD_HD CertifiedSearch(Entry* stack, const QW& q, const Vec3<W>& m, W perturbation, const BernsteinPiece<W>& root,
+                            W inside_slack, const CcdParams<T>& params, int defer_level, bool* deferred, SingleHandoff* handoff)
+      : stack_(stack), q_(q), m_(m), perturbation_(perturbation), inside_slack_(inside_slack), params_(params), defer_level_(defer_level),
+        deferred_(deferred), handoff_(handoff), max_level_(certified_max_level(params.tolerance)),
+        set_mode_(params.mode == CcdMode::set),
+        descent_(Policy::kCertainDescent && !set_mode_ && (Policy::kDescentBeforeDefer || defer_level >= max_level_)) {
+    static_assert(kStack >= 3 && kStack <= kRefineStackMax, "lwsccd: certified_refine holds 3 to kRefineStackMax pending intervals");
+    stack_[top_++] = {root, 0u, 0};
+  }
+
+  /// Runs the search up to the next interval that needs its inside test (true: the test of
+  /// level(), index() is asked for, and resume() continues with its verdict) or to its end
+  /// (false: answer()). Why two parts: a GPU warp whose lanes each run a search reconverges after
+  /// this loop, so the lanes that need a test run it together instead of one or two at a time.
+  LWSCCD_HD bool advance() {
+    while (!finished_) {
+      if (top_ == 0) return finish_at_end();
+      e_ = stack_[--top_];
+      // Dyadic with at most certified_max_level(T) bits: exact in T and W.
+      const T scale = exact_pow2_neg<T>(e_.level);
+      lo_ = static_cast<T>(e_.index) * scale, hi_ = static_cast<T>(e_.index + 1u) * scale;
+      if (lo_ >= params_.time_limit) continue;  // later than what the caller still wants
+      const W* c = e_.piece.c;
+      const W bound = e_.piece.bound, exact = e_.piece.exact;
+      if (same_sign_beyond(c, bound)) continue;  // no root here, even perturbed
+      if (same_sign_beyond(c, exact)) {          // none as given; a perturbed query's may be here
+        note_lower(lo_);
         continue;
       }
+      // f(lo) = c[0], f(hi) = c[3]: a certain sign change proves a root of the query as given.
+      crossing_ = (c[0] < -exact && c[3] > exact) || (c[0] > exact && c[3] < -exact);
+      leaf_ = e_.level >= max_level_;
+      // Set mode needs no tight time: a crossing interval is tried every fourth level on the way.
+      try_hit_ = leaf_ || (set_mode_ && crossing_ && (e_.level & 3) == 0);
+      const bool coarse = Policy::kInsideEvery > 0 && e_.level >= Policy::kInsideFrom &&
+                          (e_.level - Policy::kInsideFrom) % (Policy::kInsideEvery > 0 ? Policy::kInsideEvery : 1) == 0;
+      coplanar_ = all_within(c, exact);
+      // Single precision leaves coplanar motion (no sign of f to follow, and long searches) and
+      // searches that need many halvings before a descent to double.
+      if constexpr (kSingle) {
+        if (coplanar_ || splits_ >= Policy::kSingleSearchSplits) return finish(undecided());
+      }
+      // Both halves of one sign (a root of the control polygon, not of the cubic): no root here even
+      // perturbed, so the costly inside test is skipped (before it, the interval was only split).
+      if (Policy::kLookAhead && coarse && !leaf_ && !coplanar_ && halves_keep_sign<Policy>(e_.piece)) continue;
+      if (try_hit_ || coarse || coplanar_) return true;
+      after_inside(InsideVerdict::unknown);
     }
+    return false;
+  }
+
+  /// The level and index of the interval whose inside test advance() asked for.
+  LWSCCD_HD int level() const { return e_.level; }
+  LWSCCD_HD std::uint32_t index() const { return e_.index; }
+
+  /// The inside test over interval `index` of `level` (the asked one, or another that an
+  /// `inside_at` evaluates ahead): the same operations on the same values, so the same verdict.
+  LWSCCD_HD InsideVerdict inside(int level, std::uint32_t index) const {
+    const W half_width = exact_pow2_neg<W>(level + 1);
+    const T from = static_cast<T>(index) * exact_pow2_neg<T>(level);
+    return inside_over<Policy>(q_, fadd(W(from), half_width), half_width, m_, perturbation_, inside_slack_, given());
+  }
+
+  /// Continues with the verdict of the asked interval's own test; `inside_at` and `compute` (as
+  /// certified_search's) answer the tests of its pieces where that verdict is unknown.
+  template <class InsideAt, class Compute>
+  LWSCCD_HD void resume(InsideVerdict inside, InsideAt& inside_at, const Compute& compute) {
+    if (inside == InsideVerdict::unknown && (leaf_ || (coplanar_ && e_.level >= Policy::kCoplanarPiecesFrom)))
+      inside = verdict_in_pieces<Policy, T, W>(e_.level, e_.index, inside_at, compute);
+    if (inside == InsideVerdict::outside || inside == InsideVerdict::outside_as_given) {  // roots here are no contacts
+      if (inside == InsideVerdict::outside_as_given) note_lower(lo_);
+      if (leaf_ && ++leaves_ > Policy::kMaxLeaves) finish(settle(has_lower_ ? lower_ : lo_));
+      return;
+    }
+    after_inside(inside);
+  }
+
+  LWSCCD_HD const CertifiedAnswer<T>& answer() const { return answer_; }
+
+ private:
+  LWSCCD_HD static CertifiedAnswer<T> undecided() { return {Certainty::undecided, T(0), T(1)}; }
+  LWSCCD_HD W given() const { return kSingle ? perturbation_ : W(0); }
+  LWSCCD_HD void note_lower(T t) {
+    if (!has_lower_) lower_ = t, has_lower_ = true;  // intervals come in time order
+  }
+  // Undecided from `from` (every earlier time excluded), unless contact within the tolerance
+  // right after it settles the query. (Single precision: undecided, the double search's to answer.)
+  LWSCCD_HD CertifiedAnswer<T> settle(T from) const {
+    if constexpr (kSingle) return undecided();
+    else if constexpr (kSettle) return certified_undecided<Policy>(q_, params_, from);
+    else return CertifiedAnswer<T>{Certainty::undecided, from, T(1)};
+  }
+  LWSCCD_HD bool finish(const CertifiedAnswer<T>& a) {
+    answer_ = a;
+    finished_ = true;
+    return false;
+  }
+  // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
+  LWSCCD_HD bool finish_at_end() {
+    return finish(has_lower_ ? settle(lower_) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)});
+  }
+
+  // The rest of an interval's visit, once its inside test (if any) was not outside.
+  LWSCCD_HD void after_inside(InsideVerdict inside) {
+    const W* c = e_.piece.c;
+    const W bound = e_.piece.bound, exact = e_.piece.exact;
     // Certain descent (certain_descent): over this interval every perturbed cubic has one root
     // and a root is a contact of the query as given. A middle value within its as-given error (a
     // root on the grid) ends it: everything it noted is undone and this interval is searched as
     // usual. Single precision hands the interval it reached to double instead.
-    if (descent && inside == InsideVerdict::inside && !leaf && !has_open && single_crossing(c, bound)) {
+    if (descent_ && inside == InsideVerdict::inside && !leaf_ && !has_open_ && single_crossing(c, bound)) {
       const int first = c[0] > W(0) ? 1 : -1;
       if constexpr (kSingle) {
         // Every fact the double tail needs holds from here on (B10), so the interval is handed
         // over as it is, the root guessed on it, instead of halved in float first: the tail proves
         // the same leaf. (It ends within the time limit: the descent could end nowhere else.)
-        if (Policy::kHandOffAtDescent && !has_lower && handoff && hi <= params.time_limit) {
-          *handoff = handoff_at(e.piece, e.level, e.index, first);
-          return undecided;
+        if (Policy::kHandOffAtDescent && !has_lower_ && handoff_ && hi_ <= params_.time_limit) {
+          *handoff_ = handoff_at(e_.piece, e_.level, e_.index, first);
+          finish(undecided());
+          return;
         }
       }
-      const T saved_lower = lower;
-      const bool saved_has_lower = has_lower;
-      const int saved_splits = splits;
-      BernsteinPiece<W> piece = e.piece;
-      std::uint32_t index = e.index;
-      int level = e.level;
-      const DescentEnd end = certain_descent<Policy>(piece, index, level, first, params, max_level, splits, lower, has_lower);
+      const T saved_lower = lower_;
+      const bool saved_has_lower = has_lower_;
+      const int saved_splits = splits_;
+      BernsteinPiece<W> piece = e_.piece;
+      std::uint32_t index = e_.index;
+      int level = e_.level;
+      const DescentEnd end = certain_descent<Policy>(piece, index, level, first, params_, max_level_, splits_, lower_, has_lower_);
       if constexpr (kSingle) {
         // Nothing is noted in single precision (its two bounds are one) but at leaves, which come
         // after any descent: the interval starts right after everything excluded.
-        if (end == DescentEnd::past_limit) return CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
-        if ((end == DescentEnd::within_tolerance || end == DescentEnd::on_grid) && !saved_has_lower && handoff)
-          *handoff = handoff_at(piece, level, index, first);
-        return undecided;
+        if (end == DescentEnd::past_limit) {
+          finish({Certainty::miss, T(0), T(1)});
+          return;
+        }
+        if ((end == DescentEnd::within_tolerance || end == DescentEnd::on_grid) && !saved_has_lower && handoff_)
+          *handoff_ = handoff_at(piece, level, index, first);
+        finish(undecided());
+        return;
       } else {
         const T step = exact_pow2_neg<T>(level);
         const T from = static_cast<T>(index) * step, to = static_cast<T>(index + 1u) * step;
-        if (end == DescentEnd::within_tolerance) return {Certainty::hit, lower, to};
-        if (end == DescentEnd::too_many_splits) return settle(has_lower ? lower : from);
-        if (end == DescentEnd::past_limit)
-          return has_lower ? settle(lower) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)};
-        lower = saved_lower, has_lower = saved_has_lower, splits = saved_splits;
-        descent = false;
-        stack[top++] = e;
-        continue;
+        if (end == DescentEnd::within_tolerance) {
+          finish({Certainty::hit, lower_, to});
+          return;
+        }
+        if (end == DescentEnd::too_many_splits) {
+          finish(settle(has_lower_ ? lower_ : from));
+          return;
+        }
+        if (end == DescentEnd::past_limit) {
+          finish(has_lower_ ? settle(lower_) : CertifiedAnswer<T>{Certainty::miss, T(0), T(1)});
+          return;
+        }
+        lower_ = saved_lower, has_lower_ = saved_has_lower, splits_ = saved_splits;
+        descent_ = false;
+        stack_[top_++] = e_;
+        return;
       }
     }
-    if (try_hit) {
-      if constexpr (kSingle) return undecided;  // leaves: the double search's
+    if (try_hit_) {
+      if constexpr (kSingle) {  // leaves: the double search's
+        finish(undecided());
+        return;
+      }
       // A root is certain across this leaf, or from the start of the unresolved leaves before it
       // (a root on the grid point between two leaves makes neither a crossing alone); those
       // leaves join the interval, which must stay within the tolerance.
       const int sign_lo = c[0] < -exact ? -1 : (c[0] > exact ? 1 : 0), sign_hi = c[3] < -exact ? -1 : (c[3] > exact ? 1 : 0);
       const bool is_inside = inside == InsideVerdict::inside;
-      const bool joined = has_open && open_inside && is_inside && open_sign != 0 && sign_hi == -open_sign;
-      const T from = has_open ? open_from : lo;
-      if (((is_inside && crossing) || joined) && (set_mode || hi - from <= params.tolerance)) {
-        note_lower(lo);
-        return {Certainty::hit, lower, hi};
+      const bool joined = has_open_ && open_inside_ && is_inside && open_sign_ != 0 && sign_hi == -open_sign_;
+      const T from = has_open_ ? open_from_ : lo_;
+      if (((is_inside && crossing_) || joined) && (set_mode_ || hi_ - from <= params_.tolerance)) {
+        note_lower(lo_);
+        finish({Certainty::hit, lower_, hi_});
+        return;
       }
-      if (leaf) {
-        note_lower(lo);  // not excluded (a wider interval tried in set mode is split instead)
-        if (!has_open) open_from = lo, has_open = true, open_sign = sign_lo, open_inside = true;
-        open_inside = open_inside && is_inside;
-        if (++leaves > Policy::kMaxLeaves || (!set_mode && hi + (hi - lo) - open_from > params.tolerance))
-          return settle(lower);
-        continue;  // touching, tangent or on a boundary: look further
+      if (leaf_) {
+        note_lower(lo_);  // not excluded (a wider interval tried in set mode is split instead)
+        if (!has_open_) open_from_ = lo_, has_open_ = true, open_sign_ = sign_lo, open_inside_ = true;
+        open_inside_ = open_inside_ && is_inside;
+        if (++leaves_ > Policy::kMaxLeaves || (!set_mode_ && hi_ + (hi_ - lo_) - open_from_ > params_.tolerance))
+          finish(settle(lower_));
+        return;  // touching, tangent or on a boundary: look further
       }
     }
-    const T open = has_lower ? lower : lo;
+    const T open = has_lower_ ? lower_ : lo_;
     // f is zero within its error here (motion that stays coplanar): only the inside test can
     // still exclude time, when the features are apart within the plane; it was not certain over
     // this interval, so halves (with less motion each) are tried, unless they are certainly in
     // contact in the plane (no sign of f left to resolve).
-    if (coplanar && inside == InsideVerdict::inside) return settle(open);
-    if (++splits > Policy::kMaxSplits || top + 2 > kStack) return settle(open);
-    if (e.level >= defer_level) {
-      if (deferred) *deferred = true;
-      return undecided;
+    if (coplanar_ && inside == InsideVerdict::inside) {
+      finish(settle(open));
+      return;
+    }
+    if (++splits_ > Policy::kMaxSplits || top_ + 2 > kStack) {
+      finish(settle(open));
+      return;
+    }
+    if (e_.level >= defer_level_) {
+      if (deferred_) *deferred_ = true;
+      finish(undecided());
+      return;
     }
     BernsteinPiece<W> left, right;
-    bernstein_halves<Policy>(e.piece, left, right);
-    stack[top++] = {right, 2u * e.index + 1u, e.level + 1};
-    stack[top++] = {left, 2u * e.index, e.level + 1};
+    bernstein_halves<Policy>(e_.piece, left, right);
+    stack_[top_++] = {right, 2u * e_.index + 1u, e_.level + 1};
+    stack_[top_++] = {left, 2u * e_.index, e_.level + 1};
   }
-  // Nothing as given; a perturbed query may still touch where only the as-given bounds excluded.
-  if (has_lower) return settle(lower);
-  return {Certainty::miss, T(0), T(1)};
+
+  Entry* const stack_;
+  const QW& q_;
+  const Vec3<W>& m_;
+  const W perturbation_, inside_slack_;
+  const CcdParams<T>& params_;
+  const int defer_level_;
+  bool* const deferred_;
+  SingleHandoff* const handoff_;
+  const int max_level_;
+  const bool set_mode_;
+  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
+  // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
+  // the query as given does (only that proves a contact). Between them lies rounding's share of
+  // the inputs: in double about u of the geometry; in float it can move a contact by more than
+  // the tolerance, and the reported lower bound is then that much earlier.
+  bool descent_;
+  int top_ = 0, splits_ = 0, leaves_ = 0;
+  T lower_ = T(0), open_from_ = T(0);  // earliest time not excluded for a perturbed query / as given
+  bool has_lower_ = false, has_open_ = false, open_inside_ = true;
+  int open_sign_ = 0;  // sign of f (as given) at open_from, 0 when uncertain
+  bool finished_ = false;
+  CertifiedAnswer<T> answer_{};
+  // The interval being visited, and what advance() found of it.
+  Entry e_{};
+  T lo_ = T(0), hi_ = T(0);
+  bool crossing_ = false, leaf_ = false, try_hit_ = false, coplanar_ = false;
+};
+
+/// The search above run to its end, each interval's inside test asked of `inside_at`.
+template <class Policy, int kStack, bool kSettle, bool kSingle, class QW, class W, class T, class InsideAt>
+LWSCCD_HD CertifiedAnswer<T> certified_search(const QW& q, const Vec3<W>& m, W perturbation, const BernsteinPiece<W>& root,
+                                              W inside_slack, const CcdParams<T>& params, int defer_level, bool* deferred,
+                                              InsideAt&& inside_at, SingleHandoff* handoff) {
+  using Search = CertifiedSearch<Policy, kStack, kSettle, kSingle, QW, W, T>;
+  typename Search::Entry stack[kStack];
+  Search search(stack, q, m, perturbation, root, inside_slack, params, defer_level, deferred, handoff);
+  const auto compute = [&](int level, std::uint32_t index) { return search.inside(level, index); };
+#if defined(__CUDA_ARCH__)
+  // The lanes of a warp that run searches side by side meet (the loop's vote) before each round
+  // of inside tests, so those that need one run it together: the test is most of a search's
+  // instructions, and one lane at a time asked for it (cloth-ball's contacts: ~4 of 32 lanes).
+  // (Not where the warp runs one search, whose lanes go on alike: lanes_alike.)
+  if constexpr (!lanes_alike<std::decay_t<InsideAt>>::value) {
+    const unsigned lanes = __activemask();
+    bool running = true;
+    while (__any_sync(lanes, running)) {
+      running = running && search.advance();
+      if (running) search.resume(inside_at(search.level(), search.index(), compute), inside_at, compute);
+    }
+  } else
+#endif
+  {
+    while (search.advance()) search.resume(inside_at(search.level(), search.index(), compute), inside_at, compute);
+  }
+  return search.answer();
 }
 
 /// The certified classification of a query that certified_screen did not reject (see the file
@@ -502,7 +623,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_refine(const Q& q_in, const CcdParams<T>&
 /// descent is handed to double where it starts (or where float can no longer halve it) through
 /// *handoff; anything else is undecided (the double search decides). Reads CcdParams<float>
 /// (single_params): no double arithmetic.
-template <class Policy, class Q>
+/// kLanesAlike: every lane of a GPU warp runs this search on the same values (InsideOneByOneLanesAlike).
+template <class Policy, bool kLanesAlike = false, class Q>
 LWSCCD_HD CertifiedAnswer<float> certified_search_single(const Q& q_in, const CcdParams<float>& params, SingleHandoff& handoff) {
   handoff = {};
   if (params.min_separation > 0.0f || params.mode == CcdMode::set) return {};
@@ -516,7 +638,8 @@ LWSCCD_HD CertifiedAnswer<float> certified_search_single(const Q& q_in, const Cc
   const float inside_slack = underflow_slack(mag, 4);
   if (!finite_value(inside_slack)) return {};
   return certified_search<Policy, kRefineStackMax, false, true>(s.q, s.m, perturbation, root, inside_slack, params, kNeverDefer,
-                                                                nullptr, InsideOneByOne{}, &handoff);
+                                                                nullptr, std::conditional_t<kLanesAlike, InsideOneByOneLanesAlike, InsideOneByOne>{},
+                                                                &handoff);
 }
 
 /// A value of the cubic and two bounds on its error, as a BernsteinPiece's: `bound` covers the
@@ -818,14 +941,14 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
 /// its answer where it decides the pair (a certain miss in float, or a contact handed to double
 /// and settled by certified_descend_from); otherwise the double screen and certified_refine
 /// decide. A hand-off is a certain contact, which no screen rejects. kSettle as certified_refine's.
-template <class Policy, bool kSettle = true, class Q, class T>
+template <class Policy, bool kSettle = true, bool kLanesAlike = false, class Q, class T>
 LWSCCD_HD CertifiedAnswer<T> certified_refine_single_first(const Q& q, const CcdParams<T>& params, bool& done,
                                                            bool* in_float_pairs = nullptr) {
   done = false;
   if (in_float_pairs) *in_float_pairs = false;
   if constexpr (Policy::kSingleFirst && Policy::kSingleDescent) {
     SingleHandoff handoff;
-    const CertifiedAnswer<float> s = certified_search_single<Policy>(q, single_params(params), handoff);
+    const CertifiedAnswer<float> s = certified_search_single<Policy, kLanesAlike>(q, single_params(params), handoff);
     if (s.certainty == Certainty::miss) {
       done = true;
       return {Certainty::miss, T(0), T(1)};
