@@ -527,6 +527,11 @@ class CertifiedSearch {
     stack_[top_++] = {left, 2u * e_.index, e_.level + 1};
   }
 
+  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
+  // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
+  // the query as given does (only that proves a contact). Between them lies rounding's share of
+  // the inputs: in double about u of the geometry; in float it can move a contact by more than
+  // the tolerance, and the reported lower bound is then that much earlier.
   Entry* const stack_;
   const QW& q_;
   const Vec3<W>& m_;
@@ -537,12 +542,7 @@ class CertifiedSearch {
   SingleHandoff* const handoff_;
   const int max_level_;
   const bool set_mode_;
-  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
-  // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
-  // the query as given does (only that proves a contact). Between them lies rounding's share of
-  // the inputs: in double about u of the geometry; in float it can move a contact by more than
-  // the tolerance, and the reported lower bound is then that much earlier.
-  bool descent_;
+  bool descent_;  // a certain descent may still be tried (one that ended on the grid is not again)
   int top_ = 0, splits_ = 0, leaves_ = 0;
   T lower_ = T(0), open_from_ = T(0);  // earliest time not excluded for a perturbed query / as given
   bool has_lower_ = false, has_open_ = false, open_inside_ = true;
