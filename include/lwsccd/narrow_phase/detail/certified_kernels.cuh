@@ -684,9 +684,12 @@ __global__ void filter_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P
                               int kept_counter, std::size_t room, CcdParams<T> params, const unsigned long long* control,
                               unsigned long long* counters, unsigned long long* intervals, std::size_t interval_room,
                               FeatureHit<T>* hits, std::size_t hit_room, FeatureHit<T>* undecided, unsigned* deferred,
-                              std::size_t warp_below, unsigned* handed) {
+                              std::size_t warp_below, unsigned* handed, unsigned* listed, std::size_t listed_words) {
   lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
   if (control[kSkip]) return;
+  // filter_inside_kernel's bits, cleared here rather than by a memset between the two kernels,
+  // which would hold the next one's launch until this one ends (no launch ahead, NarrowPhase::chain).
+  LWSCCD_GRID_STRIDE(w, listed_words) { listed[w] = 0u; }
   const std::size_t n = counters[kept_counter] < room ? static_cast<std::size_t>(counters[kept_counter]) : room;
   const std::size_t whole = kWithWhole ? whole_searched_early(counters, warp_below) : 0;
   LWSCCD_GRID_STRIDE(i, n + whole) {

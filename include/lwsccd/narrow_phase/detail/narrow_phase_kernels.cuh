@@ -393,13 +393,13 @@ void NarrowPhase<Method, T, Policy>::enqueue_first_pass(const MeshFeatures& mesh
         const auto launch = [&](auto kernel) {
           chain(kernel, grid_for(room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream,
               mesh, x0, x1, kept, kept_counter, l.refine_room, params, control_.data(), l.counters.data(), l.intervals.data(),
-              l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data(), warp_below, handed);
+              l.interval_room, l.hits.data(), l.hit_room, l.undecided.data(), l.deferred.data(), warp_below, handed,
+              l.listed.data(), l.listed.size());
         };
         if (whole_in_filter) launch(detail::filter_kernel<Method, kVertexFace, true, kHand, T, P>);
         else launch(detail::filter_kernel<Method, kVertexFace, false, kHand, T, P>);
       });
       record(out, lp, [=](List& l) {
-        LWSCCD_CUDA_CHECK(cudaMemsetAsync(l.listed.data(), 0, l.listed.size() * sizeof(unsigned), l.stream));
         chain(detail::filter_inside_kernel<Method, kVertexFace, T, P>, interval_blocks, Policy::kBlock, l.stream,
             mesh, x0, x1, kept, params, control_.data(), l.counters.data(), detail::kIntervals, l.intervals.data(),
             l.interval_room, l.listed.data(), l.deferred.data(), deeper ? l.expanded.data() : nullptr);
