@@ -323,7 +323,8 @@ class CertifiedSearch {
         set_mode_(params.mode == CcdMode::set),
         descent_(Policy::kCertainDescent && !set_mode_ && (Policy::kDescentBeforeDefer || defer_level >= max_level_)) {
     static_assert(kStack >= 3 && kStack <= kRefineStackMax, "lwsccd: certified_refine holds 3 to kRefineStackMax pending intervals");
-    stack_[top_++] = {root, 0u, 0};
+    e_ = {root, 0u, 0};
+    next_held_ = true;
   }
 
   /// Runs the search up to the next interval that needs its inside test (true: the test of
@@ -332,8 +333,12 @@ class CertifiedSearch {
   /// this loop, so the lanes that need a test run it together instead of one or two at a time.
   LWSCCD_HD bool advance() {
     while (!finished_) {
-      if (top_ == 0) return finish_at_end();
-      e_ = stack_[--top_];
+      if (next_held_) {
+        next_held_ = false;  // e_ is the interval to visit
+      } else {
+        if (top_ == 0) return finish_at_end();
+        e_ = stack_[--top_];
+      }
       // Dyadic with at most certified_max_level(T) bits: exact in T and W.
       const T scale = exact_pow2_neg<T>(e_.level);
       lo_ = static_cast<T>(e_.index) * scale, hi_ = static_cast<T>(e_.index + 1u) * scale;
@@ -473,7 +478,7 @@ class CertifiedSearch {
         }
         lower_ = saved_lower, has_lower_ = saved_has_lower, splits_ = saved_splits;
         descent_ = false;
-        stack_[top_++] = e_;
+        next_held_ = true;  // this interval again
         return;
       }
     }
@@ -524,10 +529,16 @@ class CertifiedSearch {
     BernsteinPiece<W> left, right;
     bernstein_halves<Policy>(e_.piece, left, right);
     stack_[top_++] = {right, 2u * e_.index + 1u, e_.level + 1};
-    stack_[top_++] = {left, 2u * e_.index, e_.level + 1};
+    e_ = {left, 2u * e_.index, e_.level + 1};
+    next_held_ = true;
   }
 
-  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see.
+  // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see;
+  // the interval visited next when it is known at once (the root, a left half, an interval to
+  // search again) is held in e_ instead (next_held_), not stored and loaded again: a GPU thread's
+  // stack is local memory, and its stores go on to L2 (cloth-ball's edge-edge filter_kernel: two
+  // thirds of its local store sectors were the stack's pushes; L2 was its busiest unit, at 57% of
+  // its peak, DRAM at 4%). The capacity check still counts both halves, as before.
   // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
   // the query as given does (only that proves a contact). Between them lies rounding's share of
   // the inputs: in double about u of the geometry; in float it can move a contact by more than
@@ -549,8 +560,10 @@ class CertifiedSearch {
   int open_sign_ = 0;  // sign of f (as given) at open_from, 0 when uncertain
   bool finished_ = false;
   CertifiedAnswer<T> answer_{};
-  // The interval being visited, and what advance() found of it.
+  // The interval being visited (or, with next_held_, the one to visit next), and what advance()
+  // found of it.
   Entry e_{};
+  bool next_held_ = false;
   T lo_ = T(0), hi_ = T(0);
   bool crossing_ = false, leaf_ = false, try_hit_ = false, coplanar_ = false;
 };
