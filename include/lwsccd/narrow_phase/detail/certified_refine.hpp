@@ -535,10 +535,9 @@ class CertifiedSearch {
 
   // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see;
   // the interval visited next when it is known at once (the root, a left half, an interval to
-  // search again) is held in e_ instead (next_held_), not stored and loaded again: a GPU thread's
-  // stack is local memory, and its stores go on to L2 (cloth-ball's edge-edge filter_kernel: two
-  // thirds of its local store sectors were the stack's pushes; L2 was its busiest unit, at 57% of
-  // its peak, DRAM at 4%). The capacity check still counts both halves, as before.
+  // search again) is held in e_ instead (next_held_), not stored and loaded back: a GPU thread's
+  // stack is local memory, whose stores go on to L2 (docs/NARROW_PHASE.md, 5.4). The capacity
+  // check still counts both halves, as before.
   // Two bounds on everything: what a perturbed query may do (only that excludes time) and what
   // the query as given does (only that proves a contact). Between them lies rounding's share of
   // the inputs: in double about u of the geometry; in float it can move a contact by more than
