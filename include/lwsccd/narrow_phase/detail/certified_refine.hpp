@@ -324,7 +324,7 @@ class CertifiedSearch {
         descent_(Policy::kCertainDescent && !set_mode_ && (Policy::kDescentBeforeDefer || defer_level >= max_level_)) {
     static_assert(kStack >= 3 && kStack <= kRefineStackMax, "lwsccd: certified_refine holds 3 to kRefineStackMax pending intervals");
     e_ = {root, 0u, 0};
-    next_held_ = true;
+    next_held_ = !passed_over(root, 0u, 0);
   }
 
   /// Runs the search up to the next interval that needs its inside test (true: the test of
@@ -342,11 +342,10 @@ class CertifiedSearch {
       // Dyadic with at most certified_max_level(T) bits: exact in T and W.
       const T scale = exact_pow2_neg<T>(e_.level);
       lo_ = static_cast<T>(e_.index) * scale, hi_ = static_cast<T>(e_.index + 1u) * scale;
-      if (lo_ >= params_.time_limit) continue;  // later than what the caller still wants
+      // (Not passed_over: the root is visited only if not, and a half only if not.)
       const W* c = e_.piece.c;
-      const W bound = e_.piece.bound, exact = e_.piece.exact;
-      if (same_sign_beyond(c, bound)) continue;  // no root here, even perturbed
-      if (same_sign_beyond(c, exact)) {          // none as given; a perturbed query's may be here
+      const W exact = e_.piece.exact;
+      if (same_sign_beyond(c, exact)) {  // no root as given; a perturbed query's may be here
         note_lower(lo_);
         continue;
       }
@@ -528,9 +527,23 @@ class CertifiedSearch {
     }
     BernsteinPiece<W> left, right;
     bernstein_halves<Policy>(e_.piece, left, right);
-    stack_[top_++] = {right, 2u * e_.index + 1u, e_.level + 1};
-    e_ = {left, 2u * e_.index, e_.level + 1};
-    next_held_ = true;
+    const int level = e_.level + 1;
+    const std::uint32_t index = 2u * e_.index;
+    // A half that would be passed over is neither held nor stacked: the same intervals are
+    // visited in the same order, without storing and loading back those that end at once.
+    // (The left half starts where this interval does, within the time limit.)
+    const bool visit_left = !same_sign_beyond(left.c, left.bound), visit_right = !passed_over(right, index + 1u, level);
+    if (visit_left && visit_right) stack_[top_++] = {right, index + 1u, level};
+    if (visit_left) e_ = {left, index, level};
+    else if (visit_right) e_ = {right, index + 1u, level};
+    next_held_ = visit_left || visit_right;
+  }
+  // Whether interval `index` of `level` (piece p) is passed over, nothing noted: it starts past
+  // the time limit (later than the caller still wants), or p keeps one sign beyond the perturbed
+  // bound (no root there, even perturbed). Tested once for each interval, before it is held or
+  // stacked (docs/NARROW_PHASE.md 5.4).
+  LWSCCD_HD bool passed_over(const BernsteinPiece<W>& p, std::uint32_t index, int level) const {
+    return static_cast<T>(index) * exact_pow2_neg<T>(level) >= params_.time_limit || same_sign_beyond(p.c, p.bound);
   }
 
   // Depth-first over dyadic intervals, earliest first: the stack holds right halves still to see;
