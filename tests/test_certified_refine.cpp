@@ -4,7 +4,9 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <limits>
 #include <optional>
 #include <random>
 #include <string>
@@ -384,4 +386,40 @@ TEST_CASE("certified screen with a time limit: the window's boxes never drop a c
   }
   CHECK(kept > 500);
   CHECK(dropped > 1000);
+}
+
+// The search's levels from a tolerance's exponent: the least level whose width is within it, and
+// one past it for the finest, checked against their definitions (widths compared exactly).
+template <class T>
+static void check_tolerance_levels(T tolerance) {
+  int least = 0;  // by definition: 2^-least <= tolerance
+  while (least < 2000 && !(std::ldexp(1.0L, -least) <= static_cast<long double>(tolerance))) ++least;
+  INFO("tolerance " << static_cast<double>(tolerance));
+  REQUIRE(detail::tolerance_level(tolerance) == least);
+  const int grid = std::min(std::numeric_limits<T>::digits - 2, 30);
+  REQUIRE(detail::certified_max_level(tolerance) == std::clamp(least + 1, 1, grid));
+}
+TEST_CASE("certified path: the levels of a tolerance are exact, at powers of two and an ulp either side", "[narrow][certified]") {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int k = 0; k <= 60; ++k) {
+    const double p = std::ldexp(1.0, -k);
+    for (const double t : {p, std::nextafter(p, 0.0), std::nextafter(p, 2.0), 0.75 * p}) {
+      if (t > 0.0 && t < 1.0) check_tolerance_levels(t);
+      const float f = static_cast<float>(t);
+      if (f > 0.0f && f < 1.0f) check_tolerance_levels(f);
+    }
+    check_tolerance_levels(std::nextafter(static_cast<float>(p), 0.0f));
+  }
+  for (int i = 0; i < 2000; ++i) {
+    const double t = std::ldexp(unit(rng), -static_cast<int>(unit(rng) * 40.0));
+    if (t > 0.0) check_tolerance_levels(t), check_tolerance_levels(static_cast<float>(t));
+  }
+  check_tolerance_levels(std::numeric_limits<double>::denorm_min());
+  check_tolerance_levels(1.0), check_tolerance_levels(3.0f);
+  // Not a tolerance (rejected by the pipelines): no level within it, so the finest.
+  for (const double bad : {0.0, -1e-6, std::numeric_limits<double>::quiet_NaN()}) {
+    REQUIRE(detail::tolerance_level(bad) >= (1 << 20));
+    REQUIRE(detail::certified_max_level(bad) == 30);
+  }
 }

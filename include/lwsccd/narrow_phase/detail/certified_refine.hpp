@@ -904,8 +904,9 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
   const int max_level = certified_max_level(params.tolerance);
   // The leaves: the first level at or below the hand-off's within the tolerance (or the finest),
   // as certain_descent stops.
-  int leaf_level = handoff.level;
-  while (leaf_level < max_level && !(exact_pow2_neg<T>(leaf_level) <= params.tolerance)) ++leaf_level;
+  const int within = tolerance_level(params.tolerance);
+  const int leaf_level =
+      handoff.level >= max_level ? handoff.level : (within >= max_level ? max_level : (within > handoff.level ? within : handoff.level));
   CertifiedAnswer<T> proved;
   if constexpr (Policy::kDescentJump && Policy::kJumpAtPoints) {
     if (leaf_level <= 30 && handoff.guess >= 0.0f) {

@@ -43,11 +43,24 @@ LWSCCD_HD LWSCCD_HOST_INLINE W screening_bernstein(const Q& q, W b[4], const Vec
   return fadd(fmul(fmul(W(18), bound), W(1) + W(16) * u), std::numeric_limits<W>::denorm_min());
 }
 
+/// The first level whose intervals are within `tolerance`: the least level >= 0 with
+/// 2^-level <= tolerance, from the tolerance's binary exponent (exact, where a logarithm rounded to
+/// an integer may not be, and cheap: the searches ask for it per pair). No level for a tolerance
+/// that is not positive (NaN included): 2^20, past every level the searches reach.
+template <class T>
+LWSCCD_HD int tolerance_level(T tolerance) {
+  if (!(tolerance > T(0))) return 1 << 20;
+  if (tolerance >= T(1)) return 0;
+  int exponent = 0;  // tolerance = f 2^exponent, f in [1/2, 1): 2^-level <= tolerance from level 1 - exponent
+  (void)std::frexp(static_cast<double>(tolerance), &exponent);
+  return 1 - exponent;
+}
+
 /// The finest level of the time intervals: width 2^-level <= tolerance / 2, so that a root
-/// interval may span two of them.
+/// interval may span two of them (one level past tolerance_level), within T's time grid.
 template <class T>
 LWSCCD_HD int certified_max_level(T tolerance) {
-  int level = static_cast<int>(std::ceil(-std::log2(static_cast<double>(tolerance)))) + 1;
+  int level = tolerance_level(tolerance) + 1;
   level = level < 1 ? 1 : level;
   const int mantissa = std::numeric_limits<T>::digits - 2;
   level = level > mantissa ? mantissa : level;
