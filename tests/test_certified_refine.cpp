@@ -416,7 +416,8 @@ TEST_CASE("certified path: the levels of a tolerance are exact, at powers of two
     if (t > 0.0) check_tolerance_levels(t), check_tolerance_levels(static_cast<float>(t));
   }
   check_tolerance_levels(std::numeric_limits<double>::denorm_min());
-  check_tolerance_levels(1.0), check_tolerance_levels(3.0f);
+  check_tolerance_levels(1.0);
+  check_tolerance_levels(3.0f);
   // Not a tolerance (rejected by the pipelines): no level within it, so the finest.
   for (const double bad : {0.0, -1e-6, std::numeric_limits<double>::quiet_NaN()}) {
     REQUIRE(detail::tolerance_level(bad) >= (1 << 20));

@@ -342,7 +342,7 @@ class CertifiedSearch {
       // Dyadic with at most certified_max_level(T) bits: exact in T and W.
       const T scale = exact_pow2_neg<T>(e_.level);
       lo_ = static_cast<T>(e_.index) * scale, hi_ = static_cast<T>(e_.index + 1u) * scale;
-      // (Not passed_over: the root is visited only if not, and a half only if not.)
+      // (passed_over was tested before this interval was held or stacked.)
       const W* c = e_.piece.c;
       const W exact = e_.piece.exact;
       if (same_sign_beyond(c, exact)) {  // no root as given; a perturbed query's may be here
@@ -905,8 +905,8 @@ LWSCCD_HD CertifiedAnswer<T> certified_descend_from(const Q& q_in, const CcdPara
   // The leaves: the first level at or below the hand-off's within the tolerance (or the finest),
   // as certain_descent stops.
   const int within = tolerance_level(params.tolerance);
-  const int leaf_level =
-      handoff.level >= max_level ? handoff.level : (within >= max_level ? max_level : (within > handoff.level ? within : handoff.level));
+  int leaf_level = within > handoff.level ? within : handoff.level;
+  if (leaf_level > max_level) leaf_level = handoff.level > max_level ? handoff.level : max_level;
   CertifiedAnswer<T> proved;
   if constexpr (Policy::kDescentJump && Policy::kJumpAtPoints) {
     if (leaf_level <= 30 && handoff.guess >= 0.0f) {
