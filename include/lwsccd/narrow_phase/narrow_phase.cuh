@@ -3,7 +3,6 @@
 #pragma once
 
 #include <cub/device/device_radix_sort.cuh>
-#include <cub/device/device_scan.cuh>
 
 #include <algorithm>
 #include <functional>
@@ -80,8 +79,8 @@ struct NarrowPhasePolicy {
   /// double run a warp each (kHandedWarpsMaxFp64Ratio).
   static constexpr int kEarlyCoplanarSearches = 256;
   static constexpr int kEarlyCoplanarPerSurvivors = 256;
-  /// A list's first-pass kernels (the screen through settle_undecided_kernel; not the fallback's
-  /// nor the hits' sort) are launched to overlap the end of the one before them (programmatic
+  /// A list's kernels (the screen through the fallback's and the hits' sort, all but the radix
+  /// sort's CUB passes) are launched to overlap the end of the one before them (programmatic
   /// dependent launch, compute capability 9.0 and later; elsewhere plain launches): a kernel's
   /// blocks are set up while the last one's finish and wait on the device for it, instead of the
   /// stream draining between the two (NVIDIA H200: armadillo-rollers narrow 0.516 -> 0.494 ms, the
@@ -200,13 +199,17 @@ class HitSorter {
   /// no host round trip sits between a run's last kernel and its sort. take_ahead() then says
   /// whether that sort covered the count.
   /// With `overflow` (a device word, zero, that the caller reads back with its run's counts) the
-  /// hits are sorted by buckets of first ids (detail::bucket_rank_kernel: five launches, no
+  /// hits are sorted by buckets of first ids (detail::bucket_rank_kernel: four launches, no
   /// radix passes); a bucket of more than detail::kBucketRankMax hits adds to *overflow, and the
   /// caller passes the word to take_ahead(), which then declines the sort (sort() them). From
   /// then on this sorter sorts ahead by radix (a scene whose contacts crowd a few features keeps
-  /// crowding them). Without `overflow`: by radix.
+  /// crowding them). Without `overflow`: by radix. With `overlap_launches` (a device of compute
+  /// capability 9.0 or later: detail::device_overlaps_launches) the sort's own kernels (all but
+  /// the radix sort's CUB passes) are launched to overlap the end of the kernel before them on
+  /// `stream` (detail::launch_after_previous); the same order.
   void sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
-                  std::size_t id_limit, cudaStream_t stream = nullptr, unsigned long long* overflow = nullptr);
+                  std::size_t id_limit, cudaStream_t stream = nullptr, unsigned long long* overflow = nullptr,
+                  bool overlap_launches = false);
   /// Once the stream of the last sort_ahead() has been synchronized and the count `n` is known:
   /// true when that sort covered it, the sorted hits then in `hits` (buffers exchanged as by
   /// sort()); false when it did not (`hits` unchanged: sort() them). `overflow`: the value of the
@@ -220,13 +223,14 @@ class HitSorter {
   bool ahead_by_radix() const { return ahead_by_radix_; }
   std::size_t device_bytes() const {
     return sorted_.capacity_bytes() + keys_.capacity_bytes() + sorted_keys_.capacity_bytes() + scratch_.capacity_bytes() +
-           bucket_count_.capacity_bytes() + bucket_start_.capacity_bytes() + order_.capacity_bytes();
+           bucket_count_.capacity_bytes() + bucket_start_.capacity_bytes() + order_.capacity_bytes() + tile_sums_.capacity_bytes() +
+           tile_ticket_.capacity_bytes();
   }
 
  private:
   void radix_sort(const FeatureHit<T>* hits, std::size_t n, int id_bits, cudaStream_t stream, const unsigned long long* device_count);
   void bucket_sort(const FeatureHit<T>* hits, const unsigned long long* device_count, std::size_t span, std::size_t id_limit,
-                   int id_bits, cudaStream_t stream, unsigned long long* overflow);
+                   int id_bits, cudaStream_t stream, unsigned long long* overflow, bool overlap);
   std::size_t ahead_ = 0;  ///< slots the last sort_ahead() sorted (0: none pending)
   bool ahead_bucketed_ = false;  ///< the last sort_ahead() sorted by buckets
   bool ahead_by_radix_ = false;  ///< a bucket overflowed once: sort ahead by radix from then on
@@ -235,6 +239,9 @@ class HitSorter {
   DeviceBuffer<unsigned char> scratch_;
   DeviceBuffer<unsigned> bucket_count_;  ///< per bucket, zero between sorts (cleared when it grows)
   DeviceBuffer<unsigned> bucket_start_, order_;
+  DeviceBuffer<unsigned long long> tile_sums_;  ///< the bucket scan's tile sums, this sort's generation high (detail::bucket_scan_kernel)
+  DeviceBuffer<unsigned> tile_ticket_;          ///< the bucket scan's ticket, zero between sorts
+  unsigned scan_generation_ = 0;                ///< the last bucket scan's (never 0 in a scan)
 };
 
 /// Runs a CCD method over device lists of candidate pairs, in the mode params.mode (as
@@ -433,6 +440,9 @@ class NarrowPhase {
     /// the next run's early searches: none where it had none); unknown before a first run.
     std::size_t early_candidates = kUnknownCandidates;
     std::size_t survivors_seen = 0;  ///< the last run's pairs its screen passed (plans the early searches)
+    /// CertifiedCcd: the last run's undecided pairs, and those of them its fallback searched a warp
+    /// each (plan the fallback's grids); unknown before a first run.
+    std::size_t fallback_seen = kUnknownCandidates, open_seen = kUnknownCandidates;
     std::size_t sort_span = 0;                   ///< hits the next run sorts before its count reaches the host (0: none)
     CudaStream stream;
     CudaEvent done;
@@ -468,6 +478,14 @@ class NarrowPhase {
     return l.early_candidates == kUnknownCandidates ? l.early_room : std::max<std::size_t>(std::min(l.early_candidates, l.early_room), 1);
   }
   static constexpr std::size_t kUnknownCandidates = static_cast<std::size_t>(-1);
+  // The items a fallback kernel's grid is sized for (grid_for), of a list whose room is `room`:
+  // CertifiedCcd's, the last run's `seen` and a quarter more, at least a block of `per_block` items
+  // per SM (a grid-stride loop takes any more); other methods', and before a first run, the room.
+  std::size_t fallback_room(std::size_t room, std::size_t seen, int per_block) const {
+    if (!kCertified || seen == kUnknownCandidates) return room;
+    const std::size_t planned = std::max(seen + seen / 4, static_cast<std::size_t>(sms_) * static_cast<std::size_t>(per_block));
+    return std::min(room, planned);
+  }
   // Whether this run's single-precision filter runs on one thread a pair (kSingleFilterOneThreadPerSm):
   // planned from the last run's survivors, before a first run from their room (its count).
   bool single_filter_on_one_thread(const List& l) const {

@@ -25,6 +25,7 @@ __global__ void inclusion_thread_kernel(MeshFeatures mesh, const Vec3<P>* x0, co
                                         const unsigned long long* limit_bits, unsigned long long* counters, FeatureHit<T>* hits,
                                         std::size_t hit_room, unsigned* open, std::size_t direct_below) {
   using Traits = lwsccd::detail::inclusion_search_of<Method>;
+  lwsccd::detail::start_after_previous_grids();
   if (control[kSkip]) return;
   const std::size_t n = count.get();
   if (n <= direct_below) {
@@ -115,6 +116,7 @@ __global__ void __launch_bounds__(32 * kWarps)
   __shared__ CcdResult<T> results[kWarps];
   __shared__ unsigned long long dropped[kWarps];
   __shared__ int state[kWarps];
+  lwsccd::detail::start_after_previous_grids();
   if (control[kSkip]) return;
   const std::size_t n = static_cast<std::size_t>(counters[kOpen]);
   if (static_cast<std::size_t>(blockIdx.x) * kWarps >= n) return;  // no search for this block (as above)

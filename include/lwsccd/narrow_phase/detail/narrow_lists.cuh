@@ -213,6 +213,7 @@ template <class Method, bool kVertexFace, class T, class P, class Item>
 __global__ void ccd_pairs_kernel(MeshFeatures mesh, const Vec3<P>* x0, const Vec3<P>* x1, const Item* items, DeviceCount count,
                                  CcdParams<T> params, const unsigned long long* control, const unsigned long long* limit_bits,
                                  unsigned long long* counters, FeatureHit<T>* hits, std::size_t hit_room) {
+  lwsccd::detail::start_after_previous_grids();
   if (control[kSkip]) return;
   const CcdParams<T> base = limited_params(params, limit_bits);
   const std::size_t n = count.get();

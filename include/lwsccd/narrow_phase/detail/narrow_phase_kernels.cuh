@@ -218,7 +218,7 @@ void NarrowPhase<Method, T, Policy>::enqueue(const DeviceMeshFeatures& mesh, con
   if (!earliest_only_) {
     for (auto& l : lists_) {
       l.sorter.sort_ahead(l.hits, l.counters.data() + detail::kHits, l.sort_span, id_limit_, l.stream,
-                          l.counters.data() + detail::kHitSortOverflow);
+                          l.counters.data() + detail::kHitSortOverflow, overlap_launches_);
     }
     join_lists(stream);
   }
@@ -473,27 +473,33 @@ void NarrowPhase<Method, T, Policy>::enqueue_full_test(const MeshFeatures& mesh,
                                                        const unsigned long long* limit, List& list, Launches& out) {
   List* const lp = &list;
   auto launch = [&](const auto* items, DeviceCount count) {
+    using Item = std::remove_cv_t<std::remove_pointer_t<std::decay_t<decltype(items)>>>;
     count.room = std::min(count.room, in.count.room);
     if (count.room == 0) return;
     if constexpr (lwsccd::detail::inclusion_search_of<FullTest>::value) {
-      // A thread per query for a few rounds, then a warp per query still open.
+      // A thread per query for a few rounds, then a warp per query still open. CertifiedCcd's
+      // undecided pairs are few (none on most steps): grids for the last run's numbers, not for
+      // the list's room (a grid of the room's thousands of blocks with nothing to do took ~4 us).
+      const std::size_t thread_room = fallback_room(count.room, list.fallback_seen, Policy::kBlock);
+      const std::size_t warp_room = fallback_room(count.room, list.open_seen, Policy::kSearchWarpsPerBlock);
       record(out, lp, [=](List& l) {
-        detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes>
-            <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room,
-                l.open.data(), static_cast<std::size_t>(Policy::kWarpSearchDirect));
+        chain(detail::inclusion_thread_kernel<FullTest, kVertexFace, T, P, Policy::kThreadRounds, Policy::kThreadBoxes, Item>,
+              grid_for(thread_room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream, mesh, x0, x1, items, count,
+              params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room, l.open.data(),
+              static_cast<std::size_t>(Policy::kWarpSearchDirect));
       });
       record(out, lp, [=](List& l) {
         constexpr int kWarps = Policy::kSearchWarpsPerBlock;
-        detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps>
-            <<<grid_for(count.room, kWarps, Policy::kGridBlocksPerSm), 32 * kWarps, 0, l.stream>>>(
-                mesh, x0, x1, items, l.open.data(), params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+        chain(detail::inclusion_warp_kernel<FullTest, kVertexFace, T, P, kWarps, Item>,
+              grid_for(warp_room, kWarps, Policy::kGridBlocksPerSm), 32 * kWarps, l.stream, mesh, x0, x1, items,
+              static_cast<const unsigned*>(l.open.data()), params, control_.data(), limit, l.counters.data(), l.hits.data(),
+              l.hit_room);
       });
     } else {
       record(out, lp, [=](List& l) {
-        detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P>
-            <<<grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, 0, l.stream>>>(
-                mesh, x0, x1, items, count, params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
+        chain(detail::ccd_pairs_kernel<FullTest, kVertexFace, T, P, Item>,
+              grid_for(count.room, Policy::kBlock, Policy::kGridBlocksPerSm), Policy::kBlock, l.stream, mesh, x0, x1, items, count,
+              params, control_.data(), limit, l.counters.data(), l.hits.data(), l.hit_room);
       });
     }
   };
@@ -584,6 +590,8 @@ bool NarrowPhase<Method, T, Policy>::collect() {
     if (kCertified) {
       l.early_candidates = static_cast<std::size_t>(c[detail::kEarlyCandidates]);
       l.survivors_seen = static_cast<std::size_t>(c[detail::kSurvivors]);
+      l.fallback_seen = static_cast<std::size_t>(c[detail::kUndecided]);
+      l.open_seen = static_cast<std::size_t>(c[detail::kOpen]);
     }
     l.counts = {};
     l.counts.pairs = pairs;
@@ -656,7 +664,8 @@ void HitSorter<T>::sort(DeviceBuffer<FeatureHit<T>>& hits, std::size_t n, std::s
 
 template <class T>
 void HitSorter<T>::bucket_sort(const FeatureHit<T>* hits, const unsigned long long* device_count, std::size_t span,
-                               std::size_t id_limit, int id_bits, cudaStream_t stream, unsigned long long* overflow) {
+                               std::size_t id_limit, int id_bits, cudaStream_t stream, unsigned long long* overflow,
+                               bool overlap) {
   // Buckets: a power of two, at least twice the span (a couple of hits a bucket where the first
   // ids spread), at most one first id each; memory and scan in proportion to the span, not to
   // the mesh.
@@ -668,30 +677,43 @@ void HitSorter<T>::bucket_sort(const FeatureHit<T>* hits, const unsigned long lo
     bucket_count_.resize_discard(buckets + 1);
     LWSCCD_CUDA_CHECK(cudaMemsetAsync(bucket_count_.data(), 0, bucket_count_.size() * sizeof(unsigned), stream));
   }
+  // The scan's tiles: their sums (a word of another generation is stale; cleared when they grow,
+  // as a new buffer's words could hold anything) and the ticket (zero between sorts).
+  const std::size_t tiles = (buckets + 1 + detail::kBucketScanTile - 1) / detail::kBucketScanTile;
+  if (tile_sums_.size() < tiles) {
+    tile_sums_.resize_discard(tiles);
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(tile_sums_.data(), 0, tile_sums_.size() * sizeof(unsigned long long), stream));
+  }
+  if (tile_ticket_.size() == 0) {
+    tile_ticket_.resize_discard(1);
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(tile_ticket_.data(), 0, sizeof(unsigned), stream));
+  }
+  if (++scan_generation_ == 0) {  // (wrapped: every old word could match again)
+    LWSCCD_CUDA_CHECK(cudaMemsetAsync(tile_sums_.data(), 0, tile_sums_.size() * sizeof(unsigned long long), stream));
+    scan_generation_ = 1;
+  }
   bucket_start_.resize_discard(buckets + 1);
   keys_.resize_discard(span);
   order_.resize_discard(span);
   const unsigned blocks = static_cast<unsigned>((span + 255) / 256);
-  detail::bucket_count_kernel<<<blocks, 256, 0, stream>>>(hits, span, device_count, shift, bucket_count_.data(), overflow);
-  LWSCCD_CUDA_CHECK_LAUNCH();
+  using lwsccd::detail::launch_after_previous;
+  launch_after_previous(overlap, detail::bucket_count_kernel<T>, blocks, 256, stream, hits, span, device_count, shift,
+                        bucket_count_.data(), overflow);
   // (bucket_count_[buckets] is zero: the scan's last word is the count.)
-  std::size_t bytes = 0;
-  LWSCCD_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, bytes, bucket_count_.data(), bucket_start_.data(),
-                                                  static_cast<std::int64_t>(buckets + 1), stream));
-  scratch_.resize_discard(std::max({bytes, scratch_.size(), std::size_t(1)}));
-  LWSCCD_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scratch_.data(), bytes, bucket_count_.data(), bucket_start_.data(),
-                                                  static_cast<std::int64_t>(buckets + 1), stream));
-  detail::bucket_place_kernel<<<blocks, 256, 0, stream>>>(hits, span, device_count, shift, id_bits, bucket_count_.data(),
-                                                          bucket_start_.data(), keys_.data(), order_.data());
-  LWSCCD_CUDA_CHECK_LAUNCH();
-  detail::bucket_rank_kernel<<<blocks, 256, 0, stream>>>(hits, span, device_count, shift, id_bits, bucket_start_.data(), keys_.data(),
-                                                         order_.data(), sorted_.data());
-  LWSCCD_CUDA_CHECK_LAUNCH();
+  launch_after_previous(overlap, detail::bucket_scan_kernel<>, static_cast<unsigned>(tiles),
+                        static_cast<unsigned>(detail::kBucketScanThreads), stream, static_cast<const unsigned*>(bucket_count_.data()),
+                        buckets + 1, bucket_start_.data(), tile_sums_.data(), tile_ticket_.data(), scan_generation_);
+  launch_after_previous(overlap, detail::bucket_place_kernel<T>, blocks, 256, stream, hits, span, device_count, shift, id_bits,
+                        bucket_count_.data(), static_cast<const unsigned*>(bucket_start_.data()), keys_.data(), order_.data(),
+                        tile_ticket_.data());
+  launch_after_previous(overlap, detail::bucket_rank_kernel<T>, blocks, 256, stream, hits, span, device_count, shift, id_bits,
+                        static_cast<const unsigned*>(bucket_start_.data()), static_cast<const unsigned long long*>(keys_.data()),
+                        static_cast<const unsigned*>(order_.data()), sorted_.data());
 }
 
 template <class T>
 void HitSorter<T>::sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
-                              std::size_t id_limit, cudaStream_t stream, unsigned long long* overflow) {
+                              std::size_t id_limit, cudaStream_t stream, unsigned long long* overflow, bool overlap_launches) {
   ahead_ = 0;
   ahead_bucketed_ = false;
   span = std::min(span, hits.size());
@@ -699,11 +721,11 @@ void HitSorter<T>::sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const uns
   sorted_.resize_discard(std::max(span, hits.size()));
   const int id_bits = detail::id_bits_below(id_limit);
   if (span <= static_cast<std::size_t>(detail::kSmallHitSort)) {
-    detail::small_hit_sort_kernel<T, detail::kSmallHitSort>
-        <<<1, detail::kSmallHitSort, 0, stream>>>(hits.data(), static_cast<int>(span), id_bits, sorted_.data(), device_count);
-    LWSCCD_CUDA_CHECK_LAUNCH();
+    lwsccd::detail::launch_after_previous(overlap_launches, detail::small_hit_sort_kernel<T, detail::kSmallHitSort>, 1,
+                                          static_cast<unsigned>(detail::kSmallHitSort), stream, hits.data(), static_cast<int>(span),
+                                          id_bits, sorted_.data(), device_count);
   } else if (overflow && !ahead_by_radix_ && span < (std::size_t(1) << 31)) {
-    bucket_sort(hits.data(), device_count, span, id_limit, id_bits, stream, overflow);
+    bucket_sort(hits.data(), device_count, span, id_limit, id_bits, stream, overflow, overlap_launches);
     ahead_bucketed_ = true;
   } else {
     radix_sort(hits.data(), span, id_bits, stream, device_count);
