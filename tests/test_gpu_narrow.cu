@@ -51,6 +51,10 @@ struct SingleFilterInBlocks : gpu::NarrowPhasePolicy {
 struct SingleFilterInBlocksNoPieceRoom : SingleFilterInBlocks {
   static constexpr int kSingleBlockPiecesPerPair = 0;
 };
+// The block form from rooms of the initial capacity (no count before a first run).
+struct SingleFilterInBlocksFromCapacity : SingleFilterInBlocks {
+  static constexpr bool kCountFirstRun = false;
+};
 struct SingleFilterOnOneThread : gpu::NarrowPhasePolicy {
   static constexpr int kSingleFilterOneThreadPerSm = 1 << 20;
 };
@@ -510,9 +514,11 @@ TEST_CASE("GPU hit sort ahead: enqueued before the count reaches the host, used 
 }
 
 TEST_CASE("GPU hit sort ahead by buckets: spread and crowded first ids, run after run", "[gpu][narrow]") {
-  // One sorter many times (its bucket counts must return to zero after each sort), with first ids
-  // spread (a bucket or two each), in runs (consecutive ids, as contacts of one region), and up
-  // to kBucketRankMax in one bucket: every sort covered and stable.
+  // One sorter many times (its bucket counts and its scan's ticket must return to zero after each
+  // sort, its scan's tile sums of earlier sorts be passed over), with first ids spread (a bucket
+  // or two each), in runs (consecutive ids, as contacts of one region), and up to kBucketRankMax
+  // in one bucket: every sort covered and stable. Half the sorts (of both lengths) overlap their
+  // launches where the device can (as the narrow phase's).
   std::mt19937 rng(5);
   gpu::HitSorter<double> sorter;
   gpu::DeviceBuffer<unsigned long long> count, overflow;
@@ -533,7 +539,8 @@ TEST_CASE("GPU hit sort ahead by buckets: spread and crowded first ids, run afte
     gpu::DeviceBuffer<FeatureHit<double>> d;
     d.upload(hits);
     count.upload(std::vector<unsigned long long>{n});
-    sorter.sort_ahead(d, count.data(), gpu::HitSorter<double>::span_after(n), limit, nullptr, overflow.data());
+    const bool overlap = round % 4 < 2 && lwsccd::detail::device_overlaps_launches(0);
+    sorter.sort_ahead(d, count.data(), gpu::HitSorter<double>::span_after(n), limit, nullptr, overflow.data(), overlap);
     LWSCCD_CUDA_CHECK(cudaDeviceSynchronize());
     const unsigned long long overflowed = overflow.download()[0];
     if (limit >= n) REQUIRE(overflowed == 0);  // (a dense id range: buckets of one or two ids)
@@ -552,32 +559,58 @@ TEST_CASE("GPU hit sort ahead by buckets: spread and crowded first ids, run afte
   }
 }
 
-TEST_CASE("GPU narrow phase run after run: hits sorted ahead where the last count covers them, else after", "[gpu][narrow]") {
-  // The same object on the folded cloth's pairs, then a few of them (fewer hits: the sort ahead
-  // covers them), then all again (more hits than the span learned from the few: sorted after the
-  // count comes back), then once more (covered): each run's contacts are the CPU backend's.
-  const auto m = lwsccd_test::folded_cloth(40, 4);
-  const auto pairs = brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1));
-  const FeaturePairs all = feature_pairs(m.mesh, pairs);
-  FeaturePairs few;
-  for (std::size_t i = 0; i < all.vf.size(); i += 7) few.vf.push_back(all.vf[i]);
-  for (std::size_t i = 0; i < all.ee.size(); i += 7) few.ee.push_back(all.ee[i]);
-  gpu::DeviceMeshFeatures features(m.mesh);
-  gpu::DeviceStep<double> step(m.mesh, m.x0, m.x1);
-  for (CcdMode mode : {CcdMode::contacts, CcdMode::set}) {
-    gpu::NarrowPhase<CertifiedCcd, double> narrow(1 << 16);
-    CcdParams<double> params;
-    params.mode = mode;
-    for (const FeaturePairs* fp : std::initializer_list<const FeaturePairs*>{&all, &all, &few, &all, &all}) {
+// The folded cloth's feature pairs, all of them and every k-th, on the device, for a narrow phase
+// run after run.
+struct RunAfterRun {
+  lwsccd_test::MovingMesh m = lwsccd_test::folded_cloth(40, 4);
+  FeaturePairs all, few;
+  gpu::DeviceMeshFeatures features{m.mesh};
+  gpu::DeviceStep<double> step{m.mesh, m.x0, m.x1};
+  explicit RunAfterRun(std::size_t every) {
+    all = feature_pairs(m.mesh, brute_force_pairs(m.mesh, swept_triangle_bvs<Aabbd>(m.mesh, m.x0, m.x1)));
+    for (std::size_t i = 0; i < all.vf.size(); i += every) few.vf.push_back(all.vf[i]);
+    for (std::size_t i = 0; i < all.ee.size(); i += every) few.ee.push_back(all.ee[i]);
+  }
+  // Runs `narrow` on each of `runs` in turn: every run's contacts (more than `least`) must be the
+  // CPU backend's.
+  template <class Policy>
+  void require_cpu_contacts(gpu::NarrowPhase<CertifiedCcd, double, Policy>& narrow, std::initializer_list<const FeaturePairs*> runs,
+                            const CcdParams<double>& params, std::size_t least) const {
+    for (const FeaturePairs* fp : runs) {
       gpu::DeviceBuffer<std::pair<index_t, index_t>> vf, ee;
       vf.upload(fp->vf);
       ee.upload(fp->ee);
       narrow.run(features, step.x0.data(), step.x1.data(), vf.data(), vf.size(), ee.data(), ee.size(), params);
       const auto expected = cpu::test_feature_pairs<CertifiedCcd, double>(m.mesh, m.x0, m.x1, *fp, params);
-      REQUIRE(expected.vf.size() + expected.ee.size() > 2);
+      REQUIRE(expected.vf.size() + expected.ee.size() > least);
       lwsccd_test::require_same_contacts(narrow.download(), expected);
     }
   }
+};
+
+TEST_CASE("GPU narrow phase run after run: hits sorted ahead where the last count covers them, else after", "[gpu][narrow]") {
+  // The same object on the folded cloth's pairs, then a few of them (fewer hits: the sort ahead
+  // covers them), then all again (more hits than the span learned from the few: sorted after the
+  // count comes back), then once more (covered): each run's contacts are the CPU backend's.
+  const RunAfterRun r(7);
+  for (CcdMode mode : {CcdMode::contacts, CcdMode::set}) {
+    gpu::NarrowPhase<CertifiedCcd, double> narrow(1 << 16);
+    CcdParams<double> params;
+    params.mode = mode;
+    r.require_cpu_contacts(narrow, {&r.all, &r.all, &r.few, &r.all, &r.all}, params, 2);
+  }
+}
+
+TEST_CASE("GPU single-precision filter in blocks from a small capacity: a block's pairs sent on together, past the room too",
+          "[gpu][narrow]") {
+  // The block form (its pairs' sends take their places a block at a time) in a narrow phase whose
+  // first run starts from rooms of 16 (no count first): its lists overflow, the double filter's
+  // among them (the sends past its room take no place, and the run is repeated with more room),
+  // then a few of the pairs, then all again. Every run's contacts are the CPU backend's.
+  const RunAfterRun r(11);
+  gpu::NarrowPhase<CertifiedCcd, double, SingleFilterInBlocksFromCapacity> narrow(16);
+  r.require_cpu_contacts(narrow, {&r.all, &r.few, &r.all}, CcdParams<double>{}, 16);
+  CHECK(narrow.reruns() > 0);  // (the rooms of 16 did overflow)
 }
 
 TEST_CASE("GPU narrow phase equals the CPU backend on the real scenes' candidate pairs", "[gpu][narrow][data]") {

@@ -273,6 +273,77 @@ __device__ inline void send_on_from_single(const std::pair<index_t, index_t>& p,
   double_kept[at].second = p.second;
   deferred[append_index(counters + kDeferred)] = at;
 }
+// send_on_from_single for a block's pairs at once, called by every thread of the block (it holds
+// barriers): the block's sends take their slots with one atomic on each counter instead of one per
+// converged group of each warp (up to three dependent ones a group: slot, whole, deferred, all on
+// the same counters for every block of the grid). The same pairs listed at the same ends and the
+// same counts; only their order within a list differs. `tally` is the block's shared scratch.
+struct BlockSendTally {
+  unsigned kept[32], whole[32];  // a warp's sends of each kind; then its first places among the block's
+  unsigned long long double_at, whole_at, deferred_at;  // the block's first places in the lists
+  unsigned kept_total;  // the block's sends to the double filter (their places come first)
+  unsigned fitting;     // the block's sends that took a slot within the room
+};
+template <int kBlock>
+__device__ void send_on_from_single_in_block(bool send, bool whole, const std::pair<index_t, index_t>& p, unsigned long long* counters,
+                                             std::pair<index_t, index_t>* double_kept, std::size_t room, unsigned* deferred,
+                                             BlockSendTally& tally) {
+  static_assert(kBlock % 32 == 0 && kBlock <= 1024, "lwsccd: a block of whole warps");
+  constexpr int kWarps = kBlock / 32;
+  const unsigned lane = threadIdx.x % 32u, warp = threadIdx.x / 32u;
+  const unsigned kept_mask = __ballot_sync(0xffffffffu, send && !whole), whole_mask = __ballot_sync(0xffffffffu, send && whole);
+  if (lane == 0) {
+    tally.kept[warp] = static_cast<unsigned>(__popc(kept_mask));
+    tally.whole[warp] = static_cast<unsigned>(__popc(whole_mask));
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    // The warps' first places among the block's sends: every kept send, then every whole one.
+    unsigned kept_total = 0, whole_total = 0;
+    for (int w = 0; w < kWarps; ++w) {
+      const unsigned k = tally.kept[w], h = tally.whole[w];
+      tally.kept[w] = kept_total;
+      tally.whole[w] = whole_total;
+      kept_total += k;
+      whole_total += h;
+    }
+    const unsigned total = kept_total + whole_total;
+    unsigned fitting = 0;
+    if (total > 0) {
+      const unsigned long long slot = atomicAdd(counters + kKeptSlots, static_cast<unsigned long long>(total));
+      fitting = slot >= room ? 0u : (room - slot < total ? static_cast<unsigned>(room - slot) : total);
+    }
+    // (Sends past the room take no place: the run is repeated with more.)
+    const unsigned kept_fitting = kept_total < fitting ? kept_total : fitting, whole_fitting = fitting - kept_fitting;
+    if (kept_fitting > 0) tally.double_at = atomicAdd(counters + kDoubleKept, static_cast<unsigned long long>(kept_fitting));
+    if (whole_fitting > 0) {
+      tally.whole_at = atomicAdd(counters + kSingleWhole, static_cast<unsigned long long>(whole_fitting));
+      tally.deferred_at = atomicAdd(counters + kDeferred, static_cast<unsigned long long>(whole_fitting));
+    }
+    tally.kept_total = kept_total;
+    tally.fitting = fitting;
+  }
+  __syncthreads();
+  if (send) {
+    const unsigned below = (1u << lane) - 1u;
+    if (!whole) {
+      const unsigned k = tally.kept[warp] + static_cast<unsigned>(__popc(kept_mask & below));
+      if (k < tally.fitting) {
+        const unsigned long long at = tally.double_at + k;
+        double_kept[at].first = p.first;  // (std::pair's assignment is host-only before C++20)
+        double_kept[at].second = p.second;
+      }
+    } else {
+      const unsigned k = tally.whole[warp] + static_cast<unsigned>(__popc(whole_mask & below));
+      if (tally.kept_total + k < tally.fitting) {
+        const auto at = static_cast<unsigned>(room - 1 - (tally.whole_at + k));
+        double_kept[at].first = p.first;
+        double_kept[at].second = p.second;
+        deferred[tally.deferred_at + k] = at;
+      }
+    }
+  }
+}
 __device__ inline void fail_single(unsigned i, unsigned* failed, unsigned long long* counters,
                                    const std::pair<index_t, index_t>* kept, std::pair<index_t, index_t>* double_kept,
                                    std::size_t room, unsigned* deferred = nullptr, bool whole = false) {
@@ -434,6 +505,7 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks) single_block_filter_kernel
   __shared__ unsigned flags[kBlock];
   __shared__ std::uint16_t first[Room::kFirst], deep[Room::kDeepArray], expand[Room::kFirst];
   __shared__ unsigned first_count, expand_count, deep_count, misses;
+  __shared__ BlockSendTally tally;
   Query* queries = reinterpret_cast<Query*>(query_words);
   Piece* pieces = reinterpret_cast<Piece*>(piece_words);
   lwsccd::detail::start_after_previous_grids();  // (launched by NarrowPhase::chain)
@@ -522,21 +594,24 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks) single_block_filter_kernel
       if (v != InsideVerdict::outside) fail(local, v);
     }
     __syncthreads();
-    // A thread per pair: sent on.
+    // A thread per pair: sent on (the block's sends together).
+    bool send = false, whole = false;
     if (i < n && (flags[t] & kBlockListed)) {
       const unsigned f = flags[t];
       if (f & kBlockOnThread) {
         // (From the pair's query as gathered: relative_single's bound is the input's.)
         const SingleRoute route =
             Filter::route_single(gather_single_query<kVertexFace>(mesh, single, kept[i]), single_params, true, kInsideWhole);
-        if (route == SingleRoute::miss) atomicAdd(&misses, 1u);
-        else send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, route == SingleRoute::whole_search);
+        send = route != SingleRoute::miss;
+        whole = route == SingleRoute::whole_search;
       } else if (f & (kBlockToDouble | kBlockInside)) {
-        send_on_from_single(kept[i], counters, double_kept, kept_room, deferred, (f & kBlockInside) != 0u);
-      } else {
-        atomicAdd(&misses, 1u);
+        send = true;
+        whole = (f & kBlockInside) != 0u;
       }
+      if (!send) atomicAdd(&misses, 1u);
     }
+    send_on_from_single_in_block<kBlock>(send, whole, send ? kept[i] : std::pair<index_t, index_t>{}, counters, double_kept,
+                                         kept_room, deferred, tally);
     __syncthreads();
     if (t == 0 && misses > 0) atomicAdd(counters + kSingleMisses, static_cast<unsigned long long>(misses));
   }
