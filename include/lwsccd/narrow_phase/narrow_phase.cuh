@@ -147,9 +147,11 @@ struct NarrowPhasePolicy {
   /// in four kernels against 230 on one thread, armadillo-rollers' 94 against 116; cloth-ball's
   /// vertex-face list 97 against 69, cloth-funnel's two lists 23 and 25 against 8 and 11). The
   /// block form (kSingleFilterInBlocks) on the short lists too was slower on them (cloth-funnel,
-  /// horse-gallop and the built-in 100 K scene, NVIDIA H100). The same answers and counts either
+  /// horse-gallop and the built-in 100 K scene, NVIDIA H100); from 768 pairs per SM on (1024 before)
+  /// it takes cloth-ball's vertex-face list (~119 K pairs), not armadillo-rollers' (~67 K): cloth-ball's
+  /// narrow phase 0.493-0.494 -> 0.475-0.481 ms (NVIDIA H100). The same answers and counts either
   /// way; 0: never on one thread.
-  static constexpr int kSingleFilterOneThreadPerSm = 1024;
+  static constexpr int kSingleFilterOneThreadPerSm = 768;
   /// FP32 first: a list that does not run the single-precision filter on one thread a pair runs
   /// it in one kernel whose blocks keep their pairs' float queries and intervals in shared memory
   /// (single_block_filter_kernel: a thread a pair lists, a thread an interval tests, a thread an
