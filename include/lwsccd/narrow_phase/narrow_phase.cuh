@@ -359,7 +359,7 @@ class NarrowPhase {
   /// CertifiedCcd FP32 first: pairs coplanar over the whole step in float searched early, a warp
   /// each (NarrowPhasePolicy::kEarlyCoplanarSearches), in the last run (mode earliest: its last window).
   std::size_t early_searches() const { return lists_[0].early_searches + lists_[1].early_searches; }
-  /// Whether a list's first-pass kernels are launched to overlap the kernel before them
+  /// Whether a list's kernels (all but the radix sort's CUB passes) are launched to overlap the kernel before them
   /// (NarrowPhasePolicy::kOverlapLaunches on a device of compute capability 9.0 or later),
   /// decided on the device of the first run: false before it.
   bool overlaps_launches() const { return overlap_launches_; }
