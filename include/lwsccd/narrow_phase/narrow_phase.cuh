@@ -79,9 +79,10 @@ struct NarrowPhasePolicy {
   /// double run a warp each (kHandedWarpsMaxFp64Ratio).
   static constexpr int kEarlyCoplanarSearches = 256;
   static constexpr int kEarlyCoplanarPerSurvivors = 256;
-  /// A list's kernels (the screen through the fallback's and the hits' sort, all but the radix
-  /// sort's CUB passes) are launched to overlap the end of the one before them (programmatic
-  /// dependent launch, compute capability 9.0 and later; elsewhere plain launches): a kernel's
+  /// A list's kernels (the screen through the fallback's and the hits' sort, all but a sort by
+  /// radix, the rare path after a crowded bucket) are launched to overlap the end of the one
+  /// before them (programmatic dependent launch, compute capability 9.0 and later; elsewhere
+  /// plain launches): a kernel's
   /// blocks are set up while the last one's finish and wait on the device for it, instead of the
   /// stream draining between the two (NVIDIA H200: armadillo-rollers narrow 0.516 -> 0.494 ms, the
   /// other shared scenes within their spread). The same answers; false: plain launches. Every
@@ -206,9 +207,9 @@ class HitSorter {
   /// caller passes the word to take_ahead(), which then declines the sort (sort() them). From
   /// then on this sorter sorts ahead by radix (a scene whose contacts crowd a few features keeps
   /// crowding them). Without `overflow`: by radix. With `overlap_launches` (a device of compute
-  /// capability 9.0 or later: detail::device_overlaps_launches) the sort's own kernels (all but
-  /// the radix sort's CUB passes) are launched to overlap the end of the kernel before them on
-  /// `stream` (detail::launch_after_previous); the same order.
+  /// capability 9.0 or later: detail::device_overlaps_launches) the sort's kernels (the one-block
+  /// sort's and the bucket sort's; a sort by radix launches plainly) are launched to overlap the
+  /// end of the kernel before them on `stream` (detail::launch_after_previous); the same order.
   void sort_ahead(const DeviceBuffer<FeatureHit<T>>& hits, const unsigned long long* device_count, std::size_t span,
                   std::size_t id_limit, cudaStream_t stream = nullptr, unsigned long long* overflow = nullptr,
                   bool overlap_launches = false);
@@ -359,7 +360,7 @@ class NarrowPhase {
   /// CertifiedCcd FP32 first: pairs coplanar over the whole step in float searched early, a warp
   /// each (NarrowPhasePolicy::kEarlyCoplanarSearches), in the last run (mode earliest: its last window).
   std::size_t early_searches() const { return lists_[0].early_searches + lists_[1].early_searches; }
-  /// Whether a list's kernels (all but the radix sort's CUB passes) are launched to overlap the kernel before them
+  /// Whether a list's kernels (all but a sort by radix) are launched to overlap the kernel before them
   /// (NarrowPhasePolicy::kOverlapLaunches on a device of compute capability 9.0 or later),
   /// decided on the device of the first run: false before it.
   bool overlaps_launches() const { return overlap_launches_; }
