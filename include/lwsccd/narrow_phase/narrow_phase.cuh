@@ -82,10 +82,9 @@ struct NarrowPhasePolicy {
   /// A list's kernels (the screen through the fallback's and the hits' sort, all but a sort by
   /// radix, the rare path after a crowded bucket) are launched to overlap the end of the one
   /// before them (programmatic dependent launch, compute capability 9.0 and later; elsewhere
-  /// plain launches): a kernel's
-  /// blocks are set up while the last one's finish and wait on the device for it, instead of the
-  /// stream draining between the two (NVIDIA H200: armadillo-rollers narrow 0.516 -> 0.494 ms, the
-  /// other shared scenes within their spread). The same answers; false: plain launches. Every
+  /// plain launches): a kernel's blocks are set up while the last one's finish and wait on the
+  /// device for it, instead of the stream draining between the two (NVIDIA H200:
+  /// armadillo-rollers narrow 0.516 -> 0.494 ms, the other shared scenes within their spread). The same answers; false: plain launches. Every
   /// kernel NarrowPhase::chain launches starts with detail::start_after_previous_grids.
   static constexpr bool kOverlapLaunches = true;
   /// At most this many handed searches per SM run a warp each; more run a thread each (in a kernel
